@@ -1,0 +1,1 @@
+"""Dataset-card templates (``dataset_card.md``), filled by ``orbitdata.dataset.card``."""

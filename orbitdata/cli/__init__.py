@@ -1,0 +1,1 @@
+"""The ``orbitdata`` command line (typer). Commands build configs and call the library."""

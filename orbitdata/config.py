@@ -1,0 +1,121 @@
+"""Everything that defines a dataset, as one typed, frozen, serialisable config.
+
+``GenerationConfig`` nests the scenario, simulator, pilot and dataset settings. It is built
+from defaults, a TOML file (``--config``) and CLI flags, and written verbatim into
+``meta/info.json`` so a dataset records exactly how it was made.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from orbitdata.pilots.config import PilotsConfig
+from orbitdata.scenario.config import ScenarioConfig
+from orbitdata.schema import LEVELS
+from orbitdata.sim.config import SimConfig
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """Size, split, level mix and storage of a generated dataset.
+
+    Attributes:
+        episodes: total number of episodes (the paper: 8000).
+        test_fraction: share of each level that goes to the test split (the paper: 0.1).
+        seed: root seed; episode i is a pure function of (seed, i, this config).
+        level_mix: share of expert / risky / exploratory episodes (normalised).
+        episodes_per_unit: episodes per work unit (one part file, the resume granularity).
+        jpeg_quality: RGB frames are JPEG at this quality (4:2:0, libjpeg via Pillow).
+        png_compression: zlib level of the 16-bit depth PNGs.
+        row_group_rows: rows per Parquet row group.
+        compression: Parquet codec for every column.
+        max_shard_bytes: a data shard closes at the first episode boundary past this size.
+    """
+
+    episodes: int = 8000
+    test_fraction: float = 0.1
+    seed: int = 0
+    level_mix: tuple[float, float, float] = (0.5, 0.25, 0.25)
+    episodes_per_unit: int = 8
+    jpeg_quality: int = 90
+    png_compression: int = 6
+    row_group_rows: int = 512
+    compression: str = "zstd"
+    max_shard_bytes: int = 500_000_000
+
+    def __post_init__(self) -> None:
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if not 0.0 <= self.test_fraction < 1.0:
+            raise ValueError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
+        if self.seed < 0:
+            raise ValueError(f"seed must be >= 0, got {self.seed}")
+        if len(self.level_mix) != len(LEVELS) or min(self.level_mix) < 0 or sum(self.level_mix) <= 0:
+            raise ValueError(f"level_mix must be 3 non-negative shares for {LEVELS}, got {self.level_mix}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise ValueError(f"jpeg_quality must be in [1, 100], got {self.jpeg_quality}")
+        if self.episodes_per_unit < 1 or self.row_group_rows < 1 or self.max_shard_bytes < 1:
+            raise ValueError("episodes_per_unit, row_group_rows and max_shard_bytes must be positive")
+
+
+@dataclass(frozen=True)
+class GenerationConfig:
+    dataset: DatasetConfig = field(default_factory=DatasetConfig)
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    sim: SimConfig = field(default_factory=SimConfig)
+    pilots: PilotsConfig = field(default_factory=PilotsConfig)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict, where: str = "config") -> "GenerationConfig":
+        return build(cls, data, where)
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> "GenerationConfig":
+        path = Path(path)
+        try:
+            data = tomllib.loads(path.read_text())
+        except FileNotFoundError:
+            raise ValueError(f"config file {path} does not exist") from None
+        except tomllib.TOMLDecodeError as exc:
+            raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
+        return build(cls, data, str(path))
+
+    def replace(self, **sections) -> "GenerationConfig":
+        """Copy with fields of sections replaced, e.g. ``replace(dataset={'episodes': 10})``."""
+        updates = {}
+        for name, values in sections.items():
+            updates[name] = dataclasses.replace(getattr(self, name), **values)
+        return dataclasses.replace(self, **updates)
+
+
+def build(cls, data, where: str):
+    """Build dataclass ``cls`` from a plain dict, strictly: unknown keys are errors."""
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a table, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ValueError(f"{where}: unknown setting(s) {unknown}; known: {sorted(names)}")
+    kwargs = {}
+    for key, value in data.items():
+        hint = hints[key]
+        if dataclasses.is_dataclass(hint):
+            kwargs[key] = build(hint, value, f"{where}.{key}")
+        elif typing.get_origin(hint) is tuple:
+            if not isinstance(value, (list, tuple)):
+                raise ValueError(f"{where}.{key}: expected a list, got {value!r}")
+            kwargs[key] = tuple(value)
+        else:
+            kwargs[key] = value
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: {exc}") from None

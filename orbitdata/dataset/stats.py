@@ -1,0 +1,93 @@
+"""Per-feature statistics of the train split (``meta/stats.json``), computed in one pass.
+
+mean / std / min / max are exact over every row, accumulated in float64 in episode order.
+q01 / q99 come from a deterministic sample: every ``stride``-th row, with the stride chosen
+so that at most ``QUANTILE_ROWS`` rows are kept. Image channel statistics (RGB in [0, 1])
+come from every ``IMAGE_STRIDE``-th frame. ``count`` says how many values each used.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyarrow as pa
+
+from orbitdata import schema as S
+from orbitdata.dataset.encode import decode_rgb
+
+QUANTILE_ROWS = 100_000
+IMAGE_STRIDE = 50
+VECTOR_FEATURES = (S.STATE, S.ACTION, S.DEPTH_LOW)
+SCALAR_FEATURES = (S.MIN_CLEARANCE, S.TIMESTAMP)
+
+
+def _matrix(column: pa.ChunkedArray | pa.Array, width: int) -> np.ndarray:
+    if isinstance(column, pa.ChunkedArray):
+        column = column.combine_chunks()
+    if width == 1:
+        return column.to_numpy(zero_copy_only=False).astype(np.float64).reshape(-1, 1)
+    return column.flatten().to_numpy(zero_copy_only=False).astype(np.float64).reshape(-1, width)
+
+
+class _Moments:
+    def __init__(self, width: int):
+        self.n = 0
+        self.sum = np.zeros(width)
+        self.sumsq = np.zeros(width)
+        self.min = np.full(width, np.inf)
+        self.max = np.full(width, -np.inf)
+        self.sample: list[np.ndarray] = []
+
+    def update(self, x: np.ndarray, sample_rows: np.ndarray | None) -> None:
+        if len(x) == 0:
+            return
+        self.n += len(x)
+        self.sum += x.sum(axis=0)
+        self.sumsq += (x * x).sum(axis=0)
+        self.min = np.minimum(self.min, x.min(axis=0))
+        self.max = np.maximum(self.max, x.max(axis=0))
+        if sample_rows is not None and len(sample_rows):
+            self.sample.append(x[sample_rows])
+
+    def result(self) -> dict:
+        mean = self.sum / max(self.n, 1)
+        var = np.maximum(self.sumsq / max(self.n, 1) - mean * mean, 0.0)
+        out = {"count": int(self.n), "mean": mean, "std": np.sqrt(var), "min": self.min, "max": self.max}
+        if self.sample:
+            sample = np.concatenate(self.sample)
+            out["q01"] = np.quantile(sample, 0.01, axis=0)
+            out["q99"] = np.quantile(sample, 0.99, axis=0)
+        return {k: (v if isinstance(v, int) else [float(f"{x:.7g}") for x in np.atleast_1d(v)]) for k, v in out.items()}
+
+
+class StatsAccumulator:
+    """Feed steps tables of one split in episode order; ``result()`` gives the stats dict."""
+
+    def __init__(self, total_rows: int):
+        self.stride = max(1, math.ceil(total_rows / QUANTILE_ROWS))
+        self.rows_seen = 0
+        widths = {S.STATE: S.STATE_DIM, S.ACTION: S.ACTION_DIM, S.DEPTH_LOW: S.DEPTH_LOW_DIM}
+        self.moments = {name: _Moments(widths.get(name, 1)) for name in VECTOR_FEATURES + SCALAR_FEATURES}
+        self.widths = {name: widths.get(name, 1) for name in self.moments}
+        self.image = _Moments(3)
+
+    def update(self, table: pa.Table) -> None:
+        n = table.num_rows
+        global_rows = np.arange(self.rows_seen, self.rows_seen + n)
+        sample_rows = np.flatnonzero(global_rows % self.stride == 0)
+        image_rows = np.flatnonzero(global_rows % IMAGE_STRIDE == 0)
+        self.rows_seen += n
+        for name, acc in self.moments.items():
+            acc.update(_matrix(table.column(name), self.widths[name]), sample_rows)
+        if len(image_rows):
+            blobs = table.column(S.IMAGE).combine_chunks().field("bytes")
+            for i in image_rows:
+                pixels = decode_rgb(blobs[int(i)].as_py()).reshape(-1, 3).astype(np.float64) / 255.0
+                self.image.update(pixels, np.arange(0, len(pixels), 97))
+
+    def result(self) -> dict:
+        out = {name: acc.result() for name, acc in self.moments.items()}
+        if self.image.n:
+            out[S.IMAGE] = self.image.result()
+        return out

@@ -1,0 +1,81 @@
+"""PD laws for translation and attitude, turned into thrusts through the allocator.
+
+Gains are in natural units (1/s^2, 1/s) on accelerations, then scaled by the current mass and
+inertia (from the fuel gauge), so tuning does not change as the tank empties.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from orbitdata.pilots.allocation import ThrustAllocator
+from orbitdata.sim.config import CubeSatConfig
+from orbitdata.sim.state import rot6d_to_matrix, so3_log
+from orbitdata.sim.thrusters import wrench_matrix
+
+
+@dataclass(frozen=True)
+class ControlGains:
+    pos_kp: float = 2.0  # 1/s^2
+    pos_kd: float = 2.8  # 1/s
+    max_accel: float = 3.0  # m/s^2, commanded translational acceleration cap
+    att_kp: float = 16.0  # 1/s^2
+    att_kd: float = 7.0  # 1/s
+    max_alpha: float = 20.0  # rad/s^2, commanded angular acceleration cap
+
+
+def look_rotation(forward: np.ndarray, up=(0.0, 0.0, 1.0), fallback: np.ndarray | None = None) -> np.ndarray:
+    """Rotation (body->world) whose x axis (the camera axis) is ``forward`` and z is near ``up``."""
+    x = np.asarray(forward, dtype=np.float64)
+    x = x / np.linalg.norm(x)
+    y = np.cross(np.asarray(up, dtype=np.float64), x)
+    if np.linalg.norm(y) < 1e-6:  # looking straight up/down: keep the current heading
+        y = fallback[:, 1] if fallback is not None else np.array([0.0, 1.0, 0.0])
+        y = y - x * (x @ y)
+    y = y / np.linalg.norm(y)
+    return np.stack([x, y, np.cross(x, y)], axis=1)
+
+
+class Controller:
+    """Turns (desired world acceleration, desired attitude) into thrusts in [0, 1]."""
+
+    def __init__(self, cubesat: CubeSatConfig = CubeSatConfig(), gains: ControlGains = ControlGains()):
+        self.cubesat = cubesat
+        self.gains = gains
+        self.allocator = ThrustAllocator(wrench_matrix(cubesat), lever_arm=cubesat.half_size)
+
+    def mass_inertia(self, fuel_ratio: float) -> tuple[float, float]:
+        sat = self.cubesat
+        fuel = float(np.clip(fuel_ratio, 0.0, 1.0)) * sat.fuel_mass
+        inertia = sat.dry_mass * (2 * sat.half_size) ** 2 / 6.0 + 0.4 * fuel * sat.tank_radius**2
+        return sat.dry_mass + fuel, inertia
+
+    @staticmethod
+    def unpack(state: np.ndarray):
+        """(p world, v world, R body->world, w body, fuel) from a 16-float state."""
+        R = rot6d_to_matrix(state[6:12])
+        return state[0:3].astype(np.float64), R @ state[3:6], R, state[12:15].astype(np.float64), float(state[15])
+
+    def track_accel(self, state, p_ref, v_ref, a_ff=np.zeros(3)) -> np.ndarray:
+        """PD acceleration (world, m/s^2) towards a reference position and velocity."""
+        p, v, *_ = self.unpack(state)
+        g = self.gains
+        a = np.asarray(a_ff) + g.pos_kp * (np.asarray(p_ref) - p) + g.pos_kd * (np.asarray(v_ref) - v)
+        norm = np.linalg.norm(a)
+        return a if norm <= g.max_accel else a * (g.max_accel / norm)
+
+    def thrust(self, state: np.ndarray, accel_world: np.ndarray, R_des: np.ndarray) -> np.ndarray:
+        """Thrusts that best produce ``accel_world`` while turning towards ``R_des``."""
+        _, _, R, w, fuel = self.unpack(state)
+        mass, inertia = self.mass_inertia(fuel)
+        g = self.gains
+        err = so3_log(R.T @ R_des)  # body-frame rotation vector to the target attitude
+        alpha = g.att_kp * err - g.att_kd * w
+        norm = np.linalg.norm(alpha)
+        if norm > g.max_alpha:
+            alpha *= g.max_alpha / norm
+        force_body = R.T @ (mass * np.asarray(accel_world))
+        wrench = np.concatenate([force_body, inertia * alpha])
+        return self.allocator.allocate(wrench)

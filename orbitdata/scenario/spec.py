@@ -1,0 +1,105 @@
+"""Typed, immutable description of one episode's world (obstacles, goal, start, light)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from orbitdata.schema import SHAPES
+
+
+def quat_to_mat(quat) -> np.ndarray:
+    """(w, x, y, z) unit quaternion -> 3x3 rotation matrix (body -> world)."""
+    w, x, y, z = (float(q) for q in quat)
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static rock or piece of debris.
+
+    ``size`` follows MuJoCo's geom convention: sphere (r, 0, 0), ellipsoid and box (a, b, c)
+    semi-axes / half-extents, capsule and cylinder (radius, half-length along local z, 0).
+    Lengths in metres, ``center`` in the world frame relative to the start.
+    """
+
+    shape: str
+    center: tuple[float, float, float]
+    size: tuple[float, float, float]
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    rgba: tuple[float, float, float, float] = (0.5, 0.5, 0.5, 1.0)
+
+    def __post_init__(self) -> None:
+        if self.shape not in SHAPES:
+            raise ValueError(f"unknown obstacle shape {self.shape!r}; expected one of {SHAPES}")
+        n_sizes = {"sphere": 1, "capsule": 2, "cylinder": 2}.get(self.shape, 3)
+        if any(s <= 0 for s in self.size[:n_sizes]):
+            raise ValueError(f"obstacle {self.shape} has non-positive size {self.size}")
+
+    @property
+    def rotation(self) -> np.ndarray:
+        return quat_to_mat(self.quat)
+
+    @property
+    def bounding_radius(self) -> float:
+        """Radius of a sphere about ``center`` that contains the obstacle."""
+        a, b, c = self.size
+        if self.shape == "sphere":
+            return a
+        if self.shape == "ellipsoid":
+            return max(a, b, c)
+        if self.shape == "box":
+            return float(np.sqrt(a * a + b * b + c * c))
+        if self.shape == "capsule":
+            return a + b
+        return float(np.hypot(a, b))  # cylinder
+
+
+@dataclass(frozen=True)
+class Lighting:
+    """A directional sun plus ambient light. ``sun_direction`` is where the light travels."""
+
+    sun_direction: tuple[float, float, float] = (0.3, -0.4, -0.866)
+    sun_intensity: float = 1.0
+    ambient: float = 0.1
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything that defines one episode before it is flown.
+
+    The CubeSat starts at the origin (p_0 = 0) with attitude ``initial_quat`` and world-frame
+    velocity ``initial_velocity`` (m/s); it succeeds when its centre enters the sphere of
+    ``goal_radius`` metres around ``goal``.
+    """
+
+    obstacles: tuple[Obstacle, ...]
+    goal: tuple[float, float, float]
+    goal_radius: float = 0.5
+    initial_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    initial_quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)
+    lighting: Lighting = field(default_factory=Lighting)
+    seed: int = 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Scenario":
+        return cls(
+            obstacles=tuple(Obstacle(**{k: tuple(v) if isinstance(v, list) else v for k, v in o.items()})
+                            for o in d["obstacles"]),
+            goal=tuple(d["goal"]),
+            goal_radius=float(d["goal_radius"]),
+            initial_velocity=tuple(d["initial_velocity"]),
+            initial_quat=tuple(d["initial_quat"]),
+            lighting=Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in d["lighting"].items()}),
+            seed=int(d.get("seed", 0)),
+        )

@@ -1,0 +1,78 @@
+"""Onboard camera rendering: RGB and metric depth from one render pass, plus pooled depth."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+
+from orbitdata.schema import DEPTH_LOW_SIDE
+from orbitdata.sim.config import CameraConfig
+from orbitdata.sim.gl import make_context
+
+
+def pool_depth(depth: np.ndarray, far: float, side: int = DEPTH_LOW_SIDE) -> np.ndarray:
+    """Area-pool metric depth (H, W) to (side, side) metres.
+
+    No-return pixels (0) count as the far plane, so an empty patch reads as far away rather
+    than as touching the lens.
+    """
+    h, w = depth.shape
+    filled = np.where(depth > 0, depth, np.float32(far)).astype(np.float32)
+    return filled.reshape(side, h // side, side, w // side).mean(axis=(1, 3), dtype=np.float32)
+
+
+class CameraRenderer:
+    """Renders the named camera of a model offscreen.
+
+    ``render(data)`` returns ``(rgb, depth)``: uint8 (H, W, 3) and float32 (H, W) z-depth in
+    metres along the optical axis, with 0 where nothing lies within [near, far].
+    """
+
+    def __init__(self, model: mujoco.MjModel, camera: str, cfg: CameraConfig, backend: str | None = None):
+        size = cfg.image_size
+        self._ctx = make_context(size, size, backend)
+        self._model = model
+        self._rect = mujoco.MjrRect(0, 0, size, size)
+        self._scene = mujoco.MjvScene(model, maxgeom=64)
+        self._option = mujoco.MjvOption()
+        self._camera = mujoco.MjvCamera()
+        self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+        self._camera.fixedcamid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
+        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
+        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+        self._rgb = np.empty((size, size, 3), np.uint8)
+        self._zbuf = np.empty((size, size), np.float32)
+        # Reversed-Z depth buffer -> metric z: depth = d / (z + c) (see mujoco's Renderer).
+        near = np.float64(np.float32(model.vis.map.znear * model.stat.extent))
+        far = np.float64(np.float32(model.vis.map.zfar * model.stat.extent))
+        self._c = 0.5 * (far + near) / (far - near) - 0.5
+        self._d = far * near / (far - near)
+        self.near, self.far = float(near), float(far)
+
+    def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        self._ctx.make_current()
+        mujoco.mjv_updateScene(
+            self._model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL, self._scene
+        )
+        mujoco.mjr_render(self._rect, self._scene, self._con)
+        mujoco.mjr_readPixels(self._rgb, self._zbuf, self._rect, self._con)
+        rgb = np.flipud(self._rgb).copy()  # GL rows start at the bottom
+        depth = (self._d / (np.flipud(self._zbuf).astype(np.float64) + self._c)).astype(np.float32)
+        # Beyond the far plane (and empty space) the buffer holds the far value: no return.
+        depth[depth >= np.float32(self.far) * np.float32(0.9999)] = 0.0
+        return rgb, depth
+
+    def close(self) -> None:
+        if self._con is not None:
+            self._con.free()
+            self._con = None
+        if self._ctx is not None:
+            self._ctx.free()
+            self._ctx = None
+
+    def __del__(self) -> None:  # contexts hold GPU/driver memory
+        try:
+            self.close()
+        except Exception:
+            pass

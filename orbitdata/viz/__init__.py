@@ -1,0 +1,1 @@
+"""Pictures of episodes: top-down maps (OpenCV, always available) and plots (matplotlib extra)."""

@@ -1,0 +1,43 @@
+"""Shared fixtures: tiny datasets made by the real generator (64 px, a handful of episodes)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
+os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
+
+
+def tiny_config(episodes: int = 6, seed: int = 0, **dataset):
+    from orbitdata.config import GenerationConfig
+
+    cfg = GenerationConfig()
+    return cfg.replace(
+        dataset={"episodes": episodes, "seed": seed, "test_fraction": 0.34, "episodes_per_unit": 2,
+                 "row_group_rows": 64, **dataset},
+        sim={"camera": cfg.sim.camera.__class__(image_size=64)},
+    )
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset_master(tmp_path_factory) -> Path:
+    """A 6-episode, 64 px dataset generated once per session (do not modify it)."""
+    from orbitdata.dataset.generate import generate
+
+    out = tmp_path_factory.mktemp("tiny") / "orbit"
+    generate(out, tiny_config(), workers=1)
+    return out
+
+
+@pytest.fixture
+def tiny_dataset(tiny_dataset_master, tmp_path) -> Path:
+    """A private copy of the tiny dataset that a test may corrupt or modify."""
+    dst = tmp_path / "orbit"
+    shutil.copytree(tiny_dataset_master, dst)
+    return dst
