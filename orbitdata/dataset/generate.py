@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import time
 from dataclasses import dataclass
@@ -48,8 +49,6 @@ def _existing_config(out: Path) -> dict | None:
         return plan["config"]
     info = out / S.INFO_PATH
     if info.exists():
-        import json
-
         return json.loads(info.read_text()).get("config")
     return None
 
@@ -59,7 +58,7 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
     if out.exists() and not out.is_dir():
         raise DatasetExists(f"{out} exists and is not a folder; choose another OUT")
     existing = _existing_config(out) if out.exists() else None
-    mine = config.to_dict()
+    mine = json.loads(json.dumps(config.to_dict()))  # tuples -> lists, as stored
     if existing is not None and existing != mine:
         if not overwrite:
             raise DatasetExists(
@@ -103,8 +102,6 @@ def generate(
     if executor not in ("local", "ray"):
         raise ValueError(f"unknown executor {executor!r}; expected 'local' or 'ray'")
     if prepare_output(out, config, overwrite):
-        import json
-
         return json.loads((out / S.INFO_PATH).read_text())
     parts.remove_temporaries(parts.parts_dir(out))
     units = plan_units(config.dataset)

@@ -87,6 +87,7 @@ class CubeSatEnv:
         self.scenario = scn
         self.model = mujoco.MjModel.from_xml_string(build_mjcf(scn, self.sim))
         self.data = mujoco.MjData(self.model)
+        self._scratch = mujoco.MjData(self.model)
         m, d = self.model, self.data
         self._body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, BODY)
         self._hull = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, HULL)
@@ -132,8 +133,13 @@ class CubeSatEnv:
         contact_substep = None
         for k in range(self.sim.substeps):
             mujoco.mj_step(m, d)
+            # mj_step collides the state it started from, so this sees substep k's start.
             if contact_substep is None and d.ncon and self._hull_in_contact():
                 contact_substep = k
+        # Recompute kinematics and contacts of the final state (mj_step leaves them stale).
+        mujoco.mj_forward(m, d)
+        if contact_substep is None and d.ncon and self._hull_in_contact():
+            contact_substep = self.sim.substeps
         self._fuel = max(0.0, self._fuel - burn)
         self._update_mass()
         self.t += 1
@@ -172,6 +178,9 @@ class CubeSatEnv:
         fuel_inertia = 0.4 * self._fuel * sat.tank_radius**2  # solid sphere
         self.model.body_mass[self._body] = sat.dry_mass + self._fuel
         self.model.body_inertia[self._body] = dry_inertia + fuel_inertia
+        # MuJoCo 4 caches mass-derived constants: refresh them (on scratch data, since
+        # mj_setConst evaluates the model at qpos0).
+        mujoco.mj_setConst(self.model, self._scratch)
 
     def _min_clearance(self) -> float:
         far = self.sim.camera.far

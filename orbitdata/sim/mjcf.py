@@ -54,7 +54,7 @@ def build_mjcf(scn: Scenario, cfg: SimConfig) -> str:
   <statistic extent="1" center="0 0 0"/>
   <visual>
     <global offwidth="{size}" offheight="{size}" fovy="{cam.fovy_deg:.9g}"/>
-    <quality shadowsize="0"/>
+    <quality shadowsize="0" offsamples="0"/>
     <map znear="{cam.near:.9g}" zfar="{cam.far:.9g}"/>
     <headlight active="0" ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/>
   </visual>

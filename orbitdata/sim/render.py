@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import atexit
+import weakref
+
 import mujoco
 import numpy as np
 
@@ -19,6 +22,17 @@ def pool_depth(depth: np.ndarray, far: float, side: int = DEPTH_LOW_SIDE) -> np.
     h, w = depth.shape
     filled = np.where(depth > 0, depth, np.float32(far)).astype(np.float32)
     return filled.reshape(side, h // side, side, w // side).mean(axis=(1, 3), dtype=np.float32)
+
+
+_LIVE: "weakref.WeakSet[CameraRenderer]" = weakref.WeakSet()
+
+
+@atexit.register
+def _close_all() -> None:
+    # Free GL contexts while the GL bindings still exist; at interpreter teardown the OSMesa
+    # context's own finaliser fails noisily.
+    for renderer in list(_LIVE):
+        renderer.close()
 
 
 class CameraRenderer:
@@ -49,6 +63,7 @@ class CameraRenderer:
         self._c = 0.5 * (far + near) / (far - near) - 0.5
         self._d = far * near / (far - near)
         self.near, self.far = float(near), float(far)
+        _LIVE.add(self)
 
     def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         self._ctx.make_current()

@@ -1,84 +1,166 @@
-"""A top-down (x-y) map of an episode drawn with OpenCV: obstacles to scale, goal, path."""
+"""Orthographic maps of an episode drawn with OpenCV: obstacles to scale, goal, start, path.
+
+``PlaneMap`` projects the world on two of its axes: ``(0, 1)`` is the top-down view (x right,
+y up), ``(0, 2)`` the side view (x right, z up). Images are RGB. The mapping from metres to
+pixels is public (``px``, ``polyline``, ``world``) so callers and tests can find what was drawn.
+"""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from orbitdata.scenario.spec import Scenario
+from orbitdata.scenario.spec import Obstacle, Scenario
 
+# RGB colours
 BG = (18, 18, 24)
+GRID = (34, 34, 44)
 PATH = (80, 200, 255)
 GOAL = (90, 220, 90)
-HIT = (60, 60, 255)
+HIT = (255, 60, 60)
+START = (255, 255, 255)
+HEADING = (255, 210, 60)
+
+AXIS_NAMES = "xyz"
 
 
-class TopDownMap:
-    """Maps world x-y metres to pixels with a margin around start, goal and obstacles."""
+def _surface_points(ob: Obstacle) -> np.ndarray:
+    """Points whose convex hull is the obstacle, in its own frame. (N, 3) metres."""
+    u = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    v = np.linspace(-np.pi / 2, np.pi / 2, 12)
+    uu, vv = np.meshgrid(u, v)
+    unit = np.stack([np.cos(vv) * np.cos(uu), np.cos(vv) * np.sin(uu), np.sin(vv)], -1).reshape(-1, 3)
+    a, b, c = ob.size
+    if ob.shape == "sphere":
+        return a * unit
+    if ob.shape == "ellipsoid":
+        return unit * np.array([a, b, c])
+    if ob.shape == "box":
+        return np.array([[sx * a, sy * b, sz * c] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    if ob.shape == "capsule":  # radius a, half-length b: two spheres joined by their hull
+        return np.concatenate([a * unit + [0, 0, b], a * unit - [0, 0, b]])
+    ring = np.stack([a * np.cos(u), a * np.sin(u)], -1)  # cylinder: two rims
+    return np.concatenate([np.c_[ring, np.full(len(u), b)], np.c_[ring, np.full(len(u), -b)]])
 
-    def __init__(self, scenario: Scenario, size: int, extra_points: np.ndarray | None = None):
-        pts = [np.zeros(2), np.asarray(scenario.goal[:2])]
+
+class PlaneMap:
+    """Maps world metres on ``axes`` to pixels of a ``size`` (int or (width, height)) image.
+
+    The content (start, goal, obstacles and ``extra_points``, e.g. the path) is fitted with a
+    1 m margin and centred; ``scale`` (px per metre) may be given to share it between views.
+    """
+
+    def __init__(self, scenario: Scenario, size: int | tuple[int, int], extra_points: np.ndarray | None = None,
+                 axes: tuple[int, int] = (0, 1), scale: float | None = None, margin: float = 1.0):
+        self.width, self.height = (size, size) if np.isscalar(size) else (int(size[0]), int(size[1]))
+        if self.width < 8 or self.height < 8:
+            raise ValueError(f"map size {self.width}x{self.height} px is too small; use at least 8x8")
+        self.size = self.width  # backwards compatible: the square maps of `orbitdata fly --video`
+        self.axes = tuple(axes)
+        self.scenario = scenario
+        ax = list(self.axes)
+        goal = np.asarray(scenario.goal, float)[ax]
+        pts = [np.zeros(2), goal - scenario.goal_radius, goal + scenario.goal_radius]
         for ob in scenario.obstacles:
-            r = ob.bounding_radius
-            c = np.asarray(ob.center[:2])
+            c, r = np.asarray(ob.center, float)[ax], ob.bounding_radius
             pts += [c - r, c + r]
         if extra_points is not None and len(extra_points):
-            pts += list(np.asarray(extra_points)[:, :2])
+            pts += list(np.asarray(extra_points, float)[:, ax])
         pts = np.array(pts)
-        lo, hi = pts.min(0) - 1.0, pts.max(0) + 1.0
-        self.scale = (size - 1) / float(np.max(hi - lo))  # px per metre
-        self.lo = lo - ((size - 1) / self.scale - (hi - lo)) / 2  # centre the content
-        self.size = size
-        self.scenario = scenario
+        lo, hi = pts.min(0) - margin, pts.max(0) + margin
+        span = np.array([self.width - 1, self.height - 1], float)
+        self.scale = float(scale) if scale is not None else float(np.min(span / (hi - lo)))  # px per metre
+        self.lo = (lo + hi) / 2 - span / self.scale / 2  # world coords of pixel (0, height-1): centred content
 
-    def px(self, xy) -> tuple[int, int]:
-        u = (np.asarray(xy[:2]) - self.lo) * self.scale
-        return int(round(u[0])), int(round(self.size - 1 - u[1]))  # image y grows downwards
+    # ---- the mapping ------------------------------------------------------------------------
+    def px(self, point) -> tuple[int, int]:
+        """Pixel (column, row) of a world point (3-vector, or 2-vector already on ``axes``)."""
+        u, v = self.polyline(np.asarray(point, float)[None])[0]
+        return int(u), int(v)
 
+    def polyline(self, positions: np.ndarray) -> np.ndarray:
+        """(N, 3) world points (or (N, 2) on ``axes``) -> (N, 2) int32 pixel (column, row)."""
+        p = np.asarray(positions, float)
+        if p.shape[1] == 3:
+            p = p[:, list(self.axes)]
+        u = (p - self.lo) * self.scale
+        return np.stack([np.rint(u[:, 0]), np.rint(self.height - 1 - u[:, 1])], -1).astype(np.int32)
+
+    def world(self, pixels: np.ndarray) -> np.ndarray:
+        """(N, 2) pixel (column, row) -> (N, 2) world metres on ``axes``; inverse of ``polyline``."""
+        q = np.asarray(pixels, float)
+        return np.stack([q[:, 0] / self.scale + self.lo[0], (self.height - 1 - q[:, 1]) / self.scale + self.lo[1]], -1)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """World (left, right, bottom, top) of the pixel centres at the image edges, metres."""
+        return (self.lo[0], self.lo[0] + (self.width - 1) / self.scale,
+                self.lo[1], self.lo[1] + (self.height - 1) / self.scale)
+
+    @property
+    def axis_names(self) -> tuple[str, str]:
+        return AXIS_NAMES[self.axes[0]], AXIS_NAMES[self.axes[1]]
+
+    # ---- drawing ----------------------------------------------------------------------------
     def background(self) -> np.ndarray:
-        img = np.full((self.size, self.size, 3), BG, np.uint8)
-        # 1 m grid
-        for k in range(int(np.floor(self.lo[0])), int(np.ceil(self.lo[0] + self.size / self.scale)) + 1):
-            x = self.px((k, self.lo[1]))[0]
-            cv2.line(img, (x, 0), (x, self.size - 1), (32, 32, 40), 1)
-        for k in range(int(np.floor(self.lo[1])), int(np.ceil(self.lo[1] + self.size / self.scale)) + 1):
-            y = self.px((self.lo[0], k))[1]
-            cv2.line(img, (0, y), (self.size - 1, y), (32, 32, 40), 1)
+        """Grid (1 m), obstacles to scale, goal region and start cross. (H, W, 3) uint8 RGB."""
+        img = np.full((self.height, self.width, 3), BG, np.uint8)
+        left, right, bottom, top = self.extent
+        for k in range(int(np.ceil(left)), int(np.floor(right)) + 1):
+            x = self.px((k, 0.0))[0]
+            cv2.line(img, (x, 0), (x, self.height - 1), GRID, 1)
+        for k in range(int(np.ceil(bottom)), int(np.floor(top)) + 1):
+            y = self.px((0.0, k))[1]
+            cv2.line(img, (0, y), (self.width - 1, y), GRID, 1)
         for ob in self.scenario.obstacles:
             colour = tuple(int(255 * c) for c in ob.rgba[:3])
-            cv2.fillPoly(img, [self._footprint(ob)], colour, lineType=cv2.LINE_AA)
-        cv2.circle(img, self.px(self.scenario.goal), max(2, int(self.scenario.goal_radius * self.scale)), GOAL, 2, cv2.LINE_AA)
-        cv2.drawMarker(img, self.px((0, 0)), (255, 255, 255), cv2.MARKER_CROSS, 10, 2)
+            hull = self._footprint(ob)
+            cv2.fillPoly(img, [hull], colour, lineType=cv2.LINE_AA)
+            cv2.polylines(img, [hull], True, tuple(int(0.6 * c) for c in colour), 1, cv2.LINE_AA)
+        radius = max(2, int(round(self.scenario.goal_radius * self.scale)))
+        cv2.circle(img, self.px(self.scenario.goal), radius, GOAL, 2, cv2.LINE_AA)
+        cv2.drawMarker(img, self.px((0.0, 0.0, 0.0)), START, cv2.MARKER_CROSS, 10, 2)
         return img
 
-    def _footprint(self, ob) -> np.ndarray:
-        """Outline of the obstacle's projection on x-y: sample its surface and take the hull."""
-        u = np.linspace(0, 2 * np.pi, 24)
-        v = np.linspace(-np.pi / 2, np.pi / 2, 12)
-        uu, vv = np.meshgrid(u, v)
-        a, b, c = ob.size
-        if ob.shape in ("sphere",):
-            a = b = c = ob.size[0]
-        if ob.shape in ("capsule", "cylinder"):
-            a, b, c = ob.size[0], ob.size[0], ob.size[1] + (ob.size[0] if ob.shape == "capsule" else 0)
-        if ob.shape in ("box", "cylinder"):
-            # corners/rims: use a box-ish superellipsoid sampling
-            pts = np.array([[sx * a, sy * b, sz * c] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-            if ob.shape == "cylinder":
-                ang = np.linspace(0, 2 * np.pi, 24)
-                pts = np.array([[a * np.cos(t), b * np.sin(t), sz * c] for t in ang for sz in (-1, 1)])
-        else:
-            pts = np.stack([a * np.cos(vv) * np.cos(uu), b * np.cos(vv) * np.sin(uu), c * np.sin(vv)], -1).reshape(-1, 3)
-        world = pts @ ob.rotation.T + np.asarray(ob.center)
-        pix = np.array([self.px(p) for p in world], dtype=np.int32)
-        return cv2.convexHull(pix)
+    def _footprint(self, ob: Obstacle) -> np.ndarray:
+        """Outline of the obstacle's projection: the hull of its surface points."""
+        world = _surface_points(ob) @ ob.rotation.T + np.asarray(ob.center)
+        return cv2.convexHull(self.polyline(world))
 
     def draw_path(self, img: np.ndarray, positions: np.ndarray, collision_at: np.ndarray | None = None) -> np.ndarray:
+        """Draw the path (N, 3) in place, a dot at its end and a red cross where it collided."""
         if len(positions) > 1:
-            pts = np.array([self.px(p) for p in positions], dtype=np.int32)
-            cv2.polylines(img, [pts], False, PATH, 2, cv2.LINE_AA)
+            cv2.polylines(img, [self.polyline(positions)], False, PATH, 2, cv2.LINE_AA)
         if len(positions):
-            cv2.circle(img, self.px(positions[-1]), 4, (255, 255, 255), -1, cv2.LINE_AA)
+            cv2.circle(img, self.px(positions[-1]), 4, START, -1, cv2.LINE_AA)
         if collision_at is not None:
             cv2.drawMarker(img, self.px(collision_at), HIT, cv2.MARKER_TILTED_CROSS, 14, 3)
         return img
+
+    def draw_heading(self, img: np.ndarray, position, direction, length_m: float = 1.0) -> np.ndarray:
+        """An arrow from ``position`` along the unit vector ``direction`` (e.g. the camera axis)."""
+        tip = np.asarray(position, float) + length_m * np.asarray(direction, float)
+        cv2.arrowedLine(img, self.px(position), self.px(tip), HEADING, 2, cv2.LINE_AA, tipLength=0.3)
+        return img
+
+
+TopDownMap = PlaneMap  # the name `orbitdata fly --video` uses; its default axes are the top-down view
+
+
+def paired_views(scenario: Scenario, top_size: tuple[int, int], side_size: tuple[int, int],
+                 extra_points: np.ndarray | None = None) -> tuple[PlaneMap, PlaneMap]:
+    """A top-down (x-y) and a side (x-z) map at one scale, so lengths compare between them."""
+    top = PlaneMap(scenario, top_size, extra_points, (0, 1))
+    side = PlaneMap(scenario, side_size, extra_points, (0, 2))
+    scale = min(top.scale, side.scale)
+    return (PlaneMap(scenario, top_size, extra_points, (0, 1), scale=scale),
+            PlaneMap(scenario, side_size, extra_points, (0, 2), scale=scale))
+
+
+def draw_numbered(img: np.ndarray, view: PlaneMap, points: np.ndarray, first: int = 1) -> np.ndarray:
+    """Numbered dots at world ``points`` (N, 3): where the contact sheet's key frames were taken."""
+    for n, p in enumerate(points, first):
+        u, v = view.px(p)
+        cv2.circle(img, (u, v), 4, HEADING, -1, cv2.LINE_AA)
+        cv2.putText(img, str(n), (u + 5, v - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45, HEADING, 1, cv2.LINE_AA)
+    return img

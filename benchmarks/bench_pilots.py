@@ -1,0 +1,81 @@
+"""Pilot costs: RRT* planning time per episode, and per-step control cost beside rendering.
+
+    python benchmarks/bench_pilots.py [--episodes 50]
+
+Planning: the expert's whole reset (RRT* + shortening + time parametrisation) on scenarios
+with 5 obstacles at 2 m/s, and on the dataset's random mix (1-5 obstacles, 0.5-2.5 m/s).
+Control: mean time of pilot.act() per step for each level, against one 224 px RGB+depth render.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from orbitdata.pilots import make_pilot
+from orbitdata.rollout import fly_episode
+from orbitdata.scenario import sample_scenario
+from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
+
+
+def planning_times(episodes: int, **overrides) -> np.ndarray:
+    times = []
+    for seed in range(episodes):
+        scn = sample_scenario(seed, **overrides)
+        pilot = make_pilot("expert")
+        start = time.perf_counter()
+        pilot.reset(scn, seed)
+        times.append(time.perf_counter() - start)
+    return np.array(times)
+
+
+class TimedPilot:
+    def __init__(self, pilot):
+        self.pilot, self.level, self.elapsed, self.calls = pilot, pilot.level, 0.0, 0
+
+    def reset(self, scenario, seed):
+        self.pilot.reset(scenario, seed)
+
+    def act(self, state):
+        start = time.perf_counter()
+        a = self.pilot.act(state)
+        self.elapsed += time.perf_counter() - start
+        self.calls += 1
+        return a
+
+    def metadata(self):
+        return self.pilot.metadata()
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--episodes", type=int, default=50)
+    args = ap.parse_args()
+    for label, kw in (("5 obstacles, 2 m/s", {"n_obstacles": 5, "speed": 2.0}), ("dataset mix", {})):
+        t = planning_times(args.episodes, **kw)
+        print(f"expert planning ({label}, {len(t)} episodes): median {1e3 * np.median(t):.0f} ms, "
+              f"p95 {1e3 * np.percentile(t, 95):.0f} ms, max {1e3 * t.max():.0f} ms")
+
+    env = CubeSatEnv(SimConfig(render=False))
+    costs = {}
+    for level in ("expert", "risky", "exploratory"):
+        timed = TimedPilot(make_pilot(level))
+        for seed in range(10):
+            fly_episode(env, timed, seed)
+        costs[level] = timed.elapsed / timed.calls
+    render_env = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=224)))
+    render_env.reset(seed=1, options={"n_obstacles": 5})
+    render_env._observe()
+    n, start = 200, time.perf_counter()
+    for _ in range(n):
+        render_env._observe()
+    render = (time.perf_counter() - start) / n
+    print(f"render RGB+depth 224 px: {1e3 * render:.2f} ms/frame")
+    for level, c in costs.items():
+        print(f"{level:>11} act(): {1e3 * c:.3f} ms/step = {c / render:.2f} x render")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,68 @@
+"""Simulator speed on this machine: physics, rendering, and step()+render end to end.
+
+    python benchmarks/bench_sim.py [--seconds 3]
+
+Prints physics steps/s (control steps of 0.04 s, 8 substeps each), render frames/s for
+RGB+depth at 64/128/224 px, end-to-end step()+render frames/s at 224 px, and the ratio of
+end-to-end to render-only (goal >= 0.8: the simulation should cost little beside rendering).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import time
+
+import numpy as np
+
+from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
+
+
+def _rate(fn, seconds: float) -> float:
+    fn()  # warm-up
+    n, start = 0, time.perf_counter()
+    while time.perf_counter() - start < seconds:
+        fn()
+        n += 1
+    return n / (time.perf_counter() - start)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure")
+    args = ap.parse_args()
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(0.0, 0.15, size=(4096, 8))
+
+    def stepper(env):
+        state = {"i": 0}
+        env.reset(seed=0, options={"n_obstacles": 5, "speed": 0.0})
+
+        def step():
+            state["i"] += 1
+            _, _, term, trunc, _ = env.step(actions[state["i"] % len(actions)])
+            if term or trunc:
+                env.reset(seed=state["i"], options={"n_obstacles": 5, "speed": 0.0})
+
+        return step
+
+    physics = CubeSatEnv(SimConfig(render=False))
+    phys_rate = _rate(stepper(physics), args.seconds)
+    print(f"physics: {phys_rate:,.0f} control steps/s ({phys_rate * 8:,.0f} substeps/s)")
+
+    render_rates = {}
+    for size in (64, 128, 224):
+        env = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=size)))
+        env.reset(seed=1, options={"n_obstacles": 5})
+        render_rates[size] = _rate(lambda: env._observe(), args.seconds)
+        print(f"render RGB+depth {size:>3} px: {render_rates[size]:,.0f} frames/s")
+        env.close()
+
+    env = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=224)))
+    e2e = _rate(stepper(env), args.seconds)
+    print(f"step()+render 224 px: {e2e:,.0f} frames/s")
+    print(f"ratio end-to-end / render-only at 224 px: {e2e / render_rates[224]:.2f} (goal >= 0.8)")
+
+
+if __name__ == "__main__":
+    main()

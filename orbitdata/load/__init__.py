@@ -1,0 +1,103 @@
+"""Windowed PyTorch datasets over an orbitdata dataset (local folder or Hub repo).
+
+An item is a dict of tensors over T = context + horizon consecutive frames of one episode,
+keyed by the dataset's column names::
+
+    observation.image      (T, 3, H, W) uint8 RGB
+    observation.depth      (T, H, W)    float32 metres, 0 = no return
+    observation.depth_low  (T, 16, 16)  float32 metres
+    observation.state      (T, 16)      float32
+    action                 (T, 8)       float32 (zeros on an episode's last frame)
+    collision, success, is_last  (T,)   bool
+    timestamp, min_clearance     (T,)   float32
+    episode_index, frame_index   (T,)   int64
+    is_pad                 (T,)         bool, True on frames that repeat the last real frame
+
+Pipeline: ``source`` (resolve, check the schema version, load tables) -> ``select``
+(episodes filter) -> ``index`` (window starts) -> ``decode`` (Arrow rows to tensors) ->
+``windows`` (map-style) or ``streaming`` (iterable).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from orbitdata import schema as S
+from orbitdata.load.config import IS_PAD, WindowConfig
+from orbitdata.load.index import Episodes, build_index, check_lengths, check_windows
+from orbitdata.load.select import EpisodeFilter, select_episodes
+from orbitdata.load.source import check_schema_version, load_episode_table, load_steps, read_info
+from orbitdata.load.streaming import StreamingWindowDataset
+from orbitdata.load.windows import WindowDataset
+
+__all__ = ["load_windows", "WindowDataset", "StreamingWindowDataset", "WindowConfig", "IS_PAD", "EpisodeFilter"]
+
+
+def load_windows(
+    source: str | Path,
+    split: str = "train",
+    context: int = 8,
+    horizon: int = 12,
+    stride: int = 1,
+    pad: bool = False,
+    image_size: int | None = None,
+    columns: list[str] | tuple[str, ...] | None = None,
+    episodes: EpisodeFilter = None,
+    streaming: bool = False,
+    shuffle_buffer: int = 0,
+    seed: int = 0,
+    **load_dataset_kwargs,
+) -> WindowDataset | StreamingWindowDataset:
+    """Windows of ``context + horizon`` frames from one split, never crossing an episode.
+
+    Args:
+        source: a local dataset folder or a Hub repo id; read with ``datasets.load_dataset``.
+        split: "train" or "test".
+        context, horizon, stride, pad, image_size, columns: see :class:`WindowConfig`
+            (``columns=None`` loads every step column; name fewer to skip e.g. full-res depth).
+        episodes: which episodes to cut windows from, through the episodes table: ``None``
+            (all), a dict of column values (``{"level": "expert", "outcome": ["success"]}``),
+            a predicate over the episode row (``lambda ep: ep["outcome"] != "collision"``) or
+            a list of ``episode_index`` values.
+        streaming: ``False``: a map-style :class:`WindowDataset` over the memory-mapped Arrow
+            cache (shuffle with ``ds.sampler(seed=...)``). ``True``: a
+            :class:`StreamingWindowDataset` reading the Parquet shards as it goes.
+        shuffle_buffer, seed: streaming only: shuffle windows across this many episodes,
+            reproducibly from (seed, epoch).
+        **load_dataset_kwargs: passed to ``datasets.load_dataset`` (``cache_dir``,
+            ``revision``, ``token``, ...).
+
+    Raises:
+        FileNotFoundError: no such folder, or no ``meta/info.json`` in it.
+        ValueError: unknown schema version, missing column, an episodes filter that selects
+            nothing, a window longer than every selected episode, inconsistent tables.
+    """
+    if not streaming and (shuffle_buffer or seed):
+        raise ValueError("shuffle_buffer/seed are for streaming=True; shuffle a map-style dataset with ds.sampler(seed=...)")
+    config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
+                          columns=None if columns is None else tuple(columns))
+    check_schema_version(read_info(source, load_dataset_kwargs), source)
+    where = f"split {split!r} of {source}"
+    table = load_episode_table(source, split, load_dataset_kwargs)
+    selected = select_episodes(table, episodes, split)
+    ids = table.column(S.EPISODE_INDEX).to_numpy().astype(np.int64)
+    lengths = table.column(S.LENGTH).to_numpy().astype(np.int64)
+    chosen = np.isin(ids, selected)
+    if not streaming:
+        steps = load_steps(source, split, False, load_dataset_kwargs)
+        dataset = WindowDataset(steps, config, episodes=None if episodes is None else selected, where=where)
+        check_lengths(dataset.found, ids[chosen], lengths[chosen], where)
+        return dataset
+    check_windows(build_index(Episodes(ids[chosen], np.zeros(chosen.sum(), np.int64), lengths[chosen]), config),
+                  lengths[chosen], config, where)
+    steps = load_steps(source, split, True, load_dataset_kwargs)
+    wanted = config.wanted(steps.column_names)  # raises for a missing column before any read
+    if config.columns is not None:
+        steps = load_steps(source, split, True, load_dataset_kwargs, columns=wanted)
+    return StreamingWindowDataset(
+        steps, config, episodes=None if episodes is None else selected.tolist(),
+        lengths=dict(zip(ids[chosen].tolist(), lengths[chosen].tolist())),
+        shuffle_buffer=shuffle_buffer, seed=seed, where=where,
+    )

@@ -1,0 +1,199 @@
+"""Consistency: counts (card YAML, meta/info.json, data) and meta/stats.json against the data.
+
+``meta/stats.json`` is recomputed in one streaming pass with memory flat in dataset size:
+
+* count / mean / std / min / max are exact moments (sums in float64), so they are compared with
+  ``rtol = 1e-6`` (the file keeps 7 significant digits) plus ``1e-7`` of the feature's range
+  (float64 summation order, and std's ``sqrt(E[x^2] - mean^2)`` when std is ~0);
+* q01 / q99 are checked without keeping the sample: the accumulator takes every ``stride``-th
+  train row (images: every 50th frame, every 97th pixel), and a linear-interpolation quantile
+  ``q`` of those ``n`` values has ``#{x < q} <= k + 1 <= #{x <= q}`` with ``k = floor(p (n - 1))``.
+  Counting the sampled values below and at ``q`` is exact and O(width) in memory.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from orbitdata import schema as S
+from orbitdata.dataset.stats import IMAGE_STRIDE, QUANTILE_ROWS, SCALAR_FEATURES, VECTOR_FEATURES
+from orbitdata.validate import checks as C
+from orbitdata.validate.report import Sink
+
+QUANTILES = (("q01", 0.01), ("q99", 0.99))
+WIDTHS = {S.STATE: S.STATE_DIM, S.ACTION: S.ACTION_DIM, S.DEPTH_LOW: S.DEPTH_LOW_DIM, S.IMAGE: 3}
+IMAGE_PIXEL_STRIDE = 97  # matches orbitdata.dataset.stats (every 97th pixel goes to the sample)
+RTOL, RANGE_TOL = 1e-6, 1e-7
+
+
+# ---- counts (quick) -----------------------------------------------------------------------
+def _diff(a, b, path: str, out: list[str]) -> None:
+    if isinstance(a, dict) and isinstance(b, dict):
+        for key in sorted(set(a) | set(b)):
+            _diff(a.get(key), b.get(key), f"{path}.{key}" if path else key, out)
+    elif a != b:
+        out.append(f"{path}: meta/info.json says {a}, the episodes table gives {b}")
+
+
+def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_rows: dict[str, int],
+                 episodes_complete: bool, sink: Sink) -> None:
+    """Counts per split (and level, outcome) from the three places that state them."""
+    from orbitdata.dataset.meta import counts  # the generator's own definition of the counts
+
+    frames_by_split = {s: 0 for s in S.SPLITS}
+    for rel, n in data_rows.items():
+        frames_by_split[S.SHARD_RE.match(rel).group(2)] += n
+    table_frames = {s: sum(r.length for r in episode_rows if r.split == s) for s in S.SPLITS}
+    table_eps = {s: sum(1 for r in episode_rows if r.split == s) for s in S.SPLITS}
+    if episodes_complete:
+        for split in S.SPLITS:
+            if table_frames[split] != frames_by_split[split]:
+                sink.add(C.COUNTS, f"{split}: the episodes table sums to {table_frames[split]} frames, the data "
+                                   f"shards hold {frames_by_split[split]} rows", S.DATA_DIR)
+    if info is not None and episodes_complete:
+        import pyarrow as pa
+
+        usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
+        table = pa.table({S.SPLIT: [r.split for r in usable], S.LEVEL: [r.level for r in usable],
+                          S.OUTCOME: [r.outcome for r in usable], S.LENGTH: [r.length for r in usable]})
+        diffs: list[str] = []
+        _diff(info.get("counts"), counts(table), "counts", diffs)
+        for d in diffs:
+            sink.add(C.COUNTS, d, S.INFO_PATH)
+    if card is None:
+        return
+    expected = {"default": (frames_by_split, "frames in the data shards"),
+                "episodes": (table_eps, "rows in the episodes table")}
+    infos = card.get("dataset_info")
+    infos = infos if isinstance(infos, list) else [infos] if isinstance(infos, dict) else []
+    seen = set()
+    for entry in infos:
+        name = entry.get("config_name", "default") if isinstance(entry, dict) else None
+        if name not in expected:
+            continue
+        seen.add(name)
+        truth, what = expected[name]
+        card_splits = {s.get("name"): s.get("num_examples") for s in entry.get("splits") or [] if isinstance(s, dict)}
+        for split in sorted(set(card_splits) | {s for s, n in truth.items() if n}):
+            if card_splits.get(split) != truth.get(split, 0):
+                sink.add(C.COUNTS, f"dataset_info[{name}] says {split} has {card_splits.get(split)} examples, "
+                                   f"there are {truth.get(split, 0)} {what}", S.CARD_PATH)
+    for name in sorted(set(expected) - seen):
+        sink.add(C.COUNTS, f"the card's YAML has no dataset_info for config {name!r}", S.CARD_PATH)
+
+
+# ---- stats (full) -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class StatsPlan:
+    """What a worker needs to recompute its share of meta/stats.json."""
+
+    stride: int
+    quantiles: dict  # feature -> {"q01": array, "q99": array} from meta/stats.json
+
+    @classmethod
+    def build(cls, train_rows: int, stats: dict | None) -> "StatsPlan":
+        quantiles = {}
+        for name, width in ((n, WIDTHS.get(n, 1)) for n in (*VECTOR_FEATURES, *SCALAR_FEATURES, S.IMAGE)):
+            entry = (stats or {}).get(name)
+            try:
+                qs = {q: np.asarray(entry[q], dtype=np.float64).reshape(width) for q, _ in QUANTILES}
+            except (KeyError, TypeError, ValueError):
+                continue
+            quantiles[name] = qs
+        return cls(max(1, math.ceil(train_rows / QUANTILE_ROWS)), quantiles)
+
+
+@dataclass
+class Moments:
+    """Exact moments plus counts around the recorded quantiles, mergeable across workers."""
+
+    n: int = 0
+    sum: np.ndarray | None = None
+    sumsq: np.ndarray | None = None
+    min: np.ndarray | None = None
+    max: np.ndarray | None = None
+    sampled: int = 0
+    ranks: dict = field(default_factory=dict)  # "q01" -> (count below, count at or below), arrays
+
+    def update(self, x: np.ndarray, sample: np.ndarray | None, quantiles: dict | None) -> None:
+        if not len(x):
+            return
+        part = Moments(len(x), x.sum(0), (x * x).sum(0), x.min(0), x.max(0))
+        if sample is not None and len(sample):
+            s = x[sample]
+            part.sampled = len(s)
+            for q, _ in QUANTILES:
+                if quantiles and q in quantiles:
+                    ref = quantiles[q]
+                    eps = 1e-6 * np.abs(ref)
+                    part.ranks[q] = ((s < ref - eps).sum(0), (s <= ref + eps).sum(0))
+        self.merge(part)
+
+    def merge(self, other: "Moments") -> None:
+        if other.n == 0 and other.sampled == 0:
+            return
+        if self.n == 0:
+            self.n, self.sum, self.sumsq, self.min, self.max = other.n, other.sum, other.sumsq, other.min, other.max
+        elif other.n:
+            self.n += other.n
+            self.sum, self.sumsq = self.sum + other.sum, self.sumsq + other.sumsq
+            self.min, self.max = np.minimum(self.min, other.min), np.maximum(self.max, other.max)
+        self.sampled += other.sampled
+        for q, (lo, hi) in other.ranks.items():
+            a, b = self.ranks.get(q, (0, 0))
+            self.ranks[q] = (a + lo, b + hi)
+
+
+def merge_moments(total: dict[str, Moments], part: dict[str, Moments]) -> None:
+    for name, m in part.items():
+        total.setdefault(name, Moments()).merge(m)
+
+
+def check_stats(stats: dict, measured: dict[str, Moments], sink: Sink) -> None:
+    """meta/stats.json against moments recomputed from the train split."""
+    expected = set(VECTOR_FEATURES) | set(SCALAR_FEATURES) | ({S.IMAGE} if S.IMAGE in measured else set())
+    for name in sorted(set(stats) - expected):
+        sink.add(C.STATS, f"feature {name!r} is not one stats are computed for", S.STATS_PATH)
+    for name in sorted(expected):
+        m, entry = measured.get(name), stats.get(name)
+        if not isinstance(entry, dict):
+            sink.add(C.STATS, f"no statistics for {name!r}; regenerate meta with `orbitdata shard`", S.STATS_PATH)
+            continue
+        if m is None or m.n == 0:
+            continue
+        width = len(m.sum)
+        names = S.STATE_NAMES if name == S.STATE else [str(i) for i in range(width)]
+        if entry.get("count") != m.n:
+            sink.add(C.STATS, f"{name} count is {entry.get('count')}, the train split has {m.n} values", S.STATS_PATH)
+        mean = m.sum / m.n
+        values = {"mean": mean, "std": np.sqrt(np.maximum(m.sumsq / m.n - mean * mean, 0.0)), "min": m.min,
+                  "max": m.max}
+        scale = np.maximum(np.abs(m.min), np.abs(m.max))
+        for key, ours in values.items():
+            try:
+                theirs = np.asarray(entry[key], dtype=np.float64).reshape(width)
+            except (KeyError, TypeError, ValueError):
+                sink.add(C.STATS, f"{name}.{key} is missing or not {width} numbers", S.STATS_PATH)
+                continue
+            bad = np.flatnonzero(~(np.abs(theirs - ours) <= RTOL * np.abs(ours) + RANGE_TOL * scale))
+            for i in bad[:3]:
+                sink.add(C.STATS, f"{name}[{names[i]}].{key} is {theirs[i]:.7g}, the train split gives {ours[i]:.7g}",
+                         S.STATS_PATH)
+        for q, p in QUANTILES:
+            if q not in m.ranks:
+                sink.add(C.STATS, f"{name}.{q} is missing or not {width} numbers", S.STATS_PATH)
+                continue
+            below, at_or_below = m.ranks[q]
+            k = math.floor(p * (m.sampled - 1)) + 1
+            bad = np.flatnonzero((below > k) | (at_or_below < k))
+            for i in bad[:3]:
+                sink.add(C.STATS, f"{name}[{names[i]}].{q} = {entry[q][i]:.7g} is not the {p:g} quantile of the "
+                                  f"sampled train values ({below[i]} of {m.sampled} lie below it, {k} should)",
+                         S.STATS_PATH)
+
+
+def image_sample_rows(global_rows: np.ndarray) -> np.ndarray:
+    return np.flatnonzero(global_rows % IMAGE_STRIDE == 0)

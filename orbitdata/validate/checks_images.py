@@ -1,0 +1,117 @@
+"""Images: every RGB JPEG and depth PNG decodes, has the recorded size, and depth is plausible.
+
+Tolerances:
+
+* depth values are millimetres, so a non-zero value may sit up to 1 mm outside the camera's
+  [near, far] (the PNG stores ``rint(metres * 1000)``);
+* ``DEPTH_LOW_TOL_M = 1 mm``: depth_low is pooled from float32 metres before the PNG rounds
+  them to millimetres, so the pooled PNG differs from it by at most 0.5 mm (measured: 0.50 mm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+import pyarrow as pa
+
+from orbitdata import schema as S
+from orbitdata.validate import checks as C
+from orbitdata.validate.frames import Frames
+from orbitdata.validate.report import Sink
+
+MM_PER_M = 1000.0
+DEPTH_MM_SLACK = 1.0
+DEPTH_LOW_TOL_M = 1e-3
+
+
+@dataclass(frozen=True)
+class Camera:
+    """What meta/info.json says the images are."""
+
+    height: int
+    width: int
+    near: float  # metres
+    far: float  # metres; no-return pixels (0) count as this in depth_low
+
+    @classmethod
+    def from_info(cls, info: dict | None) -> "Camera | None":
+        try:
+            rgb = info["features"][S.IMAGE]["shape"]
+            near, far = info["features"][S.DEPTH]["range_m"]
+            return cls(int(rgb[0]), int(rgb[1]), float(near), float(far))
+        except (KeyError, TypeError, ValueError, IndexError):
+            return None
+
+
+def _blobs(table: pa.Table, name: str) -> tuple[pa.Array, np.ndarray]:
+    col = table.column(name).combine_chunks()
+    valid = np.asarray(col.is_valid()) if col.null_count else np.ones(len(col), bool)
+    data = col.field("bytes")
+    if data.null_count:
+        valid &= np.asarray(data.is_valid())
+    return data, valid
+
+
+def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Camera | None, rel: str, sink: Sink,
+                 keep_rgb: np.ndarray) -> dict[int, np.ndarray]:
+    """Decode every frame of a row group. Returns the RGB pixels of the rows in ``keep_rgb``."""
+    rgb_blobs, rgb_ok = _blobs(table, S.IMAGE)
+    depth_blobs, depth_ok = _blobs(table, S.DEPTH)
+    keep = set(int(i) for i in keep_rgb)
+    kept: dict[int, np.ndarray] = {}
+    ep, frame = fr.episode, fr.frame
+    for i in range(table.num_rows):
+        where = (rel, int(ep[i]), int(frame[i]))
+        rgb = None
+        if rgb_ok[i]:
+            rgb = cv2.imdecode(np.frombuffer(rgb_blobs[i].as_buffer(), np.uint8), cv2.IMREAD_UNCHANGED)
+        if rgb is None:
+            sink.add(C.DECODE, f"{S.IMAGE} does not decode (missing or corrupt JPEG bytes)", *where)
+        elif camera is not None and (rgb.ndim != 3 or rgb.shape != (camera.height, camera.width, 3)):
+            sink.add(C.SIZE, f"{S.IMAGE} is {'x'.join(map(str, rgb.shape))}, meta/info.json says "
+                             f"{camera.height}x{camera.width}x3", *where)
+        elif i in keep:
+            kept[i] = cv2.cvtColor(rgb, cv2.COLOR_BGR2RGB)
+        depth = None
+        if depth_ok[i]:
+            depth = cv2.imdecode(np.frombuffer(depth_blobs[i].as_buffer(), np.uint8), cv2.IMREAD_UNCHANGED)
+        if depth is None:
+            sink.add(C.DECODE, f"{S.DEPTH} does not decode (missing or corrupt PNG bytes)", *where)
+            continue
+        if depth.dtype != np.uint16 or depth.ndim != 2:
+            shape = "x".join(map(str, depth.shape))
+            sink.add(C.SIZE, f"{S.DEPTH} is a {shape} {depth.dtype} image, expected a single-channel 16-bit PNG",
+                     *where)
+            continue
+        if camera is None:
+            continue
+        if depth.shape != (camera.height, camera.width):
+            sink.add(C.SIZE, f"{S.DEPTH} is {depth.shape[0]}x{depth.shape[1]}, meta/info.json says "
+                             f"{camera.height}x{camera.width}", *where)
+            continue
+        _check_depth(depth, depth_low[i], camera, where, sink)
+    return kept
+
+
+def _check_depth(depth_mm: np.ndarray, low: np.ndarray, camera: Camera, where: tuple, sink: Sink) -> None:
+    lo, hi = camera.near * MM_PER_M - DEPTH_MM_SLACK, camera.far * MM_PER_M + DEPTH_MM_SLACK
+    hit = depth_mm[depth_mm > 0]
+    if hit.size and (hit.min() < lo or hit.max() > hi):
+        sink.add(C.DEPTH_RANGE, f"depth spans {hit.min() / MM_PER_M:.3f}-{hit.max() / MM_PER_M:.3f} m, outside the "
+                                f"camera range [{camera.near:g}, {camera.far:g}] m", *where)
+        return
+    if not np.isfinite(low).all():
+        return  # reported by values.finite
+    side = S.DEPTH_LOW_SIDE
+    h, w = depth_mm.shape
+    if h % side or w % side:
+        return
+    metres = np.where(depth_mm > 0, depth_mm.astype(np.float32) / np.float32(MM_PER_M), np.float32(camera.far))
+    pooled = metres.reshape(side, h // side, side, w // side).mean(axis=(1, 3))
+    err = np.abs(pooled.reshape(-1) - low)
+    if err.max() > DEPTH_LOW_TOL_M:
+        cell = int(err.argmax())
+        sink.add(C.DEPTH_LOW, f"depth_low cell {cell} is {low[cell]:.4f} m, the pooled depth image says "
+                              f"{pooled.reshape(-1)[cell]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)", *where)
