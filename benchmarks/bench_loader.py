@@ -66,8 +66,11 @@ def windows(args):
 def measure_loader(args) -> dict:
     from torch.utils.data import DataLoader
 
+    from orbitdata.load import collate_windows
+
     ds, order = windows(args)
-    loader = DataLoader(ds, batch_size=args.batch_size, sampler=order, num_workers=args.workers)
+    loader = DataLoader(ds, batch_size=args.batch_size, sampler=order, num_workers=args.workers,
+                        collate_fn=collate_windows)
     it = iter(loader)
     next(it)  # start-up: workers, first page faults
     t0 = time.perf_counter()

@@ -30,7 +30,7 @@ class DatasetConfig:
         level_mix: share of expert / risky / exploratory episodes (normalised).
         episodes_per_unit: episodes per work unit (one part file, the resume granularity).
         jpeg_quality: RGB frames are JPEG at this quality (4:2:0, libjpeg via Pillow).
-        png_compression: zlib level of the 16-bit depth PNGs.
+        png_compression: zlib level of the 16-bit depth PNGs (filter 'up').
         row_group_rows: rows per Parquet row group.
         compression: Parquet codec for every column.
         max_shard_bytes: a data shard closes at the first episode boundary past this size.
@@ -42,7 +42,7 @@ class DatasetConfig:
     level_mix: tuple[float, float, float] = (0.5, 0.25, 0.25)
     episodes_per_unit: int = 8
     jpeg_quality: int = 90
-    png_compression: int = 6
+    png_compression: int = 3
     row_group_rows: int = 512
     compression: str = "zstd"
     max_shard_bytes: int = 500_000_000

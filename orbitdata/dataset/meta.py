@@ -11,6 +11,7 @@ import pyarrow as pa
 
 from orbitdata import __version__, schema as S
 from orbitdata.config import GenerationConfig
+from orbitdata.dataset.encode import PNG_FILTER
 from orbitdata.dataset.parts import atomic_write
 from orbitdata.sim.thrusters import thruster_layout, wrench_matrix
 
@@ -81,6 +82,8 @@ def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: l
                 "dtype": "image",
                 "shape": [size, size],
                 "codec": "png16",
+                "png_filter": PNG_FILTER,
+                "png_compression": ds.png_compression,
                 "unit": "mm",
                 "no_return": 0,
                 "range_m": [config.sim.camera.near, config.sim.camera.far],

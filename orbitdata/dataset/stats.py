@@ -16,7 +16,7 @@ import pyarrow as pa
 from orbitdata import schema as S
 from orbitdata.dataset.encode import decode_rgb
 
-QUANTILE_ROWS = 100_000
+QUANTILE_ROWS = 20_000
 IMAGE_STRIDE = 50
 VECTOR_FEATURES = (S.STATE, S.ACTION, S.DEPTH_LOW)
 SCALAR_FEATURES = (S.MIN_CLEARANCE, S.TIMESTAMP)

@@ -7,6 +7,7 @@ processes and Ray tasks on other machines (no shared filesystem) behave the same
 from __future__ import annotations
 
 import io
+import os
 from dataclasses import dataclass
 
 import pyarrow as pa
@@ -39,6 +40,10 @@ def _env(config: GenerationConfig) -> CubeSatEnv:
     key = repr(config.sim) + repr(config.scenario)
     env = _ENV_CACHE.get(key)
     if env is None:
+        # One llvmpipe thread per worker: workers already use every core, and Mesa's
+        # rasteriser threads would only contend (measured: 1.0 vs 1.8 ms per 224 px frame
+        # on 2 busy cores). Mesa reads this when the first GL context is made.
+        os.environ.setdefault("LP_NUM_THREADS", "1")
         _ENV_CACHE.clear()
         env = _ENV_CACHE[key] = CubeSatEnv(config.sim, config.scenario)
     return env

@@ -13,9 +13,12 @@ keyed by the dataset's column names::
     episode_index, frame_index   (T,)   int64
     is_pad                 (T,)         bool, True on frames that repeat the last real frame
 
+Batch with ``DataLoader(..., collate_fn=collate_windows)``: a map-style batch is then decoded
+in place rather than stacked (``default_collate`` works too, one copy slower).
+
 Pipeline: ``source`` (resolve, check the schema version, load tables) -> ``select``
 (episodes filter) -> ``index`` (window starts) -> ``decode`` (Arrow rows to tensors) ->
-``windows`` (map-style) or ``streaming`` (iterable).
+``windows`` (map-style) or ``streaming`` (iterable) -> ``collate`` (batches).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from orbitdata import schema as S
+from orbitdata.load.collate import collate_windows
 from orbitdata.load.config import IS_PAD, WindowConfig
 from orbitdata.load.index import Episodes, build_index, check_lengths, check_windows
 from orbitdata.load.select import EpisodeFilter, select_episodes
@@ -32,7 +36,8 @@ from orbitdata.load.source import check_schema_version, load_episode_table, load
 from orbitdata.load.streaming import StreamingWindowDataset
 from orbitdata.load.windows import WindowDataset
 
-__all__ = ["load_windows", "WindowDataset", "StreamingWindowDataset", "WindowConfig", "IS_PAD", "EpisodeFilter"]
+__all__ = ["load_windows", "WindowDataset", "StreamingWindowDataset", "WindowConfig", "collate_windows", "IS_PAD",
+           "EpisodeFilter"]
 
 
 def load_windows(

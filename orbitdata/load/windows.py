@@ -17,6 +17,7 @@ import torch
 from torch.utils.data import Dataset, DistributedSampler
 
 from orbitdata import schema as S
+from orbitdata.load.collate import WindowBatch
 from orbitdata.load.config import IS_PAD, WindowConfig
 from orbitdata.load.decode import WindowDecoder, configure_process
 from orbitdata.load.index import Episodes, WindowIndex, build_index, check_windows, find_episodes
@@ -47,7 +48,9 @@ class WindowDataset(Dataset):
         where: how errors name the data, e.g. "split 'train' of ./orbit_planner".
 
     An item is a dict of tensors over T frames, keyed by column name (see ``orbitdata.load``),
-    plus ``is_pad`` (T,) bool. Order is the table order; shuffle with :meth:`sampler`.
+    plus ``is_pad`` (T,) bool. Order is the table order; shuffle with :meth:`sampler`. Batch
+    with ``DataLoader(ds, batch_size, sampler=ds.sampler(seed=...), collate_fn=collate_windows)``:
+    each batch is then decoded in place, with no stacking copy.
     """
 
     def __init__(self, steps, config: WindowConfig = WindowConfig(), episodes: Sequence[int] | None = None,
@@ -86,14 +89,24 @@ class WindowDataset(Dataset):
     def __len__(self) -> int:
         return len(self.index)
 
-    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+    def _rows(self, i: int) -> pa.Table:
         if self._pid != os.getpid():
             self._open()
         n = len(self.index)
         if not -n <= i < n:
             raise IndexError(f"window {i} out of range: {self.where} has {n} windows")
-        rows = self._table.slice(int(self.index.row[i]), int(self.index.n_real[i]))
-        return self._decoder(rows)
+        return self._table.slice(int(self.index.row[i]), int(self.index.n_real[i]))
+
+    def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
+        return self._decoder(self._rows(i))
+
+    def __getitems__(self, indices: Sequence[int]) -> WindowBatch:
+        """A batch decoded in place; ``collate_windows`` returns it without a copy."""
+        rows = [self._rows(int(i)) for i in indices]
+        stacked = self._decoder.allocate(rows[0], batch=len(rows))
+        for j, r in enumerate(rows):
+            self._decoder.decode_into(r, {k: v[j] for k, v in stacked.items()})
+        return WindowBatch(stacked)
 
     def sampler(self, shuffle: bool = True, seed: int = 0, drop_last: bool = False,
                 rank: int | None = None, world_size: int | None = None) -> DistributedSampler:

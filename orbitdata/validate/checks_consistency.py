@@ -4,11 +4,17 @@
 
 * count / mean / std / min / max are exact moments (sums in float64), so they are compared with
   ``rtol = 1e-6`` (the file keeps 7 significant digits) plus ``1e-7`` of the feature's range
-  (float64 summation order, and std's ``sqrt(E[x^2] - mean^2)`` when std is ~0);
-* q01 / q99 are checked without keeping the sample: the accumulator takes every ``stride``-th
-  train row (images: every 50th frame, every 97th pixel), and a linear-interpolation quantile
-  ``q`` of those ``n`` values has ``#{x < q} <= k + 1 <= #{x <= q}`` with ``k = floor(p (n - 1))``.
-  Counting the sampled values below and at ``q`` is exact and O(width) in memory.
+  (float64 summation order, and std's ``sqrt(E[x^2] - mean^2)`` when std is ~0). Image moments
+  come from every ``image_stride``-th train frame; the stride is read off the recorded count
+  (the generator's ``IMAGE_STRIDE`` if it fits), so data written with another stride still check.
+* q01 / q99 were taken from a sample (every ``stride``-th row, at most ``QUANTILE_ROWS`` rows;
+  images: every 97th pixel), whose size older datasets did not record. So instead of rebuilding
+  that sample, the check counts the values below and at ``q`` in the *whole* train split (exact,
+  O(width) memory) and asks the fraction to be ``p`` within ``5 sqrt(p (1 - p) / n) + 2 / n``,
+  ``n`` the smallest sample the generator may have used: five standard errors of a sample
+  quantile, so ~600 quantiles give no false alarm, while a wrong or shuffled quantile moves the
+  fraction by far more. Ties are handled: ``#{x < q} / N <= p + tol <= ...`` and
+  ``#{x <= q} / N >= p - tol``.
 """
 
 from __future__ import annotations
@@ -90,20 +96,41 @@ def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_
 class StatsPlan:
     """What a worker needs to recompute its share of meta/stats.json."""
 
-    stride: int
+    image_stride: int  # RGB statistics come from train frames whose index is a multiple of this
     quantiles: dict  # feature -> {"q01": array, "q99": array} from meta/stats.json
 
     @classmethod
-    def build(cls, train_rows: int, stats: dict | None) -> "StatsPlan":
+    def build(cls, train_rows: int, stats: dict | None, image_pixels: int | None) -> "StatsPlan":
         quantiles = {}
         for name, width in ((n, WIDTHS.get(n, 1)) for n in (*VECTOR_FEATURES, *SCALAR_FEATURES, S.IMAGE)):
             entry = (stats or {}).get(name)
             try:
                 qs = {q: np.asarray(entry[q], dtype=np.float64).reshape(width) for q, _ in QUANTILES}
-            except (KeyError, TypeError, ValueError):
+            except (KeyError, TypeError, ValueError, AttributeError):
                 continue
             quantiles[name] = qs
-        return cls(max(1, math.ceil(train_rows / QUANTILE_ROWS)), quantiles)
+        return cls(_image_stride(train_rows, stats, image_pixels), quantiles)
+
+
+def _image_stride(train_rows: int, stats: dict | None, image_pixels: int | None) -> int:
+    """The frame stride that explains the recorded image pixel count (IMAGE_STRIDE if it does)."""
+    try:
+        count = int(stats[S.IMAGE]["count"])
+    except (KeyError, TypeError, ValueError):
+        return IMAGE_STRIDE
+    if not image_pixels or count % image_pixels or train_rows < 1:
+        return IMAGE_STRIDE
+    frames = count // image_pixels
+    if frames < 1 or -(-train_rows // IMAGE_STRIDE) == frames:
+        return IMAGE_STRIDE
+    fits = [s for s in range(1, train_rows + 1) if -(-train_rows // s) == frames]
+    return fits[0] if fits else IMAGE_STRIDE
+
+
+def quantile_tolerance(p: float, sample: int) -> float:
+    """Allowed |fraction below q - p| for a quantile taken from ``sample`` values (see module doc)."""
+    sample = max(sample, 1)
+    return 5.0 * math.sqrt(p * (1.0 - p) / sample) + 2.0 / sample
 
 
 @dataclass
@@ -115,25 +142,22 @@ class Moments:
     sumsq: np.ndarray | None = None
     min: np.ndarray | None = None
     max: np.ndarray | None = None
-    sampled: int = 0
     ranks: dict = field(default_factory=dict)  # "q01" -> (count below, count at or below), arrays
 
-    def update(self, x: np.ndarray, sample: np.ndarray | None, quantiles: dict | None) -> None:
+    def update(self, x: np.ndarray, quantiles: dict | None) -> None:
+        """Add rows x (N, width); count them around the recorded quantiles (7 digits: 1e-6 slack)."""
         if not len(x):
             return
         part = Moments(len(x), x.sum(0), (x * x).sum(0), x.min(0), x.max(0))
-        if sample is not None and len(sample):
-            s = x[sample]
-            part.sampled = len(s)
-            for q, _ in QUANTILES:
-                if quantiles and q in quantiles:
-                    ref = quantiles[q]
-                    eps = 1e-6 * np.abs(ref)
-                    part.ranks[q] = ((s < ref - eps).sum(0), (s <= ref + eps).sum(0))
+        for q, _ in QUANTILES:
+            if quantiles and q in quantiles:
+                ref = quantiles[q]
+                eps = 1e-6 * np.abs(ref)
+                part.ranks[q] = ((x < ref - eps).sum(0), (x <= ref + eps).sum(0))
         self.merge(part)
 
     def merge(self, other: "Moments") -> None:
-        if other.n == 0 and other.sampled == 0:
+        if other.n == 0:
             return
         if self.n == 0:
             self.n, self.sum, self.sumsq, self.min, self.max = other.n, other.sum, other.sumsq, other.min, other.max
@@ -141,7 +165,6 @@ class Moments:
             self.n += other.n
             self.sum, self.sumsq = self.sum + other.sum, self.sumsq + other.sumsq
             self.min, self.max = np.minimum(self.min, other.min), np.maximum(self.max, other.max)
-        self.sampled += other.sampled
         for q, (lo, hi) in other.ranks.items():
             a, b = self.ranks.get(q, (0, 0))
             self.ranks[q] = (a + lo, b + hi)
@@ -152,8 +175,9 @@ def merge_moments(total: dict[str, Moments], part: dict[str, Moments]) -> None:
         total.setdefault(name, Moments()).merge(m)
 
 
-def check_stats(stats: dict, measured: dict[str, Moments], sink: Sink) -> None:
+def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink: Sink) -> None:
     """meta/stats.json against moments recomputed from the train split."""
+    sample_rows = min(train_rows, QUANTILE_ROWS)  # the smallest sample the generator may have used
     expected = set(VECTOR_FEATURES) | set(SCALAR_FEATURES) | ({S.IMAGE} if S.IMAGE in measured else set())
     for name in sorted(set(stats) - expected):
         sink.add(C.STATS, f"feature {name!r} is not one stats are computed for", S.STATS_PATH)
@@ -187,13 +211,12 @@ def check_stats(stats: dict, measured: dict[str, Moments], sink: Sink) -> None:
                 sink.add(C.STATS, f"{name}.{q} is missing or not {width} numbers", S.STATS_PATH)
                 continue
             below, at_or_below = m.ranks[q]
-            k = math.floor(p * (m.sampled - 1)) + 1
-            bad = np.flatnonzero((below > k) | (at_or_below < k))
+            sample = m.n // IMAGE_PIXEL_STRIDE if name == S.IMAGE else sample_rows
+            tol = quantile_tolerance(p, sample)
+            bad = np.flatnonzero((below / m.n > p + tol) | (at_or_below / m.n < p - tol))
             for i in bad[:3]:
                 sink.add(C.STATS, f"{name}[{names[i]}].{q} = {entry[q][i]:.7g} is not the {p:g} quantile of the "
-                                  f"sampled train values ({below[i]} of {m.sampled} lie below it, {k} should)",
-                         S.STATS_PATH)
+                                  f"train split: {below[i] / m.n:.2%} of the values lie below it, "
+                                  f"{at_or_below[i] / m.n:.2%} at or below (tolerance {tol:.2%})", S.STATS_PATH)
 
 
-def image_sample_rows(global_rows: np.ndarray) -> np.ndarray:
-    return np.flatnonzero(global_rows % IMAGE_STRIDE == 0)

@@ -61,6 +61,7 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
     depth_blobs, depth_ok = _blobs(table, S.DEPTH)
     keep = set(int(i) for i in keep_rgb)
     kept: dict[int, np.ndarray] = {}
+    good_rows, good_depth = [], []  # depth images of the expected shape, checked together below
     ep, frame = fr.episode, fr.frame
     for i in range(table.num_rows):
         where = (rel, int(ep[i]), int(frame[i]))
@@ -69,7 +70,7 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
             rgb = cv2.imdecode(np.frombuffer(rgb_blobs[i].as_buffer(), np.uint8), cv2.IMREAD_UNCHANGED)
         if rgb is None:
             sink.add(C.DECODE, f"{S.IMAGE} does not decode (missing or corrupt JPEG bytes)", *where)
-        elif camera is not None and (rgb.ndim != 3 or rgb.shape != (camera.height, camera.width, 3)):
+        elif camera is not None and rgb.shape != (camera.height, camera.width, 3):
             sink.add(C.SIZE, f"{S.IMAGE} is {'x'.join(map(str, rgb.shape))}, meta/info.json says "
                              f"{camera.height}x{camera.width}x3", *where)
         elif i in keep:
@@ -79,39 +80,45 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
             depth = cv2.imdecode(np.frombuffer(depth_blobs[i].as_buffer(), np.uint8), cv2.IMREAD_UNCHANGED)
         if depth is None:
             sink.add(C.DECODE, f"{S.DEPTH} does not decode (missing or corrupt PNG bytes)", *where)
-            continue
-        if depth.dtype != np.uint16 or depth.ndim != 2:
+        elif depth.dtype != np.uint16 or depth.ndim != 2:
             shape = "x".join(map(str, depth.shape))
             sink.add(C.SIZE, f"{S.DEPTH} is a {shape} {depth.dtype} image, expected a single-channel 16-bit PNG",
                      *where)
-            continue
-        if camera is None:
-            continue
-        if depth.shape != (camera.height, camera.width):
+        elif camera is not None and depth.shape != (camera.height, camera.width):
             sink.add(C.SIZE, f"{S.DEPTH} is {depth.shape[0]}x{depth.shape[1]}, meta/info.json says "
                              f"{camera.height}x{camera.width}", *where)
-            continue
-        _check_depth(depth, depth_low[i], camera, where, sink)
+        elif camera is not None:
+            good_rows.append(i)
+            good_depth.append(depth)
+    if good_rows:
+        _check_depth(np.stack(good_depth), np.asarray(good_rows), fr, depth_low, camera, rel, sink)
     return kept
 
 
-def _check_depth(depth_mm: np.ndarray, low: np.ndarray, camera: Camera, where: tuple, sink: Sink) -> None:
+def _check_depth(depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: np.ndarray, camera: Camera,
+                 rel: str, sink: Sink) -> None:
+    """depth_mm (K, H, W) uint16 of table rows ``rows``: range, then depth_low against the pooled image."""
+    ep, frame = fr.episode[rows], fr.frame[rows]
     lo, hi = camera.near * MM_PER_M - DEPTH_MM_SLACK, camera.far * MM_PER_M + DEPTH_MM_SLACK
-    hit = depth_mm[depth_mm > 0]
-    if hit.size and (hit.min() < lo or hit.max() > hi):
-        sink.add(C.DEPTH_RANGE, f"depth spans {hit.min() / MM_PER_M:.3f}-{hit.max() / MM_PER_M:.3f} m, outside the "
-                                f"camera range [{camera.near:g}, {camera.far:g}] m", *where)
-        return
-    if not np.isfinite(low).all():
-        return  # reported by values.finite
+    hit = depth_mm > 0
+    lowest = np.where(hit, depth_mm, np.uint16(65535)).min(axis=(1, 2))
+    highest = depth_mm.max(axis=(1, 2))
+    out = hit.any(axis=(1, 2)) & ((lowest < lo) | (highest > hi))
+    sink.add_rows(C.DEPTH_RANGE, np.flatnonzero(out), lambda k: f"depth spans {lowest[k] / MM_PER_M:.3f}-"
+                  f"{highest[k] / MM_PER_M:.3f} m, outside the camera range [{camera.near:g}, {camera.far:g}] m",
+                  rel, ep, frame)
     side = S.DEPTH_LOW_SIDE
-    h, w = depth_mm.shape
+    k, h, w = depth_mm.shape
     if h % side or w % side:
         return
-    metres = np.where(depth_mm > 0, depth_mm.astype(np.float32) / np.float32(MM_PER_M), np.float32(camera.far))
-    pooled = metres.reshape(side, h // side, side, w // side).mean(axis=(1, 3))
-    err = np.abs(pooled.reshape(-1) - low)
-    if err.max() > DEPTH_LOW_TOL_M:
-        cell = int(err.argmax())
-        sink.add(C.DEPTH_LOW, f"depth_low cell {cell} is {low[cell]:.4f} m, the pooled depth image says "
-                              f"{pooled.reshape(-1)[cell]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)", *where)
+    metres = np.where(hit, depth_mm.astype(np.float32) / np.float32(MM_PER_M), np.float32(camera.far))
+    pooled = metres.reshape(k, side, h // side, side, w // side).mean(axis=(2, 4), dtype=np.float32).reshape(k, -1)
+    low = depth_low[rows]
+    with np.errstate(invalid="ignore"):
+        err = np.abs(pooled - low)
+        # out-of-range depth is already reported; non-finite depth_low is values.finite's
+        bad = np.flatnonzero(~out & np.isfinite(low).all(axis=1) & (err.max(axis=1) > DEPTH_LOW_TOL_M))
+    cell = err.argmax(axis=1) if len(bad) else None
+    sink.add_rows(C.DEPTH_LOW, bad, lambda j: f"depth_low cell {cell[j]} is {low[j, cell[j]]:.4f} m, the pooled "
+                  f"depth image says {pooled[j, cell[j]]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)",
+                  rel, ep, frame)

@@ -15,8 +15,7 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.validate import checks as C
-from orbitdata.validate.checks_consistency import (IMAGE_PIXEL_STRIDE, WIDTHS, Moments, StatsPlan,
-                                                   image_sample_rows)
+from orbitdata.validate.checks_consistency import WIDTHS, Moments, StatsPlan
 from orbitdata.validate.checks_episodes import check_rows, check_transitions, runs
 from orbitdata.validate.checks_images import Camera, check_images
 from orbitdata.validate.checks_values import check_finite, check_steps, check_values
@@ -94,31 +93,29 @@ def check_row_group(task: RowGroupTask) -> RowGroupResult:
         check_steps(a, b, ctx.rel, ctx.dt, ctx.substeps, sink)
 
     global_rows = np.arange(task.train_row, task.train_row + len(fr))
-    keep_rgb = image_sample_rows(global_rows) if ctx.stats else np.empty(0, int)
+    keep_rgb = np.flatnonzero(global_rows % ctx.stats.image_stride == 0) if ctx.stats else np.empty(0, int)
     rgb = check_images(table, fr, depth_low, ctx.camera, ctx.rel, sink, keep_rgb)
     if ctx.stats:
-        result.moments = _moments(fr, depth_low, rgb, global_rows, ctx.stats)
+        result.moments = _moments(fr, depth_low, rgb, ctx.stats)
     result.rows = len(fr)
     result.head, result.tail = fr.take(slice(0, 1)), fr.take(slice(-1, None))
     result.runs = runs(fr)
     return result
 
 
-def _moments(fr: Frames, depth_low: np.ndarray, rgb: dict, global_rows: np.ndarray, plan: StatsPlan) -> dict:
+def _moments(fr: Frames, depth_low: np.ndarray, rgb: dict, plan: StatsPlan) -> dict:
     """This row group's share of the train statistics (see checks_consistency)."""
-    sample = np.flatnonzero(global_rows % plan.stride == 0)
     columns = {S.STATE: fr.state, S.ACTION: fr.action, S.DEPTH_LOW: depth_low,
                S.MIN_CLEARANCE: fr.clearance[:, None], S.TIMESTAMP: fr.timestamp[:, None]}
     out = {}
     for name, x in columns.items():
         assert x.shape[1] == WIDTHS.get(name, 1), name
         m = Moments()
-        m.update(x, sample, plan.quantiles.get(name))
+        m.update(x, plan.quantiles.get(name))
         out[name] = m
     image = Moments()
     for i in sorted(rgb):
-        pixels = rgb[i].reshape(-1, 3).astype(np.float64) / 255.0
-        image.update(pixels, np.arange(0, len(pixels), IMAGE_PIXEL_STRIDE), plan.quantiles.get(S.IMAGE))
+        image.update(rgb[i].reshape(-1, 3).astype(np.float64) / 255.0, plan.quantiles.get(S.IMAGE))
     if image.n:
         out[S.IMAGE] = image
     return out

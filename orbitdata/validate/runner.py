@@ -40,7 +40,9 @@ class ValidateOptions:
     Attributes:
         quick: structure, integrity, schema and counts only: file list, sha256, Parquet footers,
             the episodes table and metadata; no data pages or images are decoded.
-        workers: processes for hashing and row groups; 0 = all cores, 1 = in this process.
+        workers: processes for hashing and row groups; 1 = in this process; 0 = all cores, but
+            no more than one per ``FRAMES_PER_WORKER`` frames (a worker takes ~1 s to start,
+            the time it needs to check that many frames).
         max_per_check: findings listed per check; the rest are counted.
     """
 
@@ -55,6 +57,7 @@ class ValidateOptions:
             raise ValueError(f"max_per_check must be >= 1, got {self.max_per_check}")
 
 
+FRAMES_PER_WORKER = 5000
 Progress = Callable[[str, int, int], None]  # (phase, done, total)
 
 
@@ -87,6 +90,16 @@ class _Pool:
             self.pool.shutdown(cancel_futures=True)
 
 
+def _auto_workers(root: Path) -> int:
+    frames = 0
+    for path in sorted((root / S.DATA_DIR).glob("*.parquet")):
+        try:
+            frames += pq.ParquetFile(path).metadata.num_rows
+        except Exception:
+            continue  # reported later; for sizing the pool a guess will do
+    return max(1, min(os.cpu_count() or 1, frames // FRAMES_PER_WORKER))
+
+
 def _sha_task(args: tuple[str, str]):
     return sha256_task(*args)
 
@@ -101,7 +114,7 @@ def validate(root: str | Path, options: ValidateOptions = ValidateOptions(),
     if not root.is_dir():
         raise NotADirectoryError(f"{root} is not a folder; pass the dataset folder (the one holding meta/info.json)")
     start = time.monotonic()
-    workers = options.workers or os.cpu_count() or 1
+    workers = options.workers or _auto_workers(root)
     sink = Sink(options.max_per_check)
     report = Report(str(root), "quick" if options.quick else "full", sink, workers=workers)
     layout = Layout(root, present=scan(root))
@@ -193,7 +206,9 @@ def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink,
             report.skipped[check] = "meta/info.json does not give the image shape and depth range"
     by_index = {r.index: r for r in rows}
     train = [f for f in layout.shards(S.DATA_DIR, "train") if f.schema_ok]
-    plan = StatsPlan.build(sum(f.num_rows for f in train), layout.stats) if layout.stats is not None else None
+    train_rows = sum(f.num_rows for f in train)
+    pixels = camera.height * camera.width if camera else None
+    plan = StatsPlan.build(train_rows, layout.stats, pixels) if layout.stats is not None else None
     if plan is None:
         report.skipped[C.STATS] = "meta/stats.json is missing or unreadable"
 
@@ -234,7 +249,7 @@ def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink,
                      r.source, r.index)
     if plan is not None:
         if stats_whole and train:
-            check_stats(layout.stats, moments, sink)
+            check_stats(layout.stats, moments, train_rows, sink)
         elif not stats_whole:
             report.skipped[C.STATS] = "part of the train split could not be read"
 

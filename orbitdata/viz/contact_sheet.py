@@ -34,7 +34,6 @@ class ContactSheet:
         self.frames = key_frames(len(ep), count)
         rgb, depth = ep.rgb(self.frames), ep.depth(self.frames)
         colours = P.DepthColours(P.DepthColours.range_for(depth))
-        ep_axes: dict[str, object] = {}
         with P.theme():
             fig = P.figure(self.WIDTH, self.HEIGHT)
             fig.text(0.5, 1 - 22 / self.HEIGHT, ep.title(), ha="center", va="center", fontsize=14, weight="bold")
@@ -67,7 +66,7 @@ class ContactSheet:
                 "clearance": P.add_axes(fig, 400, 970, 270, 190),
                 "thrust": P.add_axes(fig, 740, 970, 250, 190),
                 "thrust_bar": P.add_axes(fig, 998, 970, 8, 190),
-                "fuel": P.add_axes(fig, 1080, 970, 280, 190),
+                "fuel": P.add_axes(fig, 1100, 970, 260, 190),
             }
             P.plot_signals(fig, ep_axes, ep, marks=self.frames)
             image = P.render(fig)

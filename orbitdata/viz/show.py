@@ -111,9 +111,13 @@ class EpisodeVideo:
                     1, cv2.LINE_AA)
         return img
 
-    def frames(self):
-        for t in range(len(self)):
-            yield self.frame(t)
+    def __getitem__(self, t: int) -> np.ndarray:
+        if not -len(self) <= t < len(self):
+            raise IndexError(f"frame {t} out of range for {len(self)} frames")
+        return self.frame(t % len(self))
+
+    def __iter__(self):  # frames are drawn as the writer asks for them, so an mp4 streams
+        return (self.frame(t) for t in range(len(self)))
 
 
 def show_episode(root: Path, index: int, out: Path, fps: float = FPS) -> Path:
@@ -130,4 +134,4 @@ def show_episode(root: Path, index: int, out: Path, fps: float = FPS) -> Path:
         ContactSheet(ep).save(out)
         return out
     video = EpisodeVideo(ep, scale=0.75 if suffix == ".gif" else 1.0)
-    return write_video(out, list(video.frames()), fps)
+    return write_video(out, video, fps)
