@@ -7,14 +7,15 @@ import os
 from pathlib import Path
 
 import typer
+from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from orbitdata.cli.errors import friendly, usage
 from orbitdata.config import GenerationConfig
 
 
-def _progress_bar():
-    bar = Progress(
+def _progress_bar(console: Console) -> Progress:
+    return Progress(
         TextColumn("[bold]generate"),
         BarColumn(),
         TextColumn("{task.completed}/{task.total} episodes"),
@@ -23,9 +24,9 @@ def _progress_bar():
         TimeElapsedColumn(),
         TextColumn("ETA"),
         TimeRemainingColumn(),
-        transient=False,
+        console=console,
+        disable=not console.is_terminal,
     )
-    return bar
 
 
 def register(app: typer.Typer) -> None:
@@ -77,13 +78,24 @@ def register(app: typer.Typer) -> None:
         out = out.expanduser()
         if out.exists() and not os.access(out, os.W_OK):
             raise PermissionError(f"{out} is not writable; choose another OUT or fix its permissions")
-        with _progress_bar() as bar:
-            task = bar.add_task("generate", total=cfg.dataset.episodes, eps=0.0, fps=0.0)
+        console = Console(stderr=True)
+        bar = _progress_bar(console)
+        task = bar.add_task("generate", total=cfg.dataset.episodes, eps=0.0, fps=0.0)
+        last_logged = [-1]
 
-            def report(p):
-                elapsed = max(p.elapsed, 1e-9)
-                bar.update(task, completed=p.episodes_done, eps=p.episodes_new / elapsed, fps=p.frames_done / elapsed)
+        def report(p):
+            elapsed = max(p.elapsed, 1e-9)
+            eps, fps = p.episodes_new / elapsed, p.frames_done / elapsed
+            bar.update(task, completed=p.episodes_done, eps=eps, fps=fps)
+            # Without a terminal (CI, nohup, a log file) print a line every 5 %.
+            step = p.episodes_done * 20 // p.episodes_total
+            if not console.is_terminal and step > last_logged[0]:
+                last_logged[0] = step
+                eta = (p.episodes_total - p.episodes_done) / max(eps, 1e-9)
+                console.print(f"generate: {p.episodes_done}/{p.episodes_total} episodes, {eps:.2f} ep/s, "
+                              f"{fps:.0f} frames/s, ETA {eta:.0f} s", highlight=False)
 
+        with bar:
             info = run(out, cfg, workers=workers, executor=executor, ray_address=ray_address,
                        overwrite=overwrite, progress=report, repo_id=repo_id)
             bar.update(task, completed=cfg.dataset.episodes)

@@ -139,6 +139,11 @@ def decode_depth_frames(blobs: list[np.ndarray], out: np.ndarray, resize: bool) 
     out[len(blobs):] = out[len(blobs) - 1]
 
 
+def _place(rows: pa.Table) -> str:
+    episode, first = rows.column(S.EPISODE_INDEX)[0].as_py(), rows.column(S.FRAME_INDEX)[0].as_py()
+    return f"episode {episode}, window starting at frame {first}"
+
+
 class WindowDecoder:
     """Turns the ``n_real <= T`` rows of a window into its tensors."""
 
@@ -157,7 +162,8 @@ class WindowDecoder:
             else:  # the stored size, from the first frame (a dataset has one image size)
                 img = cv2.imdecode(_binary_views(rows.column(col.name).slice(0, 1))[0], cv2.IMREAD_UNCHANGED)
                 if img is None:
-                    raise ValueError(f"column {col.name!r}: the first frame of the window is not a decodable image")
+                    raise ValueError(f"{_place(rows)}, column {col.name!r}: frame 0 of the window is not a decodable "
+                                     "image; the dataset is corrupt (run `orbitdata validate`)")
                 self._image_hw[col.name] = img.shape[:2]
         hw = self._image_hw[col.name]
         return (3, *hw) if col.kind == "rgb" else hw
@@ -184,10 +190,8 @@ class WindowDecoder:
             try:
                 self._column(col, rows.column(col.name), out[col.name].numpy())
             except ValueError as err:
-                ep = rows.column(S.EPISODE_INDEX)[0].as_py()
-                first = rows.column(S.FRAME_INDEX)[0].as_py()
                 raise ValueError(
-                    f"episode {ep}, window starting at frame {first}, column {col.name!r}: {err}; "
+                    f"{_place(rows)}, column {col.name!r}: {err}; "
                     "the dataset is corrupt (run `orbitdata validate`), or pass columns= without it"
                 ) from None
         is_pad = out[IS_PAD].numpy()  # (T,) bool

@@ -56,8 +56,8 @@ class WindowIndex:
     """Window w covers rows ``row[w] .. row[w] + n_real[w] - 1``, then repeats its last row."""
 
     row: np.ndarray  # (N,) int64 first row in the steps table
-    n_real: np.ndarray  # (N,) int64 real frames, <= T
-    episode: np.ndarray  # (N,) int64 episode_index
+    n_real: np.ndarray  # (N,) int32 real frames, <= T
+    episode: np.ndarray  # (N,) int32 episode_index
 
     def __len__(self) -> int:
         return len(self.row)
@@ -80,7 +80,8 @@ def build_index(episodes: Episodes, config: WindowConfig, keep: np.ndarray | Non
     lengths = np.where(mask, episodes.lengths, 0)
     which, start = window_starts(lengths, config)
     n_real = np.minimum(config.length, episodes.lengths[which] - start)
-    return WindowIndex(row=episodes.starts[which] + start, n_real=n_real, episode=episodes.ids[which])
+    return WindowIndex(row=episodes.starts[which] + start, n_real=n_real.astype(np.int32),
+                       episode=episodes.ids[which].astype(np.int32))
 
 
 def check_windows(index: WindowIndex, lengths: np.ndarray, config: WindowConfig, where: str) -> None:

@@ -75,6 +75,10 @@ def load_steps(source: str | Path, split: str, streaming: bool, load_kwargs: dic
     from datasets import load_dataset
 
     kwargs = dict(load_kwargs)
+    if local_folder(source) is not None and "data_files" not in kwargs and "data_dir" not in kwargs:
+        # Named explicitly, the files' mtimes enter the cache key; through the card's configs
+        # they do not, and a rewritten dataset would be read from a stale Arrow cache.
+        kwargs["data_files"] = {split: f"{S.DATA_DIR}/{split}-*.parquet"}
     if streaming and columns is not None:
         kwargs["columns"] = list(columns)  # Parquet reads only these columns
     steps = load_dataset(str(source), split=split, streaming=streaming, **kwargs)

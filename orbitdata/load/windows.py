@@ -98,7 +98,8 @@ class WindowDataset(Dataset):
         return self._table.slice(int(self.index.row[i]), int(self.index.n_real[i]))
 
     def __getitem__(self, i: int) -> dict[str, torch.Tensor]:
-        return self._decoder(self._rows(i))
+        rows = self._rows(i)  # opens the table in a new process, so first
+        return self._decoder(rows)
 
     def __getitems__(self, indices: Sequence[int]) -> WindowBatch:
         """A batch decoded in place; ``collate_windows`` returns it without a copy."""

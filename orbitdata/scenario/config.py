@@ -47,8 +47,8 @@ class ScenarioConfig:
     along_range: tuple[float, float] = (0.3, 0.8)
     start_clearance: float = 2.0
     goal_clearance: float = 1.0
-    sun_intensity: tuple[float, float] = (0.5, 1.2)
-    ambient: tuple[float, float] = (0.03, 0.3)
+    sun_intensity: tuple[float, float] = (0.7, 1.4)
+    ambient: tuple[float, float] = (0.1, 0.35)
     max_tries: int = 200
 
     def __post_init__(self) -> None:

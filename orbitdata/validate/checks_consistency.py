@@ -192,17 +192,19 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
         names = S.STATE_NAMES if name == S.STATE else [str(i) for i in range(width)]
         if entry.get("count") != m.n:
             sink.add(C.STATS, f"{name} count is {entry.get('count')}, the train split has {m.n} values", S.STATS_PATH)
-        mean = m.sum / m.n
-        values = {"mean": mean, "std": np.sqrt(np.maximum(m.sumsq / m.n - mean * mean, 0.0)), "min": m.min,
-                  "max": m.max}
-        scale = np.maximum(np.abs(m.min), np.abs(m.max))
+        with np.errstate(invalid="ignore", over="ignore"):  # NaN/Inf in the data: values.finite says where
+            mean = m.sum / m.n
+            values = {"mean": mean, "std": np.sqrt(np.maximum(m.sumsq / m.n - mean * mean, 0.0)), "min": m.min,
+                      "max": m.max}
+            scale = np.maximum(np.abs(m.min), np.abs(m.max))
         for key, ours in values.items():
             try:
                 theirs = np.asarray(entry[key], dtype=np.float64).reshape(width)
             except (KeyError, TypeError, ValueError):
                 sink.add(C.STATS, f"{name}.{key} is missing or not {width} numbers", S.STATS_PATH)
                 continue
-            bad = np.flatnonzero(~(np.abs(theirs - ours) <= RTOL * np.abs(ours) + RANGE_TOL * scale))
+            with np.errstate(invalid="ignore"):
+                bad = np.flatnonzero(~(np.abs(theirs - ours) <= RTOL * np.abs(ours) + RANGE_TOL * scale))
             for i in bad[:3]:
                 sink.add(C.STATS, f"{name}[{names[i]}].{key} is {theirs[i]:.7g}, the train split gives {ours[i]:.7g}",
                          S.STATS_PATH)

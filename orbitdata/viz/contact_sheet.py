@@ -80,6 +80,8 @@ class ContactSheet:
         key = ep.positions[self.frames]
         for name, view in self.views.items():
             panel = view.background()
+            for t in self.frames:  # which way the camera looked in each key frame (under the path)
+                view.draw_heading(panel, ep.positions[t], ep.camera_axis[t], length_m=0.8)
             view.draw_path(panel, ep.positions, ep.collision_at)
             draw_numbered(panel, view, key)
             self.boxes[name].paste(image, panel)

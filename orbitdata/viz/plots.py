@@ -152,7 +152,7 @@ class DepthColours:
 def plot_signals(fig, axes: dict, ep: Episode, marks: list[int] = ()) -> None:
     """Speed, clearance, thrust and fuel against time on ``axes`` (keys of those names).
 
-    ``marks``: frames to flag with numbered dashed lines (the contact sheet's key frames).
+    ``marks``: frames to flag with numbered dotted lines (the contact sheet's key frames).
     """
     t = ep.times
     end = t[-1] if len(t) > 1 else DT
@@ -258,7 +258,8 @@ def map_legend(fig, anchor: tuple[float, float], collision: bool, heading: bool 
     if heading:
         items.append(Line2D([], [], color=rgb(T.HEADING), lw=2, marker=">", ms=6, label="now, camera axis"))
     if marks:
-        items.append(Line2D([], [], color=rgb(T.HEADING), marker="o", ls="", ms=6, label="key frames"))
+        items.append(Line2D([], [], color=rgb(T.HEADING), marker="o", ls="-", lw=2, ms=6,
+                            label="key frames, camera axis"))
     if collision:
         items.append(Line2D([], [], color=rgb(T.HIT), marker="x", ls="", ms=9, mew=3, label="collision"))
     fig.legend(handles=items, loc="center", bbox_to_anchor=anchor, ncol=ncol, fontsize=8, handlelength=1.6,

@@ -67,7 +67,7 @@ class EpisodeVideo:
                 "clearance": P.add_axes(fig, 370, 440, 250, 220),
                 "thrust": P.add_axes(fig, 690, 440, 240, 220),
                 "thrust_bar": P.add_axes(fig, 938, 440, 8, 220),
-                "fuel": P.add_axes(fig, 1020, 440, 240, 220),
+                "fuel": P.add_axes(fig, 1045, 440, 215, 220),
             }
             P.plot_signals(fig, sig, ep)
             self.background = P.render(fig)

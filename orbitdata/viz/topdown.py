@@ -162,5 +162,6 @@ def draw_numbered(img: np.ndarray, view: PlaneMap, points: np.ndarray, first: in
     for n, p in enumerate(points, first):
         u, v = view.px(p)
         cv2.circle(img, (u, v), 4, HEADING, -1, cv2.LINE_AA)
-        cv2.putText(img, str(n), (u + 5, v - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.45, HEADING, 1, cv2.LINE_AA)
+        for colour, width in ((BG, 3), (HEADING, 1)):  # a dark rim keeps it readable on light rocks
+            cv2.putText(img, str(n), (u + 5, v - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.5, colour, width, cv2.LINE_AA)
     return img

@@ -1,0 +1,84 @@
+"""``orbitdata push``: validate (quick) and publish a dataset to the Hugging Face Hub."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import typer
+
+from orbitdata.cli.errors import fail, friendly, usage
+
+REPO_ID = re.compile(r"^(?:[A-Za-z0-9][\w.-]*/)?[A-Za-z0-9][\w.-]*$")
+
+
+def _size(n: int) -> str:
+    for unit in ("B", "KB", "MB", "GB", "TB"):
+        if n < 1000 or unit == "TB":
+            return f"{n} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} TB"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command()
+    @friendly
+    def push(
+        folder: Path = typer.Argument(..., help="Dataset folder made by `orbitdata generate`."),
+        repo_id: str = typer.Argument(..., help="Hub dataset repo, e.g. user/orbit_planner."),
+        private: bool = typer.Option(False, "--private", help="Create the repo private."),
+        revision: str = typer.Option(None, "--revision", "--branch", help="Branch to push to (created if missing)."),
+        message: str = typer.Option("Upload Orbit-Planner dataset (orbitdata)", help="Commit message."),
+        dry_run: bool = typer.Option(False, "--dry-run", help="List the files and the card; upload nothing."),
+        force: bool = typer.Option(False, "--force", help="Push even if validation finds problems."),
+    ):
+        """Publish a dataset to the Hugging Face Hub, resumably, in several commits.
+
+        Runs `orbitdata validate --quick` first and refuses an invalid dataset unless --force.
+        The token comes from HF_TOKEN or `hf auth login`; it is never printed. Run the same
+        command again to resume an interrupted push: files already on the Hub are skipped.
+        """
+        from orbitdata.publish import PushOptions, PushRefused, preview, push as run
+        from orbitdata.validate import ValidateOptions, validate
+
+        folder = folder.expanduser()
+        if not folder.is_dir():
+            usage(f"{folder} is not a dataset folder; pass the folder made by `orbitdata generate`")
+        if not REPO_ID.match(repo_id) or "--" in repo_id or ".." in repo_id:
+            usage(f"REPO_ID {repo_id!r} is not a Hub repo id; expected NAMESPACE/NAME, e.g. user/orbit_planner")
+        if revision is not None and not revision.strip():
+            usage("--revision needs a branch name, e.g. --revision v1")
+        options = PushOptions(private=private, revision=revision, message=message, force=force)
+
+        report = validate(folder, ValidateOptions(quick=True))
+        verdict = "valid" if report.ok else f"INVALID ({', '.join(report.failed())})"
+        typer.echo(f"validate --quick: {verdict} [{report.files} files, {report.episodes} episodes, "
+                   f"{report.frames} frames, {report.seconds:.1f} s]")
+        if not report.ok:
+            typer.echo(report.render())
+            if not force:
+                if not dry_run:
+                    fail(f"refusing to push {folder}: fix the problems above, or pass --force to push it anyway")
+                typer.echo("(a real push would be refused: fix the problems, or pass --force)")
+
+        if dry_run:
+            plan = preview(folder)
+            typer.echo(f"\ndry run: would push {len(plan.files)} files ({_size(plan.bytes)}) to dataset "
+                       f"{repo_id} (revision {revision or 'main'}, {'private' if private else 'public'}):")
+            width = max(len(f.rel) for f in plan.files)
+            for f in plan.files:
+                typer.echo(f"  {f.rel:<{width}}  {_size(f.bytes):>10}")
+            typer.echo(f"\n--- the card ({(folder / 'README.md').name}) ---")
+            typer.echo((folder / "README.md").read_text())
+            return
+
+        try:
+            result = run(folder, repo_id, options, report=report, log=typer.echo)
+        except PushRefused as exc:  # validated above already; kept for API parity
+            fail(str(exc))
+        n = len(result.uploaded)
+        typer.echo(f"pushed {n} file(s) ({_size(result.bytes)}) in {len(result.commits)} commit(s) to "
+                   f"{result.repo_url} (revision {result.revision}); {len(result.unchanged)} unchanged, "
+                   f"{len(result.deleted)} stale file(s) deleted")
+        rev = "" if result.revision == "main" else f", revision={result.revision!r}"
+        typer.echo(f'load it with: load_dataset("{repo_id}"{rev}) and load_dataset("{repo_id}", "episodes"{rev})')
