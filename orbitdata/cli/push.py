@@ -64,7 +64,7 @@ def register(app: typer.Typer) -> None:
         if dry_run:
             plan = preview(folder)
             typer.echo(f"\ndry run: would push {len(plan.files)} files ({_size(plan.bytes)}) to dataset "
-                       f"{repo_id} (revision {revision or 'main'}, {'private' if private else 'public'}):")
+                       f"{repo_id} (revision {revision or 'main'}{', private' if private else ''}):")
             width = max(len(f.rel) for f in plan.files)
             for f in plan.files:
                 typer.echo(f"  {f.rel:<{width}}  {_size(f.bytes):>10}")
@@ -81,4 +81,5 @@ def register(app: typer.Typer) -> None:
                    f"{result.repo_url} (revision {result.revision}); {len(result.unchanged)} unchanged, "
                    f"{len(result.deleted)} stale file(s) deleted")
         rev = "" if result.revision == "main" else f", revision={result.revision!r}"
-        typer.echo(f'load it with: load_dataset("{repo_id}"{rev}) and load_dataset("{repo_id}", "episodes"{rev})')
+        repo = result.repo_id
+        typer.echo(f'load it with: load_dataset("{repo}"{rev}) and load_dataset("{repo}", "episodes"{rev})')

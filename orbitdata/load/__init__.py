@@ -30,7 +30,7 @@ import numpy as np
 from orbitdata import schema as S
 from orbitdata.load.collate import collate_windows
 from orbitdata.load.config import IS_PAD, WindowConfig
-from orbitdata.load.index import Episodes, build_index, check_lengths, check_windows
+from orbitdata.load.index import check_lengths, check_windows
 from orbitdata.load.select import EpisodeFilter, select_episodes
 from orbitdata.load.source import check_schema_version, load_episode_table, load_steps, read_info
 from orbitdata.load.streaming import StreamingWindowDataset
@@ -80,29 +80,29 @@ def load_windows(
             nothing, a window longer than every selected episode, inconsistent tables.
     """
     if not streaming and (shuffle_buffer or seed):
-        raise ValueError("shuffle_buffer/seed are for streaming=True; shuffle a map-style dataset with ds.sampler(seed=...)")
+        raise ValueError("shuffle_buffer/seed are for streaming=True; "
+                         "shuffle a map-style dataset with ds.sampler(seed=...)")
     config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
                           columns=None if columns is None else tuple(columns))
     check_schema_version(read_info(source, load_dataset_kwargs), source)
     where = f"split {split!r} of {source}"
     table = load_episode_table(source, split, load_dataset_kwargs)
-    selected = select_episodes(table, episodes, split)
-    ids = table.column(S.EPISODE_INDEX).to_numpy().astype(np.int64)
-    lengths = table.column(S.LENGTH).to_numpy().astype(np.int64)
-    chosen = np.isin(ids, selected)
+    selected = select_episodes(table, episodes, split)  # (E,) sorted episode_index
+    chosen = np.isin(table.column(S.EPISODE_INDEX).to_numpy(), selected)
+    ids = table.column(S.EPISODE_INDEX).to_numpy()[chosen].astype(np.int64)
+    lengths = table.column(S.LENGTH).to_numpy()[chosen].astype(np.int64)
+    check_windows(lengths, config, where)
+    keep = None if episodes is None else selected
     if not streaming:
         steps = load_steps(source, split, False, load_dataset_kwargs)
-        dataset = WindowDataset(steps, config, episodes=None if episodes is None else selected, where=where)
-        check_lengths(dataset.found, ids[chosen], lengths[chosen], where)
+        dataset = WindowDataset(steps, config, episodes=keep, where=where)
+        check_lengths(dataset.found, ids, lengths, where)
         return dataset
-    check_windows(build_index(Episodes(ids[chosen], np.zeros(chosen.sum(), np.int64), lengths[chosen]), config),
-                  lengths[chosen], config, where)
     steps = load_steps(source, split, True, load_dataset_kwargs)
     wanted = config.wanted(steps.column_names)  # raises for a missing column before any read
     if config.columns is not None:
         steps = load_steps(source, split, True, load_dataset_kwargs, columns=wanted)
     return StreamingWindowDataset(
-        steps, config, episodes=None if episodes is None else selected.tolist(),
-        lengths=dict(zip(ids[chosen].tolist(), lengths[chosen].tolist())),
-        shuffle_buffer=shuffle_buffer, seed=seed, where=where,
+        steps, config, episodes=None if keep is None else keep.tolist(),
+        lengths=dict(zip(ids.tolist(), lengths.tolist())), shuffle_buffer=shuffle_buffer, seed=seed, where=where,
     )

@@ -59,7 +59,7 @@ _SPLIT_IN_PLACE = _split_writes_in_place()
 class Column:
     name: str
     kind: str  # "rgb" | "depth" | "list" | "scalar"
-    frame_shape: tuple[int, ...]  # per frame, for "list"; (H, W) for images once known
+    frame_shape: tuple[int, ...]  # per frame, for "list" (an image size is read from its first frame)
     dtype: torch.dtype
 
 
@@ -73,7 +73,8 @@ def plan_columns(schema: pa.Schema, names: tuple[str, ...]) -> tuple[Column, ...
     for name in names:
         t = schema.field(name).type
         if _is_image(t):
-            plan.append(Column(name, "depth", (), torch.float32) if name == S.DEPTH else Column(name, "rgb", (), torch.uint8))
+            depth = name == S.DEPTH
+            plan.append(Column(name, "depth" if depth else "rgb", (), torch.float32 if depth else torch.uint8))
         elif pa.types.is_fixed_size_list(t) and pa.types.is_floating(t.value_type):
             plan.append(Column(name, "list", FRAME_SHAPES.get(name, (t.list_size,)), torch.float32))
         elif pa.types.is_boolean(t):
@@ -83,7 +84,8 @@ def plan_columns(schema: pa.Schema, names: tuple[str, ...]) -> tuple[Column, ...
         elif pa.types.is_floating(t):
             plan.append(Column(name, "scalar", (), torch.float32))
         else:
-            raise ValueError(f"column {name!r} has type {t}, which the window loader cannot stack; leave it out of columns=")
+            raise ValueError(f"column {name!r} has type {t}, which the window loader cannot stack; "
+                             "leave it out of columns=")
     return tuple(plan)
 
 
@@ -96,7 +98,8 @@ def _binary_views(col: pa.ChunkedArray) -> list[np.ndarray]:
             raise ValueError("missing image bytes")
         wide = pa.types.is_large_binary(data.type)
         _, offsets, values = data.buffers()
-        offsets = np.frombuffer(offsets, np.int64 if wide else np.int32, count=len(data) + 1, offset=data.offset * (8 if wide else 4))
+        dtype = np.dtype(np.int64 if wide else np.int32)
+        offsets = np.frombuffer(offsets, dtype, count=len(data) + 1, offset=data.offset * dtype.itemsize)
         values = np.frombuffer(values, np.uint8) if values is not None else np.zeros(0, np.uint8)
         out += [values[offsets[i]:offsets[i + 1]] for i in range(len(data))]
     return out
@@ -107,7 +110,8 @@ def _fit(img: np.ndarray, hw: tuple[int, int], resize: bool, interpolation: int,
         return img
     if not resize:
         raise ValueError(f"frame {i} of the window is {img.shape[1]}x{img.shape[0]} px, not "
-                         f"{hw[1]}x{hw[0]} like the dataset's first frame; pass image_size= to resize every frame to one size")
+                         f"{hw[1]}x{hw[0]} like the dataset's first frame; pass image_size= to resize every "
+                         "frame to one size")
     return cv2.resize(img, (hw[1], hw[0]), interpolation=interpolation)
 
 

@@ -84,11 +84,12 @@ def build_index(episodes: Episodes, config: WindowConfig, keep: np.ndarray | Non
                        episode=episodes.ids[which].astype(np.int32))
 
 
-def check_windows(index: WindowIndex, lengths: np.ndarray, config: WindowConfig, where: str) -> None:
-    """Raise when no window fits: every selected episode is shorter than a window."""
-    if len(index):
+def check_windows(lengths: np.ndarray, config: WindowConfig, where: str) -> None:
+    """Raise when episodes of these lengths give no window: every one is shorter than a window."""
+    lengths = np.asarray(lengths, dtype=np.int64)
+    if (lengths >= config.min_frames).any():
         return
-    longest = int(np.max(lengths)) if len(lengths) else 0
+    longest = int(lengths.max()) if len(lengths) else 0
     fix = "use a shorter context/horizon" + ("" if config.pad else ", or pad=True to pad the horizon")
     raise ValueError(
         f"a window of {config.min_frames} real frames (context {config.context} + horizon {config.horizon}"
@@ -103,7 +104,8 @@ def check_lengths(found: Episodes, ids: np.ndarray, lengths: np.ndarray, where: 
     for episode, length in zip(ids.tolist(), lengths.tolist()):
         i = position.get(episode)
         if i is None:
-            raise ValueError(f"episode {episode} is in the episodes table but has no rows in {where}; run `orbitdata validate`")
+            raise ValueError(f"episode {episode} is in the episodes table but has no rows in {where}; "
+                             "run `orbitdata validate`")
         if int(found.lengths[i]) != length:
             raise ValueError(
                 f"episode {episode}: the episodes table says {length} frames but {where} has "

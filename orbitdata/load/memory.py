@@ -1,39 +1,56 @@
-"""Output buffers for decoded batches: shared memory in DataLoader workers, huge pages otherwise.
+"""Output buffers for decoded batches: shared memory in DataLoader workers, recycled otherwise.
 
-A batch of 64 windows of 20 frames at 224 px is 190 MB of fresh memory per batch. Faulting
-that in 4 KiB pages costs about as much as decoding the JPEGs (measured on a 2-core VM:
-100 ms per batch, against 12 ms with 2 MiB pages), so large buffers ask the kernel for
-transparent huge pages (``MADV_HUGEPAGE``, honoured when THP is "madvise" or "always").
+A batch of 64 windows of 20 frames at 224 px is 190 MB. Fresh memory costs page faults and
+zeroing of the order of decoding the JPEGs (measured on a 2-core VM: ~100 ms to first write
+190 MB of new memory, ~13 ms to write it again). So in the process that trains, a large
+buffer goes back to a small pool once nothing references it any more (the batch and every
+view of it are gone) and a later batch of the same shape reuses it.
+
 In a worker the buffer is allocated in shared memory instead, as ``default_collate`` does,
-so sending it to the main process costs no copy.
+so sending it to the main process costs no copy; the worker cannot know when the main
+process is done with it, so it is never recycled.
 """
 
 from __future__ import annotations
 
-import ctypes
 import math
-import sys
+import threading
+import weakref
 
 import torch
 
-HUGE_PAGE = 2 << 20  # bytes
-MADV_HUGEPAGE = 14  # <sys/mman.h> on Linux
-MIN_HUGE_BYTES = 8 * HUGE_PAGE  # below this, malloc reuses freed memory anyway
+MIN_POOLED_BYTES = 16 << 20  # below this, malloc reuses freed memory anyway
 
 
-def _madvise():
-    if not sys.platform.startswith("linux"):
-        return None
-    try:
-        fn = ctypes.CDLL(None, use_errno=True).madvise
-    except (OSError, AttributeError):
-        return None
-    fn.argtypes = [ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int]
-    fn.restype = ctypes.c_int
-    return fn
+class _Pool:
+    """Large buffers of this process that no tensor uses any more, by (shape, dtype)."""
+
+    def __init__(self, keep: int = 2):
+        self.keep = keep  # free buffers kept per shape; more go back to the OS
+        self.free: dict[tuple, list[torch.Tensor]] = {}
+        self.lock = threading.Lock()  # finalizers may run in a pin-memory thread
+
+    def take(self, shape: tuple[int, ...], dtype: torch.dtype) -> torch.Tensor:
+        key = (shape, dtype)
+        with self.lock:
+            free = self.free.get(key)
+            base = free.pop() if free else None
+        if base is None:
+            base = torch.empty(shape, dtype=dtype)
+        # The caller's tensor holds this numpy view; when the last tensor on its memory is
+        # gone, so is the view, and the finalizer hands ``base`` back.
+        handle = base.numpy().view()
+        weakref.finalize(handle, self.give, key, base).atexit = False
+        return torch.from_numpy(handle)
+
+    def give(self, key: tuple, base: torch.Tensor) -> None:
+        with self.lock:
+            free = self.free.setdefault(key, [])
+            if len(free) < self.keep:
+                free.append(base)
 
 
-_MADVISE = _madvise()
+_POOL = _Pool()
 
 
 def empty(shape: tuple[int, ...], dtype: torch.dtype, shared: bool = False) -> torch.Tensor:
@@ -42,10 +59,6 @@ def empty(shape: tuple[int, ...], dtype: torch.dtype, shared: bool = False) -> t
     if shared:
         storage = torch.UntypedStorage._new_shared(nbytes)  # what default_collate uses in workers
         return torch.empty(0, dtype=dtype).set_(storage, 0, shape)
-    if _MADVISE is None or nbytes < MIN_HUGE_BYTES:
+    if nbytes < MIN_POOLED_BYTES:
         return torch.empty(shape, dtype=dtype)
-    raw = torch.empty(nbytes + HUGE_PAGE, dtype=torch.uint8)
-    start = -raw.data_ptr() % HUGE_PAGE  # first 2 MiB boundary
-    aligned = raw[start:start + nbytes]
-    _MADVISE(aligned.data_ptr(), nbytes - nbytes % HUGE_PAGE, MADV_HUGEPAGE)  # a hint: failure is harmless
-    return aligned.view(dtype).view(shape)
+    return _POOL.take(shape, dtype)

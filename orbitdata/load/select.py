@@ -49,7 +49,8 @@ def _by_values(table: pa.Table, where: Mapping[str, Any], split: str) -> np.ndar
             raise ValueError(f"episodes filter: no episode column {name!r}; columns: {table.column_names}")
         column = table.column(name)
         if pa.types.is_nested(column.type):
-            raise ValueError(f"episodes filter: {name!r} is a nested column; filter it with a callable, e.g. lambda ep: ...")
+            raise ValueError(f"episodes filter: {name!r} is a nested column; "
+                             "filter it with a callable, e.g. lambda ep: ...")
         values = _values(value)
         if not values:
             raise ValueError(f"episodes filter: empty list of values for {name!r}")
@@ -59,7 +60,8 @@ def _by_values(table: pa.Table, where: Mapping[str, Any], split: str) -> np.ndar
         try:
             value_set = pa.array(values, type=column.type)
         except (pa.ArrowInvalid, pa.ArrowTypeError, TypeError, OverflowError):
-            raise ValueError(f"episodes filter: {name}={value!r} does not match the column type {column.type}") from None
+            message = f"episodes filter: {name}={value!r} does not match the column type {column.type}"
+            raise ValueError(message) from None
         mask &= pc.is_in(column, value_set=value_set).to_numpy(zero_copy_only=False)
     if not mask.any():
         raise ValueError(
@@ -84,7 +86,8 @@ def _by_index(table: pa.Table, wanted: Iterable[int], split: str) -> np.ndarray:
     if wanted.size == 0:
         raise ValueError(f"episodes=[] selects no episode of split {split!r}; pass None for all of them")
     if not np.issubdtype(wanted.dtype, np.integer):
-        raise TypeError(f"episodes: expected episode_index integers, got {wanted.dtype} values like {wanted[:3].tolist()}")
+        raise TypeError(f"episodes: expected episode_index integers, "
+                        f"got {wanted.dtype} values like {wanted[:3].tolist()}")
     ids = table.column(S.EPISODE_INDEX).to_numpy()
     missing = np.setdiff1d(wanted, ids)
     if missing.size:
@@ -108,5 +111,6 @@ def select_episodes(table: pa.Table, episodes: EpisodeFilter, split: str) -> np.
     elif isinstance(episodes, (Iterable, np.ndarray)):
         mask = _by_index(table, episodes, split)
     else:
-        raise TypeError(f"episodes: expected None, a dict, a callable or a list of indices, got {type(episodes).__name__}")
+        raise TypeError("episodes: expected None, a dict, a callable or a list of indices, "
+                        f"got {type(episodes).__name__}")
     return np.sort(table.column(S.EPISODE_INDEX).to_numpy()[mask].astype(np.int64))

@@ -92,7 +92,8 @@ class StreamingWindowDataset(IterableDataset):
                         yield current, pa.concat_tables(parts)
                     if e in seen:
                         raise ValueError(
-                            f"episode {e} appears twice in {self.where}: its rows are not contiguous; run `orbitdata validate`"
+                            f"episode {e} appears twice in {self.where}: its rows are not contiguous; "
+                            "run `orbitdata validate`"
                         )
                     seen.add(e)
                     current, wanted, parts = e, keep(e), []
@@ -109,9 +110,8 @@ class StreamingWindowDataset(IterableDataset):
                 f"streams {rows.num_rows}; run `orbitdata validate`"
             )
 
-    def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
-        configure_process()
-        unit, units = self._units()
+    def _share(self, unit: int, units: int):
+        """This unit's stream, and the predicate that keeps this unit's selected episodes."""
         steps = self.steps
         if steps.column_names is not None:
             steps = steps.select_columns(list(self.config.wanted(steps.column_names)))
@@ -122,7 +122,7 @@ class StreamingWindowDataset(IterableDataset):
 
             fsspec.asyn.reset_lock()  # a lock inherited through fork would hang remote reads
             steps = split_dataset_by_node(steps, rank=unit, world_size=units, strategy="shards")
-        ordinal = -1
+        ordinal = -1  # selected episodes seen so far: the same count in every unit
 
         def keep(e: int) -> bool:
             nonlocal ordinal
@@ -131,39 +131,43 @@ class StreamingWindowDataset(IterableDataset):
             ordinal += 1
             return by_shard or ordinal % units == unit
 
-        T = self.config.length
-        decoder = None
-        rng = np.random.default_rng([self.seed, self.epoch, unit, units])
-        pool: dict[int, list] = {}  # slot -> [rows, windows left]
-        pending: list[tuple[int, int]] = []  # (slot, start frame)
+        return steps, keep
 
-        def take(slot: int, start: int) -> dict[str, torch.Tensor]:
-            rows = pool[slot][0] if self.shuffle_buffer else current
-            return decoder(rows.slice(start, min(T, rows.num_rows - start)))
+    def _window(self, rows: pa.Table, start: int) -> pa.Table:
+        return rows.slice(start, min(self.config.length, rows.num_rows - start))
+
+    def __iter__(self) -> Iterator[dict[str, torch.Tensor]]:
+        configure_process()
+        unit, units = self._units()
+        steps, keep = self._share(unit, units)
+        rng = np.random.default_rng([self.seed, self.epoch, unit, units])
+        decoder = None
+        held: dict[int, list] = {}  # episode -> [rows, windows not yet yielded]
+        pending: list[tuple[int, int]] = []  # (episode, start frame) of the held windows
 
         def pop() -> dict[str, torch.Tensor]:
             j = int(rng.integers(len(pending)))
             pending[j], pending[-1] = pending[-1], pending[j]
-            slot, start = pending.pop()
-            item = take(slot, start)
-            pool[slot][1] -= 1
-            if pool[slot][1] == 0:
-                del pool[slot]
-            return item
+            episode, start = pending.pop()
+            rows = held[episode][0]
+            held[episode][1] -= 1
+            if held[episode][1] == 0:
+                del held[episode]
+            return decoder(self._window(rows, start))
 
-        for slot, (episode, current) in enumerate(self._episode_tables(steps, keep)):
-            self._check(episode, current)
+        for episode, rows in self._episode_tables(steps, keep):
+            self._check(episode, rows)
             if decoder is None:
-                decoder = WindowDecoder(current.schema, self.config.wanted(current.column_names), self.config)
-            _, starts = window_starts(np.array([current.num_rows]), self.config)
+                decoder = WindowDecoder(rows.schema, self.config.wanted(rows.column_names), self.config)
+            _, starts = window_starts(np.array([rows.num_rows]), self.config)
             if not self.shuffle_buffer:
                 for start in starts.tolist():
-                    yield take(slot, start)
+                    yield decoder(self._window(rows, start))
                 continue
             if len(starts):
-                pool[slot] = [current, len(starts)]
-                pending.extend((slot, s) for s in starts.tolist())
-            while len(pool) >= self.shuffle_buffer:
+                held[episode] = [rows, len(starts)]
+                pending.extend((episode, start) for start in starts.tolist())
+            while len(held) >= self.shuffle_buffer:
                 yield pop()
         while pending:
             yield pop()

@@ -65,11 +65,13 @@ class WindowDataset(Dataset):
         self.where = where
         table = steps.data.table
         self.columns = config.wanted(table.column_names)
-        self.found: Episodes = find_episodes(_key_column(table, S.EPISODE_INDEX), _key_column(table, S.FRAME_INDEX), where)
+        self.found: Episodes = find_episodes(
+            _key_column(table, S.EPISODE_INDEX), _key_column(table, S.FRAME_INDEX), where
+        )
         keep = None if episodes is None else np.asarray(episodes, dtype=np.int64)
         self.index: WindowIndex = build_index(self.found, config, keep)
-        kept = self.found.lengths if keep is None else self.found.lengths[np.isin(self.found.ids, keep)]
-        check_windows(self.index, kept, config, where)
+        check_windows(self.found.lengths if keep is None else self.found.lengths[np.isin(self.found.ids, keep)],
+                      config, where)
         self.episodes = np.unique(self.index.episode)  # (E,) episodes that give at least one window
         self._pid: int | None = None
         self._table: pa.Table | None = None
@@ -101,9 +103,11 @@ class WindowDataset(Dataset):
         rows = self._rows(i)  # opens the table in a new process, so first
         return self._decoder(rows)
 
-    def __getitems__(self, indices: Sequence[int]) -> WindowBatch:
+    def __getitems__(self, indices: Sequence[int]) -> WindowBatch | list:
         """A batch decoded in place; ``collate_windows`` returns it without a copy."""
         rows = [self._rows(int(i)) for i in indices]
+        if not rows:
+            return []
         stacked = self._decoder.allocate(rows[0], batch=len(rows))
         for j, r in enumerate(rows):
             self._decoder.decode_into(r, {k: v[j] for k, v in stacked.items()})

@@ -74,6 +74,7 @@ class PushOptions:
 
 @dataclass
 class PushResult:
+    repo_id: str  # with its namespace, as the Hub resolved it
     repo_url: str
     revision: str
     commits: list[str] = field(default_factory=list)  # commit ids, in order
@@ -146,6 +147,7 @@ def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=
     cannot be reached or refuses.
     """
     from huggingface_hub import CommitOperationAdd, CommitOperationDelete, HfApi, constants, get_token
+    from huggingface_hub.hf_api import RepoFile
 
     root = Path(root)
     if report is None:
@@ -167,16 +169,21 @@ def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=
     with hub_errors(repo_id, endpoint):
         user = api.whoami().get("name", "?")
         log(f"authenticated as {user} on {endpoint}")
-        url = api.create_repo(repo_id, repo_type="dataset", private=options.private, exist_ok=True)
+        # private=None (not False) leaves a new repo to the namespace's default visibility
+        url = api.create_repo(repo_id, repo_type="dataset", private=True if options.private else None,
+                              exist_ok=True)
         repo_id = getattr(url, "repo_id", None) or repo_id
         if revision != "main":
             api.create_branch(repo_id, branch=revision, repo_type="dataset", exist_ok=True)
         remote = {f.path: f for f in api.list_repo_tree(repo_id, recursive=True, revision=revision,
-                                                        repo_type="dataset") if hasattr(f, "size")}
-        result = PushResult(str(url), revision)
+                                                        repo_type="dataset") if isinstance(f, RepoFile)}
+        result = PushResult(repo_id, str(url), revision)
         todo = []
         for f in plan.files:
-            (result.unchanged if _unchanged(f, root, remote.get(f.rel)) else todo).append(f)
+            if _unchanged(f, root, remote.get(f.rel)):
+                result.unchanged.append(f.rel)
+            else:
+                todo.append(f)
         planned = {f.rel for f in plan.files}
         owned = (f"{S.DATA_DIR}/", f"{S.EPISODES_DIR}/", f"{S.META_DIR}/")
         result.deleted = sorted(p for p in remote if p.startswith(owned) and p not in planned)

@@ -44,11 +44,32 @@ def _diff(a, b, path: str, out: list[str]) -> None:
         out.append(f"{path}: meta/info.json says {a}, the episodes table gives {b}")
 
 
+def counts(rows: list) -> dict:
+    """meta/info.json's ``counts`` from episodes-table rows: the definition in orbitdata.dataset.meta.
+
+    Re-stated here (a test keeps the two equal) because importing the generator's module loads
+    MuJoCo and its GL stack, some 300 MB a validation does not need.
+    """
+    def tally(mine: list) -> dict:
+        return {o: sum(1 for r in mine if r.outcome == o) for o in S.OUTCOMES}
+
+    out: dict = {"episodes": len(rows), "frames": sum(r.length for r in rows), "splits": {}}
+    for split in S.SPLITS:
+        mine = [r for r in rows if r.split == split]
+        if not mine:
+            continue
+        levels = {}
+        for level in S.LEVELS:
+            lv = [r for r in mine if r.level == level]
+            levels[level] = {"episodes": len(lv), "frames": sum(r.length for r in lv), "outcomes": tally(lv)}
+        out["splits"][split] = {"episodes": len(mine), "frames": sum(r.length for r in mine), "levels": levels,
+                                "outcomes": tally(mine)}
+    return out
+
+
 def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_rows: dict[str, int],
                  episodes_complete: bool, sink: Sink) -> None:
     """Counts per split (and level, outcome) from the three places that state them."""
-    from orbitdata.dataset.meta import counts  # the generator's own definition of the counts
-
     frames_by_split = {s: 0 for s in S.SPLITS}
     for rel, n in data_rows.items():
         frames_by_split[S.SHARD_RE.match(rel).group(2)] += n
@@ -60,13 +81,9 @@ def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_
                 sink.add(C.COUNTS, f"{split}: the episodes table sums to {table_frames[split]} frames, the data "
                                    f"shards hold {frames_by_split[split]} rows", S.DATA_DIR)
     if info is not None and episodes_complete:
-        import pyarrow as pa
-
-        usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
-        table = pa.table({S.SPLIT: [r.split for r in usable], S.LEVEL: [r.level for r in usable],
-                          S.OUTCOME: [r.outcome for r in usable], S.LENGTH: [r.length for r in usable]})
         diffs: list[str] = []
-        _diff(info.get("counts"), counts(table), "counts", diffs)
+        usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
+        _diff(info.get("counts"), counts(usable), "counts", diffs)
         for d in diffs:
             sink.add(C.COUNTS, d, S.INFO_PATH)
     if card is None:
@@ -155,6 +172,25 @@ class Moments:
                 eps = 1e-6 * np.abs(ref)
                 part.ranks[q] = ((x < ref - eps).sum(0), (x <= ref + eps).sum(0))
         self.merge(part)
+
+    @classmethod
+    def from_histogram(cls, hist: np.ndarray, quantiles: dict | None) -> "Moments":
+        """Moments of uint8 image values / 255 from per-channel counts (C, 256): exact and cheap."""
+        values = np.arange(256, dtype=np.float64) / 255.0
+        n = int(hist[0].sum())
+        m = cls()
+        if n == 0:
+            return m
+        present = hist > 0
+        m.n, m.sum, m.sumsq = n, hist @ values, hist @ (values * values)
+        m.min = np.array([values[np.flatnonzero(row)[0]] for row in present])
+        m.max = np.array([values[np.flatnonzero(row)[-1]] for row in present])
+        for q, _ in QUANTILES:
+            if quantiles and q in quantiles:
+                ref = quantiles[q][:, None]
+                eps = 1e-6 * np.abs(ref)
+                m.ranks[q] = ((hist * (values < ref - eps)).sum(1), (hist * (values <= ref + eps)).sum(1))
+        return m
 
     def merge(self, other: "Moments") -> None:
         if other.n == 0:

@@ -1,5 +1,12 @@
 """Images: every RGB JPEG and depth PNG decodes, has the recorded size, and depth is plausible.
 
+Speed (it sets the pace of a full validation): a JPEG is decoded at 1/8 scale, which still
+entropy-decodes the whole stream (so it fails on the same truncation and corruption as a full
+decode; measured 0.03 vs 0.21 ms at 224 px) while its true size and channel count come from the
+JPEG header. Frames kept for the statistics, and RGB images that are not JPEG, are decoded in full.
+Depth PNGs are decoded in full (their values are checked), ``DEPTH_BATCH`` at a time (bounded
+memory), and pooled with exact integer block sums.
+
 Tolerances:
 
 * depth values are millimetres, so a non-zero value may sit up to 1 mm outside the camera's
@@ -24,6 +31,7 @@ from orbitdata.validate.report import Sink
 MM_PER_M = 1000.0
 DEPTH_MM_SLACK = 1.0
 DEPTH_LOW_TOL_M = 1e-3
+DEPTH_BATCH = 64  # depth images checked together: vectorised, ~6 MB at 224 px
 
 
 @dataclass(frozen=True)
@@ -43,6 +51,25 @@ class Camera:
             return cls(int(rgb[0]), int(rgb[1]), float(near), float(far))
         except (KeyError, TypeError, ValueError, IndexError):
             return None
+
+
+def jpeg_header(data: bytes) -> tuple[int, int, int] | None:
+    """(height, width, channels) from a JPEG's start-of-frame marker; None if it is not a JPEG."""
+    if data[:2] != b"\xff\xd8":
+        return None
+    i, n = 2, len(data)
+    while i + 9 < n:
+        if data[i] != 0xFF:
+            return None
+        marker = data[i + 1]
+        if marker == 0xFF:  # fill byte
+            i += 1
+            continue
+        length = int.from_bytes(data[i + 2:i + 4], "big")
+        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # SOFn (not DHT, JPG, DAC)
+            return (int.from_bytes(data[i + 5:i + 7], "big"), int.from_bytes(data[i + 7:i + 9], "big"), data[i + 9])
+        i += 2 + length
+    return None
 
 
 def _blobs(table: pa.Table, name: str) -> tuple[pa.Array, np.ndarray]:
@@ -65,15 +92,22 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
     ep, frame = fr.episode, fr.frame
     for i in range(table.num_rows):
         where = (rel, int(ep[i]), int(frame[i]))
-        rgb = None
+        shape, rgb = None, None
         if rgb_ok[i]:
-            rgb = cv2.imdecode(np.frombuffer(rgb_blobs[i].as_buffer(), np.uint8), cv2.IMREAD_UNCHANGED)
-        if rgb is None:
+            buffer = rgb_blobs[i].as_buffer()
+            header = jpeg_header(buffer[:4096].to_pybytes())
+            full = header is None or i in keep
+            decoded = cv2.imdecode(np.frombuffer(buffer, np.uint8),
+                                   cv2.IMREAD_UNCHANGED if full else cv2.IMREAD_REDUCED_COLOR_8)
+            if decoded is not None:
+                shape = decoded.shape if header is None else header
+                rgb = decoded if full else None
+        if shape is None:
             sink.add(C.DECODE, f"{S.IMAGE} does not decode (missing or corrupt JPEG bytes)", *where)
-        elif camera is not None and rgb.shape != (camera.height, camera.width, 3):
-            sink.add(C.SIZE, f"{S.IMAGE} is {'x'.join(map(str, rgb.shape))}, meta/info.json says "
+        elif camera is not None and tuple(shape) != (camera.height, camera.width, 3):
+            sink.add(C.SIZE, f"{S.IMAGE} is {'x'.join(map(str, shape))}, meta/info.json says "
                              f"{camera.height}x{camera.width}x3", *where)
-        elif i in keep:
+        elif i in keep and rgb is not None and rgb.ndim == 3:
             kept[i] = cv2.cvtColor(rgb, cv2.COLOR_BGR2RGB)
         depth = None
         if depth_ok[i]:
@@ -90,8 +124,9 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
         elif camera is not None:
             good_rows.append(i)
             good_depth.append(depth)
-    if good_rows:
-        _check_depth(np.stack(good_depth), np.asarray(good_rows), fr, depth_low, camera, rel, sink)
+        if len(good_rows) == DEPTH_BATCH or (good_rows and i == table.num_rows - 1):
+            _check_depth(np.stack(good_depth), np.asarray(good_rows), fr, depth_low, camera, rel, sink)
+            good_rows, good_depth = [], []
     return kept
 
 
@@ -100,10 +135,9 @@ def _check_depth(depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: 
     """depth_mm (K, H, W) uint16 of table rows ``rows``: range, then depth_low against the pooled image."""
     ep, frame = fr.episode[rows], fr.frame[rows]
     lo, hi = camera.near * MM_PER_M - DEPTH_MM_SLACK, camera.far * MM_PER_M + DEPTH_MM_SLACK
-    hit = depth_mm > 0
-    lowest = np.where(hit, depth_mm, np.uint16(65535)).min(axis=(1, 2))
+    lowest = (depth_mm - np.uint16(1)).min(axis=(1, 2)).astype(np.int64) + 1  # 0 wraps to 65535: skips no-return
     highest = depth_mm.max(axis=(1, 2))
-    out = hit.any(axis=(1, 2)) & ((lowest < lo) | (highest > hi))
+    out = (highest > 0) & ((lowest < lo) | (highest > hi))
     sink.add_rows(C.DEPTH_RANGE, np.flatnonzero(out), lambda k: f"depth spans {lowest[k] / MM_PER_M:.3f}-"
                   f"{highest[k] / MM_PER_M:.3f} m, outside the camera range [{camera.near:g}, {camera.far:g}] m",
                   rel, ep, frame)
@@ -111,8 +145,13 @@ def _check_depth(depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: 
     k, h, w = depth_mm.shape
     if h % side or w % side:
         return
-    metres = np.where(hit, depth_mm.astype(np.float32) / np.float32(MM_PER_M), np.float32(camera.far))
-    pooled = metres.reshape(k, side, h // side, side, w // side).mean(axis=(2, 4), dtype=np.float32).reshape(k, -1)
+    bh, bw = h // side, w // side
+    # Exact block means in integers: sum rows of each block band, then columns of each block.
+    sums = depth_mm.reshape(k * side, bh, w).sum(axis=1, dtype=np.uint32).reshape(k * side, side, bw).sum(axis=2)
+    empty = (depth_mm == 0).reshape(k * side, bh, w).sum(axis=1, dtype=np.uint32)
+    empty = empty.reshape(k * side, side, bw).sum(axis=2)
+    far_mm = round(camera.far * MM_PER_M)  # no return counts as the far plane, as in the generator
+    pooled = ((sums + empty * far_mm) / (bh * bw * MM_PER_M)).reshape(k, side * side)  # metres
     low = depth_low[rows]
     with np.errstate(invalid="ignore"):
         err = np.abs(pooled - low)

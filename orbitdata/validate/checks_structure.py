@@ -195,8 +195,9 @@ def check_hash(info: dict, rel: str, digest: str | None, size: int, error: str |
         sink.add(C.SHA256, f"{size} bytes, meta/info.json says {expected['bytes']}: the file is truncated or was "
                            "changed; download it again or regenerate the dataset", rel)
     elif expected.get("sha256") != digest:
-        sink.add(C.SHA256, f"sha256 {digest[:12]}... differs from meta/info.json ({str(expected.get('sha256'))[:12]}...): "
-                           "the file was changed or corrupted; download it again or regenerate the dataset", rel)
+        recorded = str(expected.get("sha256"))[:12]
+        sink.add(C.SHA256, f"sha256 {digest[:12]}... differs from meta/info.json ({recorded}...): the file was "
+                           "changed or corrupted; download it again or regenerate the dataset", rel)
 
 
 def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
@@ -220,7 +221,8 @@ def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
     expected = S.STEP_SCHEMA if kind == S.DATA_DIR else S.EPISODE_SCHEMA
     ok = check_schema(rel, pf.schema_arrow, expected, sink)
     md = pf.metadata
-    return ParquetFooter(rel, kind, split, md.num_rows, [md.row_group(i).num_rows for i in range(md.num_row_groups)], ok)
+    rows = [md.row_group(i).num_rows for i in range(md.num_row_groups)]
+    return ParquetFooter(rel, kind, split, md.num_rows, rows, ok)
 
 
 def check_schema(rel: str, actual: pa.Schema, expected: pa.Schema, sink: Sink) -> bool:

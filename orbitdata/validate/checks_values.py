@@ -99,11 +99,13 @@ def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: 
     with np.errstate(invalid="ignore", divide="ignore"):
         pos, rot = residuals(a.state[idx], b.state[idx], a.frame[idx] == 0, dt, substeps)
     bad = np.flatnonzero(~(pos <= POSITION_TOL_M))
-    sink.add_rows(C.KIN_POSITION, bad, lambda k: f"position moved {1000 * pos[k]:.1f} mm away from what the velocity "
-                  f"predicts over {dt:g} s (tolerance {1000 * POSITION_TOL_M:g} mm)", rel, ep[idx], frame[idx])
+    sink.add_rows(C.KIN_POSITION, bad, lambda k: f"step {frame[idx][k] - 1}->{frame[idx][k]}: position ends "
+                  f"{1000 * pos[k]:.1f} mm from where the velocities put it after {dt:g} s (tolerance "
+                  f"{1000 * POSITION_TOL_M:g} mm)", rel, ep[idx], frame[idx])
     bad = np.flatnonzero(~(rot <= ROTATION_TOL_RAD))
-    sink.add_rows(C.KIN_ROTATION, bad, lambda k: f"attitude is {rot[k]:.3g} rad away from what the angular velocity "
-                  f"predicts over {dt:g} s (tolerance {ROTATION_TOL_RAD:g} rad)", rel, ep[idx], frame[idx])
+    sink.add_rows(C.KIN_ROTATION, bad, lambda k: f"step {frame[idx][k] - 1}->{frame[idx][k]}: attitude ends "
+                  f"{rot[k]:.3g} rad from where the angular velocities turn it in {dt:g} s (tolerance "
+                  f"{ROTATION_TOL_RAD:g} rad)", rel, ep[idx], frame[idx])
 
 
 def _all_finite(value) -> bool:

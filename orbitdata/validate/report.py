@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Callable, Sequence
 
 from orbitdata.validate.checks import BY_NAME, CHECKS
 
@@ -165,9 +165,3 @@ class Report:
                          + ", ".join(self.failed()))
         return "\n".join(lines)
 
-
-def merge_all(sinks: Iterable[Sink], cap: int) -> Sink:
-    out = Sink(cap)
-    for s in sinks:
-        out.merge(s)
-    return out

@@ -113,9 +113,10 @@ def _moments(fr: Frames, depth_low: np.ndarray, rgb: dict, plan: StatsPlan) -> d
         m = Moments()
         m.update(x, plan.quantiles.get(name))
         out[name] = m
-    image = Moments()
-    for i in sorted(rgb):
-        image.update(rgb[i].reshape(-1, 3).astype(np.float64) / 255.0, plan.quantiles.get(S.IMAGE))
-    if image.n:
-        out[S.IMAGE] = image
+    if rgb:
+        hist = np.zeros((3, 256), np.int64)  # per-channel value counts: every image statistic follows
+        for pixels in rgb.values():
+            for c in range(3):
+                hist[c] += np.bincount(pixels[..., c].reshape(-1), minlength=256)
+        out[S.IMAGE] = Moments.from_histogram(hist, plan.quantiles.get(S.IMAGE))
     return out

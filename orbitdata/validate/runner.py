@@ -5,6 +5,8 @@ and the episodes table (driver), then, in full mode, every row group of every da
 with the seams between row groups, the episode runs and the statistics finished in the driver.
 Results are consumed in submission order, so the report is the same whatever ``workers`` is,
 and at most ``2 * workers`` tasks are in flight, so memory does not grow with the dataset.
+Workers are spawned (not forked), so a script that calls ``validate`` with several workers needs
+the usual ``if __name__ == "__main__":`` guard.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ class ValidateOptions:
             raise ValueError(f"max_per_check must be >= 1, got {self.max_per_check}")
 
 
-FRAMES_PER_WORKER = 5000
+FRAMES_PER_WORKER = 2000
 Progress = Callable[[str, int, int], None]  # (phase, done, total)
 
 
@@ -148,7 +150,8 @@ def validate(root: str | Path, options: ValidateOptions = ValidateOptions(),
 def _check_hashes(layout: Layout, pool: _Pool, sink: Sink, progress: Progress | None) -> None:
     if layout.info is None:
         return
-    listed = [rel for rel in sorted(layout.info.get("files", {})) if rel in set(layout.present)]
+    present = set(layout.present)
+    listed = [rel for rel in sorted(layout.info.get("files", {})) if rel in present]
     for i, (rel, digest, size, error) in enumerate(pool.map(_sha_task, [(str(layout.root), r) for r in listed])):
         check_hash(layout.info, rel, digest, size, error, sink)
         if progress:

@@ -33,7 +33,9 @@ def run(ds: WindowDataset, seed: int, epoch: int, workers: int, collate=collate_
 
 
 def same(a: list, b: list) -> bool:
-    return len(a) == len(b) and all(x.keys() == y.keys() and all(torch.equal(x[k], y[k]) for k in x) for x, y in zip(a, b))
+    return len(a) == len(b) and all(
+        x.keys() == y.keys() and all(torch.equal(x[k], y[k]) for k in x) for x, y in zip(a, b)
+    )
 
 
 def test_two_workers_are_deterministic_for_a_seed_and_match_no_workers(windows):

@@ -78,7 +78,8 @@ def test_shuffle_is_a_pure_function_of_seed_and_epoch(tiny_dataset_master, cache
         stream.set_epoch(epoch)
         return [key(item) for item in stream]
 
-    plain = [key(item) for item in load_windows(tiny_dataset_master, columns=[S.ACTION], streaming=True, cache_dir=cache)]
+    plain = load_windows(tiny_dataset_master, columns=[S.ACTION], streaming=True, cache_dir=cache)
+    plain = [key(item) for item in plain]
     first = order(seed=1, epoch=0)
     assert sorted(first) == sorted(plain) and first != plain
     assert order(seed=1, epoch=0) == first
@@ -90,6 +91,7 @@ def test_shuffle_is_a_pure_function_of_seed_and_epoch(tiny_dataset_master, cache
 def test_ranks_get_disjoint_whole_episodes(layout, tiny_dataset_master, sharded, cache):
     source = tiny_dataset_master if layout == "one shard" else sharded
     stream = load_windows(source, columns=[S.ACTION], streaming=True, cache_dir=cache)
+    assert stream.steps.num_shards == (1 if layout == "one shard" else 4)  # by episode / by shard
     everything = sorted(key(item) for item in stream)
     parts = []
     for rank in (0, 1):

@@ -88,7 +88,7 @@ class HubState:
         self.refuse: dict[str, int] = {}  # route name -> status to answer with (simulated Hub refusals)
         self.fail_commit: int | None = None  # answer the n-th commit request (1-based) with a 503
         self.commit_requests = 0
-        self.lock = threading.Lock()
+        self.lock = threading.RLock()  # handlers answer while holding it; _send records under it too
 
 
 class Handler(BaseHTTPRequestHandler):
@@ -198,7 +198,8 @@ class Handler(BaseHTTPRequestHandler):
         with self.state.lock:
             if repo_id in self.state.repos:
                 return self._json(409, {"error": "You already created this dataset repo", "url": url})
-            self.state.repos[repo_id] = Repo(repo_id, bool(body.get("private")))
+            private = body.get("visibility") == "private" or bool(body.get("private"))
+            self.state.repos[repo_id] = Repo(repo_id, private)
         self._json(200, {"url": url, "name": repo_id, "id": repo_id})
 
     def validate_yaml(self) -> None:
@@ -397,7 +398,7 @@ class HubServer:
         self.httpd = ThreadingHTTPServer(("127.0.0.1", 0), handler)
         self.url = f"http://127.0.0.1:{self.httpd.server_address[1]}"
         handler.endpoint = self.url
-        self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
+        self.thread = threading.Thread(target=self.httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
 
     def __enter__(self) -> "HubServer":
         self.thread.start()

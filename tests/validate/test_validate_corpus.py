@@ -7,8 +7,6 @@ that must report it (and, where the damage has one, the episode and frame it mus
 from __future__ import annotations
 
 import json
-import os
-import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -334,8 +332,11 @@ CASES = [
                                                                                              3 * s[12:15] + 1))),
     Case("garbage JPEG", C.DECODE, _image(S.IMAGE, lambda root: b"\xff\xd8not a jpeg")),
     Case("garbage PNG", C.DECODE, _image(S.DEPTH, lambda root: b"\x89PNG broken")),
+    Case("truncated JPEG", C.DECODE, _image(S.IMAGE, lambda root: X.image_bytes(root, X.TRAIN, S.IMAGE, 3)[:300])),
+    Case("truncated PNG", C.DECODE, _image(S.DEPTH, lambda root: X.image_bytes(root, X.TRAIN, S.DEPTH, 3)[:-40])),
     Case("RGB of 32 px", C.SIZE, _image(S.IMAGE, lambda root: X.jpeg(np.zeros((32, 32, 3), np.uint8)))),
-    Case("grey RGB", C.SIZE, _image(S.IMAGE, lambda root: X.png(np.zeros((64, 64), np.uint8)))),
+    Case("grey RGB PNG", C.SIZE, _image(S.IMAGE, lambda root: X.png(np.zeros((64, 64), np.uint8)))),
+    Case("grey RGB JPEG", C.SIZE, _image(S.IMAGE, lambda root: X.jpeg(np.zeros((64, 64), np.uint8)))),
     Case("8-bit depth", C.SIZE, _image(S.DEPTH, lambda root: X.png(np.zeros((64, 64), np.uint8)))),
     Case("depth beyond far", C.DEPTH_RANGE, _image(S.DEPTH, _far_depth)),
     Case("depth_low edited", C.DEPTH_LOW, _depth_low),

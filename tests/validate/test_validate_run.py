@@ -126,3 +126,20 @@ def test_missing_folder_raises(tmp_path):
     with pytest.raises(FileNotFoundError, match="does not exist"):
         validate(tmp_path / "nope")
     shutil.rmtree(tmp_path)
+
+
+def test_counts_match_the_generators_definition(tiny_dataset_master):
+    """validate re-states meta.counts (to avoid importing MuJoCo); the two must not drift."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from orbitdata.dataset.meta import counts as generator_counts
+    from orbitdata.validate.checks_consistency import counts
+    from orbitdata.validate.checks_episodes import episode_rows
+
+    rows, tables = [], []
+    for rel in (X.TRAIN_EPISODES, X.TEST_EPISODES):
+        table = pq.read_table(tiny_dataset_master / rel)
+        rows += episode_rows(table, rel)
+        tables.append(table)
+    assert counts(rows) == generator_counts(pa.concat_tables(tables))
