@@ -23,7 +23,7 @@ def make_pilot(level: str, config: PilotsConfig = PilotsConfig(), cubesat: CubeS
         return RiskyPilot(config.risky.cruise, controller=controller)
     if level == "exploratory":
         e = config.exploratory
-        return ExploratoryPilot(e.cruise, e.sigma, e.tau, controller=controller)
+        return ExploratoryPilot(e.cruise, e.accel_sigma, e.alpha_sigma, e.thrust_sigma, e.tau, controller=controller)
     raise ValueError(f"unknown pilot {level!r}; expected one of {', '.join(PILOTS)}")
 
 

@@ -27,8 +27,12 @@ class RiskyConfig:
 
 @dataclass(frozen=True)
 class ExploratoryConfig:
+    """Ornstein-Uhlenbeck noise on the goal-seeking PD (see ExploratoryPilot)."""
+
     cruise: float = 1.5  # m/s
-    sigma: float = 0.3  # stationary std of the Ornstein-Uhlenbeck thrust noise
+    accel_sigma: float = 1.5  # m/s^2 on the commanded acceleration
+    alpha_sigma: float = 6.0  # rad/s^2 on the commanded angular acceleration
+    thrust_sigma: float = 0.05  # normalised thrust, on every thruster
     tau: float = 0.6  # s, noise correlation time
 
 

@@ -90,13 +90,19 @@ class Controller:
         norm = np.linalg.norm(a)
         return a if norm <= g.max_accel else a * (g.max_accel / norm)
 
-    def thrust(self, state: np.ndarray, accel_world: np.ndarray, R_des: np.ndarray) -> np.ndarray:
-        """Thrusts that best produce ``accel_world`` while turning towards ``R_des``."""
+    def thrust(self, state: np.ndarray, accel_world: np.ndarray, R_des: np.ndarray,
+               alpha_offset: np.ndarray | None = None) -> np.ndarray:
+        """Thrusts that best produce ``accel_world`` while turning towards ``R_des``.
+
+        ``alpha_offset`` (rad/s^2, body frame) is added to the attitude PD's command.
+        """
         _, _, R, w, fuel = self.unpack(state)
         mass, inertia = self.mass_inertia(fuel)
         g = self.gains
         err = so3_log(R.T @ R_des)  # body-frame rotation vector to the target attitude
         alpha = g.att_kp * err - g.att_kd * w
+        if alpha_offset is not None:
+            alpha = alpha + alpha_offset
         norm = np.linalg.norm(alpha)
         if norm > g.max_alpha:
             alpha *= g.max_alpha / norm

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from orbitdata import schema as S
+from orbitdata.dataset.meta import sha256_file
 from orbitdata.publish.plan import UploadFile, UploadPlan, batches, plan_upload
 
 LOGIN_HINT = "run `hf auth login` or set HF_TOKEN to a token with write access"
@@ -89,21 +90,13 @@ def _git_blob_id(path: Path) -> str:
     return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 22), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def _unchanged(f: UploadFile, root: Path, remote) -> bool:
     """Same content on the Hub: LFS files by sha256, regular files by git blob id."""
     if remote is None or getattr(remote, "size", None) != f.bytes:
         return False
     lfs = getattr(remote, "lfs", None)
     if lfs is not None:
-        return lfs.sha256 == (f.sha256 or _sha256(root / f.rel))
+        return lfs.sha256 == (f.sha256 or sha256_file(root / f.rel))
     return getattr(remote, "blob_id", None) == _git_blob_id(root / f.rel)
 
 

@@ -97,7 +97,7 @@ def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: 
     if not len(idx):
         return
     with np.errstate(invalid="ignore", divide="ignore"):
-        pos, rot = residuals(a.state[idx], b.state[idx], a.frame[idx] == 0, dt, substeps)
+        pos, rot = residuals(a.state[idx], b.state[idx], dt, substeps)
     bad = np.flatnonzero(~(pos <= POSITION_TOL_M))
     sink.add_rows(C.KIN_POSITION, bad, lambda k: f"step {frame[idx][k] - 1}->{frame[idx][k]}: position ends "
                   f"{1000 * pos[k]:.1f} mm from where the velocities put it after {dt:g} s (tolerance "

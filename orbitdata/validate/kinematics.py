@@ -10,13 +10,12 @@ substeps of ``h = dt / n``; with thrust held over a control step, the velocity c
 The second is exact for this CubeSat: its inertia is isotropic (a cube plus a spherical tank),
 so there is no gyroscopic term and the body-frame angular acceleration is constant over a step.
 
-Two samplings are accepted, and a step passes if it matches either: the pose at the end of the
-step (model A, the contract), or one substep earlier (model B: MuJoCo leaves ``xpos``/``xmat``
-stale after ``mj_step``, which datasets written before that was fixed in the env recorded). For
-B the displacement window shifts by one substep (and the first step covers ``n - 1`` of them).
+States are sampled at the end of each step (the contract). An earlier simulator recorded
+the pose one substep early (MuJoCo leaves ``xpos``/``xmat`` stale after ``mj_step``); such data
+fails this check, on purpose.
 
-Tolerances, measured on 52k clean steps of all three pilot levels, 16 to 224 px, datasets from
-before and after the env fix (|w| up to 683 rad/s: exploratory episodes spin fast):
+Tolerances, measured on 52k clean steps of all three pilot levels, 16 to 224 px, including
+an older exploratory pilot that spun the body up to 683 rad/s:
 
 * ``POSITION_TOL_M = 5 mm``. Largest residual 2.3 mm (99.9th percentile 1.7 mm, median 2 um),
   at |w| ~ 100 rad/s: the thrust direction turns with the body during a step, so the
@@ -66,33 +65,26 @@ def _angle(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(cos, -1.0, 1.0))
 
 
-def position_residual(p0, p1, u0, u1, first, dt: float, n: int) -> np.ndarray:
-    """|p1 - p0 - predicted| in metres, the better of samplings A and B. u: world-frame velocity."""
-    dp = p1 - p0
-    a = dp - dt * ((n - 1) * u0 + (n + 1) * u1) / (2 * n)
-    b_later = dp - dt * ((n + 1) * u0 + (n - 1) * u1) / (2 * n)
-    b_first = dp - dt * (n - 1) / (2 * n) * (u0 + u1)
-    b = np.where(first[:, None], b_first, b_later)
-    return np.minimum(np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1))
+def position_residual(p0, p1, u0, u1, dt: float, n: int) -> np.ndarray:
+    """|p1 - p0 - predicted| in metres. u: world-frame velocity."""
+    return np.linalg.norm(p1 - p0 - dt * ((n - 1) * u0 + (n + 1) * u1) / (2 * n), axis=1)
 
 
-def rotation_residual(R0, R1, w0, w1, first, dt: float, n: int) -> np.ndarray:
-    """Angle between R1 and the integrated R0, radians, the better of samplings A and B."""
+def rotation_residual(R0, R1, w0, w1, dt: float, n: int) -> np.ndarray:
+    """Angle between R1 and R0 integrated over the step's n substeps, radians."""
     h = dt / n
     dw = w1 - w0
-    inner = np.broadcast_to(np.eye(3), (len(w0), 3, 3)).copy()  # substeps 1..n-1, shared by A and B
-    for k in range(1, n):
-        inner = inner @ _expm(h * (w0 + (k / n) * dw))
-    model_a = inner @ _expm(h * w1)
-    model_b = np.where(first[:, None, None], inner, _expm(h * w0) @ inner)
-    return np.minimum(_angle(R0 @ model_a, R1), _angle(R0 @ model_b, R1))
+    step = np.broadcast_to(np.eye(3), (len(w0), 3, 3)).copy()
+    for k in range(1, n + 1):
+        step = step @ _expm(h * (w0 + (k / n) * dw))
+    return _angle(R0 @ step, R1)
 
 
-def residuals(s0: np.ndarray, s1: np.ndarray, first: np.ndarray, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+def residuals(s0: np.ndarray, s1: np.ndarray, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and rotation (rad) residuals of steps s0 -> s1, states (N, 16) float64."""
     R0, R1 = rot6d_matrix(s0[:, 6:12]), rot6d_matrix(s1[:, 6:12])
     u0 = np.einsum("nij,nj->ni", R0, s0[:, 3:6])  # m/s, world frame
     u1 = np.einsum("nij,nj->ni", R1, s1[:, 3:6])
-    pos = position_residual(s0[:, 0:3], s1[:, 0:3], u0, u1, first, dt, n)
-    rot = rotation_residual(R0, R1, s0[:, 12:15], s1[:, 12:15], first, dt, n)
+    pos = position_residual(s0[:, 0:3], s1[:, 0:3], u0, u1, dt, n)
+    rot = rotation_residual(R0, R1, s0[:, 12:15], s1[:, 12:15], dt, n)
     return pos, rot
