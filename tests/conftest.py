@@ -7,22 +7,12 @@ import shutil
 from pathlib import Path
 
 import pytest
+from tiny import tiny_config
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
-
-
-def tiny_config(episodes: int = 6, seed: int = 0, **dataset):
-    from orbitdata.config import GenerationConfig
-
-    cfg = GenerationConfig()
-    return cfg.replace(
-        dataset={"episodes": episodes, "seed": seed, "test_fraction": 0.34, "episodes_per_unit": 2,
-                 "row_group_rows": 64, **dataset},
-        sim={"camera": cfg.sim.camera.__class__(image_size=64)},
-    )
 
 
 @pytest.fixture(scope="session")

@@ -72,8 +72,13 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
         clear_output(out)
     complete = (out / S.INFO_PATH).exists() and not parts.parts_dir(out).exists() and existing == mine
     if not complete:
-        out.mkdir(parents=True, exist_ok=True)
-        parts.write_plan(out, _plan_record(config))
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            parts.write_plan(out, _plan_record(config))
+        except OSError as exc:
+            raise PermissionError(
+                f"cannot write to {out} ({exc.strerror}); choose another OUT or fix its permissions"
+            ) from None
     return complete
 
 

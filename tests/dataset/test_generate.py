@@ -13,7 +13,7 @@ import pyarrow.parquet as pq
 import pytest
 import yaml
 
-from conftest import tiny_config
+from tiny import tiny_config
 from orbitdata import schema as S
 from orbitdata.dataset.generate import generate
 
@@ -139,7 +139,7 @@ def test_ray_executor_gives_identical_bytes(tiny_dataset_master, tmp_path):
 
 KILL_SCRIPT = """
 import sys
-from conftest import tiny_config
+from tiny import tiny_config
 from orbitdata.dataset.generate import generate
 generate(sys.argv[1], tiny_config(episodes_per_unit=1), workers=1)
 """
@@ -149,7 +149,7 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
     clean = tmp_path / "clean" / "orbit"
     generate(clean, tiny_config(episodes_per_unit=1), workers=1)
     out = tmp_path / "killed" / "orbit"
-    env = dict(os.environ, PYTHONPATH=str(Path(__file__).parents[1]))
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).parents[1]))  # tests/, for tiny.py
     proc = subprocess.Popen([sys.executable, "-c", KILL_SCRIPT, str(out)], env=env)
     # Kill mid-way: after at least one unit is on disk, before the run can finish.
     deadline = time.monotonic() + 120

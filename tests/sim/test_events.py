@@ -3,7 +3,7 @@
 import dataclasses
 
 import numpy as np
-from conftest import free_space, wall_ahead
+from scenes import free_space, wall_ahead
 
 from orbitdata.sim import CubeSatEnv, SimConfig
 

@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import free_space, pure_force_thrust
+from scenes import free_space, pure_force_thrust
 
 from orbitdata.sim import CubeSatConfig, CubeSatEnv, SimConfig
 from orbitdata.sim.env import G0

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import wall_ahead
+from scenes import wall_ahead
 
 from orbitdata.sim.render import pool_depth
 

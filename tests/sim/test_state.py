@@ -1,7 +1,7 @@
 """The 16-float state convention: p_0 = 0, body-frame velocities, rot6d order, kinematics."""
 
 import numpy as np
-from conftest import free_space
+from scenes import free_space
 
 from orbitdata.sim.state import rot6d, rot6d_to_matrix
 from orbitdata.scenario.spec import quat_to_mat

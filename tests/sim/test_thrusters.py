@@ -1,7 +1,7 @@
 """The thruster wrench matrix matches the geometry, and every wrench direction is reachable."""
 
 import numpy as np
-from conftest import free_space, pure_force_thrust
+from scenes import free_space, pure_force_thrust
 from scipy.optimize import linprog
 
 from orbitdata.sim import CubeSatConfig, thruster_layout, wrench_matrix

@@ -1,0 +1,14 @@
+"""Settings for the tiny datasets tests generate (64 px, a handful of episodes)."""
+
+from __future__ import annotations
+
+
+def tiny_config(episodes: int = 6, seed: int = 0, **dataset):
+    from orbitdata.config import GenerationConfig
+
+    cfg = GenerationConfig()
+    return cfg.replace(
+        dataset={"episodes": episodes, "seed": seed, "test_fraction": 0.34, "episodes_per_unit": 2,
+                 "row_group_rows": 64, **dataset},
+        sim={"camera": cfg.sim.camera.__class__(image_size=64)},
+    )
