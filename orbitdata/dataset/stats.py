@@ -3,7 +3,9 @@
 mean / std / min / max are exact over every row, accumulated in float64 in episode order.
 q01 / q99 come from a deterministic sample: every ``stride``-th row, with the stride chosen
 so that at most ``QUANTILE_ROWS`` rows are kept. Image channel statistics (RGB in [0, 1])
-come from every ``IMAGE_STRIDE``-th frame. ``count`` says how many values each used.
+come from every ``IMAGE_STRIDE``-th frame (moments over all its pixels); their quantiles
+from at most ``QUANTILE_ROWS`` pixels in all, spread over those frames and over the image,
+so memory stays flat in the dataset size. ``count`` says how many values each used, ``q_count`` how many the quantiles used.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from orbitdata.dataset.encode import decode_rgb
 
 QUANTILE_ROWS = 20_000
 IMAGE_STRIDE = 50
+PIXEL_STRIDE = 97  # prime: coprime with every image size
 VECTOR_FEATURES = (S.STATE, S.ACTION, S.DEPTH_LOW)
 SCALAR_FEATURES = (S.MIN_CLEARANCE, S.TIMESTAMP)
 
@@ -58,6 +61,7 @@ class _Moments:
             sample = np.concatenate(self.sample)
             out["q01"] = np.quantile(sample, 0.01, axis=0)
             out["q99"] = np.quantile(sample, 0.99, axis=0)
+            out["q_count"] = int(len(sample))  # size of the sample the quantiles come from
         return {k: (v if isinstance(v, int) else [float(f"{x:.7g}") for x in np.atleast_1d(v)]) for k, v in out.items()}
 
 
@@ -71,6 +75,9 @@ class StatsAccumulator:
         self.moments = {name: _Moments(widths.get(name, 1)) for name in VECTOR_FEATURES + SCALAR_FEATURES}
         self.widths = {name: widths.get(name, 1) for name in self.moments}
         self.image = _Moments(3)
+        n_images = max(1, math.ceil(total_rows / IMAGE_STRIDE))
+        self.pixels_per_image = max(1, QUANTILE_ROWS // n_images)
+        self.images_seen = 0
 
     def update(self, table: pa.Table) -> None:
         n = table.num_rows
@@ -84,7 +91,13 @@ class StatsAccumulator:
             blobs = table.column(S.IMAGE).combine_chunks().field("bytes")
             for i in image_rows:
                 pixels = decode_rgb(blobs[int(i)].as_py()).reshape(-1, 3).astype(np.float64) / 255.0
-                self.image.update(pixels, np.arange(0, len(pixels), 97))
+                # A walk of prime stride through the image (no more often than every 97th pixel:
+                # neighbours are correlated), starting elsewhere in each image.
+                n_pix = len(pixels)
+                keep = max(1, min(self.pixels_per_image, n_pix // PIXEL_STRIDE))
+                start = (self.images_seen * 7919) % n_pix
+                self.image.update(pixels, (start + PIXEL_STRIDE * np.arange(keep)) % n_pix)
+                self.images_seen += 1
 
     def result(self) -> dict:
         out = {name: acc.result() for name, acc in self.moments.items()}

@@ -31,7 +31,7 @@ from orbitdata.validate.report import Sink
 
 QUANTILES = (("q01", 0.01), ("q99", 0.99))
 WIDTHS = {S.STATE: S.STATE_DIM, S.ACTION: S.ACTION_DIM, S.DEPTH_LOW: S.DEPTH_LOW_DIM, S.IMAGE: 3}
-IMAGE_PIXEL_STRIDE = 97  # matches orbitdata.dataset.stats (every 97th pixel goes to the sample)
+IMAGE_PIXEL_STRIDE = 97  # the image sample stride of files without q_count
 RTOL, RANGE_TOL = 1e-6, 1e-7
 
 
@@ -249,7 +249,9 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
                 sink.add(C.STATS, f"{name}.{q} is missing or not {width} numbers", S.STATS_PATH)
                 continue
             below, at_or_below = m.ranks[q]
-            sample = m.n // IMAGE_PIXEL_STRIDE if name == S.IMAGE else sample_rows
+            # The sample size is recorded (q_count) since it became bounded; older files
+            # sampled every 97th image pixel and at most QUANTILE_ROWS rows.
+            sample = entry.get("q_count") or (m.n // IMAGE_PIXEL_STRIDE if name == S.IMAGE else sample_rows)
             tol = quantile_tolerance(p, sample)
             bad = np.flatnonzero((below / m.n > p + tol) | (at_or_below / m.n < p - tol))
             for i in bad[:3]:
