@@ -31,10 +31,11 @@ class StorageSettings:
 
 
 def _image_bytes(table: pa.Table) -> int:
+    """Estimated stored size of ``table``: its encoded images plus ~1.2 KB a row for the rest."""
     total = 0
     for name in S.IMAGE_COLUMNS:
-        col = table.column(name).combine_chunks().field("bytes")
-        total += col.buffers()[2].size if len(col) else 0
+        # Count the bytes of these rows only (a slice shares its parent's buffers).
+        total += pc.sum(pc.binary_length(pc.struct_field(table.column(name), "bytes"))).as_py() or 0
     # Everything else is ~1.2 KB/row before compression (depth_low dominates).
     return total + 1200 * table.num_rows
 
@@ -56,7 +57,10 @@ class _ShardWriter:
         path = self.out / S.DATA_DIR / f".tmp-{self.split}-{len(self.files):05d}.parquet"
         path.parent.mkdir(parents=True, exist_ok=True)
         self.files.append(path)
-        self.writer = pq.ParquetWriter(path, self.schema, compression=self.storage.compression)
+        # No dictionary encoding: images are unique blobs, and a dictionary's fallback point
+        # would depend on how the input happens to be chunked, breaking byte-identity.
+        self.writer = pq.ParquetWriter(path, self.schema, compression=self.storage.compression,
+                                       use_dictionary=False)
         self.shard_bytes = self.shard_rows = 0
 
     def _flush(self, final: bool) -> None:
@@ -64,7 +68,9 @@ class _ShardWriter:
         while self.buffered >= rows or (final and self.buffered):
             table = pa.concat_tables(self.buffer)
             take = min(rows, table.num_rows)
-            self.writer.write_table(table.slice(0, take).cast(self.schema), row_group_size=rows)
+            # One chunk per column, so the bytes never depend on the source's chunking.
+            group = table.slice(0, take).cast(self.schema).combine_chunks()
+            self.writer.write_table(group, row_group_size=rows)
             rest = table.slice(take)
             self.buffer, self.buffered = ([rest] if rest.num_rows else []), rest.num_rows
 
@@ -101,32 +107,58 @@ class _ShardWriter:
         return names
 
 
-def _source_from_parts(out: Path) -> Iterator[tuple[dict, pa.Table]]:
-    """(episode row, frames) for every episode in the parts, in episode order."""
+def _source_from_parts(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]]:
+    """(episode row, frames) for every episode of ``split`` in the parts, in episode order."""
     units = sorted(p.name[: -len(".episodes.parquet")] for p in parts_dir(out).glob("unit-*.episodes.parquet"))
     for name in units:
         episodes = pq.read_table(episodes_part(out, name)).to_pylist()
+        if not any(row[S.SPLIT] == split for row in episodes):
+            continue
         steps = pq.read_table(steps_part(out, name))
         offset = 0
         for row in episodes:
-            yield row, steps.slice(offset, row[S.LENGTH])
+            if row[S.SPLIT] == split:
+                yield row, steps.slice(offset, row[S.LENGTH])
             offset += row[S.LENGTH]
 
 
-def _source_from_shards(out: Path) -> Iterator[tuple[dict, pa.Table]]:
-    """(episode row, frames) from an existing layout, read one row group range at a time."""
+class _RowGroupReader:
+    """Rows [a, b) of one Parquet file, reading only the row groups that hold them (in order)."""
+
+    def __init__(self, path: Path):
+        self.file = pq.ParquetFile(path, memory_map=True)
+        sizes = [self.file.metadata.row_group(g).num_rows for g in range(self.file.num_row_groups)]
+        self.starts = [0]
+        for n in sizes:
+            self.starts.append(self.starts[-1] + n)
+        self.cache: dict[int, pa.Table] = {}
+
+    def rows(self, a: int, b: int) -> pa.Table:
+        groups = [g for g in range(len(self.starts) - 1) if self.starts[g] < b and self.starts[g + 1] > a]
+        for g in list(self.cache):
+            if g < groups[0]:  # episodes come in file order: earlier groups are done
+                del self.cache[g]
+        for g in groups:
+            if g not in self.cache:
+                self.cache[g] = self.file.read_row_group(g)
+        table = pa.concat_tables([self.cache[g] for g in groups])
+        return table.slice(a - self.starts[groups[0]], b - a)
+
+
+def _source_from_shards(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]]:
+    """(episode row, frames) of ``split`` from an existing layout, with a few row groups in memory."""
     files = sorted((out / S.EPISODES_DIR).glob("*.parquet"))
     if not files:
         raise FileNotFoundError(f"{out} has neither parts/ nor episodes/*.parquet to shard")
     episodes = pa.concat_tables([pq.read_table(f) for f in files])
+    episodes = episodes.filter(pc.equal(episodes.column(S.SPLIT), split))
     episodes = episodes.take(pc.sort_indices(episodes, [(S.EPISODE_INDEX, "ascending")]))
-    cache: dict[str, pa.Table] = {}
+    reader, current = None, None
     for row in episodes.to_pylist():
-        path = row[S.DATA_FILE]
-        if path not in cache:  # episodes are grouped by file, so keep one file open at a time
-            cache.clear()
-            cache[path] = pq.read_table(out / path, memory_map=True)
-        yield row, cache[path].slice(row[S.ROW_START], row[S.ROW_END] - row[S.ROW_START])
+        if row[S.DATA_FILE] != current:
+            current = row[S.DATA_FILE]
+            reader = _RowGroupReader(out / current)
+        yield row, reader.rows(row[S.ROW_START], row[S.ROW_END])
 
 
 def _rows_per_split(out: Path, from_parts: bool) -> dict[str, int]:
@@ -161,10 +193,8 @@ def write_shards(out: Path, storage: StorageSettings) -> ShardResult:
             continue
         writer = _ShardWriter(out, split, storage)
         rows = []
-        source = _source_from_parts(out) if from_parts else _source_from_shards(out)
+        source = _source_from_parts(out, split) if from_parts else _source_from_shards(out, split)
         for row, frames in source:
-            if row[S.SPLIT] != split:
-                continue
             shard, start, end = writer.add_episode(frames)
             if split == "train":
                 stats.update(frames)

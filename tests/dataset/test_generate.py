@@ -183,3 +183,13 @@ def test_reshard_into_smaller_files_keeps_every_row(tiny_dataset):
     from datasets import load_dataset
 
     assert load_dataset(str(tiny_dataset), split="train").num_rows == info["counts"]["splits"]["train"]["frames"]
+
+
+def test_reshard_round_trip_reproduces_the_generated_bytes(tiny_dataset, tiny_dataset_master):
+    """Shard bytes depend on the rows alone, not on whether they came from parts or shards."""
+    from orbitdata.dataset.generate import shard
+
+    shard(tiny_dataset, max_shard_bytes=50_000)
+    assert tree_digest(tiny_dataset) != tree_digest(tiny_dataset_master)
+    shard(tiny_dataset, max_shard_bytes=500_000_000)
+    assert tree_digest(tiny_dataset) == tree_digest(tiny_dataset_master)
