@@ -131,11 +131,13 @@ def generate(
 
 
 def _write_overview(out: Path, episodes) -> str | None:
-    """meta/overview.png for the card, when the plotting extra is installed."""
+    """meta/overview.png for the card, when the plotting extra (orbitdata[viz]) is installed."""
     try:
-        from orbitdata.viz.overview import write_overview
-    except ImportError:  # matplotlib missing (orbitdata[viz]) or viz not built yet
+        import matplotlib  # noqa: F401  (only the optional dependency may be missing)
+    except ImportError:
         return None
+    from orbitdata.viz.overview import write_overview
+
     write_overview(out, episodes)
     return S.OVERVIEW_PATH
 
