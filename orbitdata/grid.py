@@ -84,11 +84,8 @@ def fly_grid(
                 cell = CellResult(obstacles=n, speed=float(v), episodes=episodes)
                 for k in range(episodes):
                     s = grid_seed(seed, n, v, k)
-                    frames, positions = [], []
-                    sink = None
-                    if video_dir is not None:
-                        def sink(t, rgb, _depth, _low, frames=frames):
-                            frames.append(rgb)
+                    frames: list = []
+                    sink = (lambda t, rgb, *_: frames.append(rgb)) if video_dir is not None else None
                     result = fly_episode(env, make_pilot(pilot, config.pilots, sim.cubesat), s, n, v, frame_sink=sink)
                     cell.add(result.outcome)
                     if video_dir is not None:

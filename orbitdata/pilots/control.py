@@ -13,7 +13,7 @@ import numpy as np
 
 from orbitdata.pilots.allocation import ThrustAllocator
 from orbitdata.sim.config import CubeSatConfig
-from orbitdata.sim.state import so3_log
+from orbitdata.sim.state import cross3, rot6d_to_matrix, so3_log
 from orbitdata.sim.thrusters import wrench_matrix
 
 
@@ -31,27 +31,12 @@ def look_rotation(forward: np.ndarray, up=(0.0, 0.0, 1.0), fallback: np.ndarray 
     """Rotation (body->world) whose x axis (the camera axis) is ``forward`` and z is near ``up``."""
     x = np.asarray(forward, dtype=np.float64)
     x = x / math.sqrt(x @ x)
-    y = _cross(np.asarray(up, dtype=np.float64), x)
+    y = cross3(np.asarray(up, dtype=np.float64), x)
     if math.sqrt(y @ y) < 1e-6:  # looking straight up/down: keep the current heading
         y = fallback[:, 1] if fallback is not None else np.array([0.0, 1.0, 0.0])
         y = y - x * (x @ y)
     y = y / math.sqrt(y @ y)
-    return np.column_stack([x, y, _cross(x, y)])
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # np.cross costs ~40 us on 3-vectors (axis handling); this is ~2 us.
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
-
-
-def _rot6d_to_matrix_fast(r6: np.ndarray) -> np.ndarray:
-    """rot6d_to_matrix for one state, without numpy's per-call overhead."""
-    a = np.array([r6[0], r6[2], r6[4]])
-    b = np.array([r6[1], r6[3], r6[5]])
-    x = a / math.sqrt(a @ a)
-    b = b - (x @ b) * x
-    y = b / math.sqrt(b @ b)
-    return np.column_stack([x, y, _cross(x, y)])
+    return np.column_stack([x, y, cross3(x, y)])
 
 
 class Controller:
@@ -64,10 +49,7 @@ class Controller:
         self._unpacked: tuple = (None, None)
 
     def mass_inertia(self, fuel_ratio: float) -> tuple[float, float]:
-        sat = self.cubesat
-        fuel = float(np.clip(fuel_ratio, 0.0, 1.0)) * sat.fuel_mass
-        inertia = sat.dry_mass * (2 * sat.half_size) ** 2 / 6.0 + 0.4 * fuel * sat.tank_radius**2
-        return sat.dry_mass + fuel, inertia
+        return self.cubesat.mass_properties(float(np.clip(fuel_ratio, 0.0, 1.0)) * self.cubesat.fuel_mass)
 
     def unpack(self, state: np.ndarray):
         """(p world, v world, R body->world, w body, fuel) from a 16-float state.
@@ -78,7 +60,7 @@ class Controller:
         key = state.tobytes()
         if self._unpacked[0] != key:
             s = state.astype(np.float64)
-            R = _rot6d_to_matrix_fast(s[6:12])
+            R = rot6d_to_matrix(s[6:12])
             self._unpacked = (key, (s[0:3], R @ s[3:6], R, s[12:15], float(s[15])))
         return self._unpacked[1]
 

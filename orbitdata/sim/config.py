@@ -28,6 +28,14 @@ class CubeSatConfig:
     cant_deg: float = 30.0  # thruster cant about body z (see module docstring)
     tank_radius: float = 0.035  # m, fuel modelled as a solid sphere at the centre
 
+    def mass_properties(self, fuel_kg: float) -> tuple[float, float]:
+        """(mass kg, principal inertia kg m^2) with ``fuel_kg`` in the tank.
+
+        Solid cube plus a solid spherical tank at the centre: the inertia is isotropic.
+        """
+        dry_inertia = self.dry_mass * (2 * self.half_size) ** 2 / 6.0
+        return self.dry_mass + fuel_kg, dry_inertia + 0.4 * fuel_kg * self.tank_radius**2
+
 
 @dataclass(frozen=True)
 class CameraConfig:

@@ -173,11 +173,9 @@ class CubeSatEnv:
         return False
 
     def _update_mass(self) -> None:
-        sat = self.sim.cubesat
-        dry_inertia = sat.dry_mass * (2 * sat.half_size) ** 2 / 6.0  # solid cube, kg m^2
-        fuel_inertia = 0.4 * self._fuel * sat.tank_radius**2  # solid sphere
-        self.model.body_mass[self._body] = sat.dry_mass + self._fuel
-        self.model.body_inertia[self._body] = dry_inertia + fuel_inertia
+        mass, inertia = self.sim.cubesat.mass_properties(self._fuel)
+        self.model.body_mass[self._body] = mass
+        self.model.body_inertia[self._body] = inertia
         # MuJoCo 4 caches mass-derived constants: refresh them (on scratch data, since
         # mj_setConst evaluates the model at qpos0).
         mujoco.mj_setConst(self.model, self._scratch)

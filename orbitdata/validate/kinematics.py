@@ -34,17 +34,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from orbitdata.sim.state import rot6d_to_matrix
+
 POSITION_TOL_M = 5e-3
 ROTATION_TOL_RAD = 1e-3
-
-
-def rot6d_matrix(r6: np.ndarray) -> np.ndarray:
-    """(N, 6) rot6d -> (N, 3, 3) by Gram-Schmidt (exact for a valid rot6d)."""
-    a = r6.reshape(-1, 3, 2)
-    x = a[:, :, 0] / np.linalg.norm(a[:, :, 0], axis=1, keepdims=True)
-    b = a[:, :, 1] - (x * a[:, :, 1]).sum(1, keepdims=True) * x
-    y = b / np.linalg.norm(b, axis=1, keepdims=True)
-    return np.stack([x, y, np.cross(x, y)], axis=-1)
 
 
 def _expm(rv: np.ndarray) -> np.ndarray:
@@ -82,7 +75,7 @@ def rotation_residual(R0, R1, w0, w1, dt: float, n: int) -> np.ndarray:
 
 def residuals(s0: np.ndarray, s1: np.ndarray, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and rotation (rad) residuals of steps s0 -> s1, states (N, 16) float64."""
-    R0, R1 = rot6d_matrix(s0[:, 6:12]), rot6d_matrix(s1[:, 6:12])
+    R0, R1 = rot6d_to_matrix(s0[:, 6:12]), rot6d_to_matrix(s1[:, 6:12])
     u0 = np.einsum("nij,nj->ni", R0, s0[:, 3:6])  # m/s, world frame
     u1 = np.einsum("nij,nj->ni", R1, s1[:, 3:6])
     pos = position_residual(s0[:, 0:3], s1[:, 0:3], u0, u1, dt, n)
