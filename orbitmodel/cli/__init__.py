@@ -1,0 +1,1 @@
+"""The ``orbitmodel`` command line: typer commands that build configs and call the library."""

@@ -1,0 +1,35 @@
+"""One-line errors: the library raises, only the CLI exits (2 for bad input, as for usage)."""
+
+from __future__ import annotations
+
+import functools
+import sys
+
+import typer
+
+BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError)
+
+
+def fail(message: str, code: int = 2) -> None:
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    raise typer.Exit(code)
+
+
+def friendly(func):
+    """Library exceptions become one line on stderr and exit 2, never a traceback."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except typer.Exit:
+            raise
+        except KeyboardInterrupt:
+            typer.secho("interrupted; run the same command with --resume to continue", err=True)
+            sys.exit(130)
+        except BAD_INPUT as exc:
+            fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+        except OSError as exc:
+            fail(f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), code=1)
+
+    return wrapper

@@ -1,0 +1,57 @@
+"""``orbitmodel train``: Stage I, the latent world model."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from orbitdata import schema as S
+from orbitmodel.cli.errors import friendly
+from orbitmodel.config import PRESETS
+
+Preset = Enum("Preset", {name: name for name in PRESETS}, type=str)
+Level = Enum("Level", {name: name for name in S.LEVELS}, type=str)
+Outcome = Enum("Outcome", {name: name for name in S.OUTCOMES}, type=str)
+Device = Enum("Device", {name: name for name in ("auto", "cpu", "cuda")}, type=str)
+
+
+def register(app: typer.Typer) -> None:
+    app.command("train")(train)
+
+
+@friendly
+def train(
+    dataset: Annotated[str, typer.Argument(help="orbitdata dataset: a local folder or a Hub repo id")],
+    out: Annotated[Path, typer.Option("--out", help="run folder to write (checkpoints, metrics, config)")],
+    preset: Annotated[Preset, typer.Option(help="model size and recipe; see `orbitmodel presets`")] = "cpu",
+    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
+    max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    batch_size: Annotated[Optional[int], typer.Option(min=2, help="windows per step and process")] = None,
+    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    level: Annotated[Optional[list[Level]], typer.Option(help="train on these levels only (repeatable)")] = None,
+    outcome: Annotated[Optional[list[Outcome]], typer.Option(help="train on these outcomes only (repeatable)")] = None,
+    workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
+    seed: Annotated[Optional[int], typer.Option(min=0, help="data order, augmentation and initialisation")] = None,
+    resize: Annotated[bool, typer.Option(help="resize images to the preset's size while loading")] = False,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
+    resume: Annotated[bool, typer.Option(help="continue the run in --out from its latest checkpoint")] = False,
+    overwrite: Annotated[bool, typer.Option(help="replace a run already in --out")] = False,
+) -> None:
+    """Train the Stage I world model (ViT + AdaLN-Zero predictor + depth head, SIGReg).
+
+    Multi-GPU / multi-node: launch with `torchrun --nproc_per_node N -m orbitmodel.cli.app train ...`.
+    """
+    from orbitmodel.config import get_preset
+    from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+    p = get_preset(preset.value).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
+                                            num_workers=workers, seed=seed)
+    req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
+                        outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,
+                        resume=resume, overwrite=overwrite)
+    result = train_world_model(req)
+    typer.echo(f"trained {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} windows/s, "
+               f"{100 * result.data_wait:.1f} % waiting for data); weights in {out}")

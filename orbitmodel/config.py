@@ -1,0 +1,190 @@
+"""Typed configs for the world model and its training, and the named presets the CLI lists.
+
+A preset is a one-line factory (DiT's ``DiT_models`` style) returning a :class:`Preset`: the
+model's sizes and the training recipe that goes with them. ``paper`` is upstream
+Orbit-Planner's Stage I at 224 px (for a GPU); ``cpu`` is the same family scaled to train on a
+2-core machine from a 64 px dataset in under an hour (sizes chosen by measurement, see the
+README); ``tiny`` is for tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, replace
+from typing import Callable
+
+from orbitdata.schema import ACTION_DIM, DEPTH_LOW_SIDE, STATE_DIM
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Sizes of the Stage I world model (upstream names in brackets).
+
+    Args:
+        image_size: square input image in pixels; must match the dataset's (or be resized to).
+        patch_size: ViT patch side in pixels; ``image_size / patch_size`` patches per side.
+        width, depth, heads, mlp: the ViT encoder (192 / 12 / 3 / 768 for ViT-tiny).
+        state_hidden, state_embed: state encoder MLP 16 -> hidden -> GELU -> embed.
+        latent_dim: z_t [latent_dim].
+        action_hidden: action encoder MLP 8 -> hidden -> GELU -> latent_dim.
+        pred_depth, pred_heads, pred_mlp, pred_dropout: the AdaLN-Zero causal predictor.
+        max_seq_len: learned positional embeddings of the predictor (>= training window).
+        history: latents the predictor sees in a rollout (a sliding window).
+        depth_hidden: per-patch depth head MLP width -> hidden -> GELU -> cells.
+        sigreg_projections, sigreg_knots: SIGReg's random 1-D projections and quadrature knots.
+        lambda_sigreg, lambda_depth: loss weights.
+    """
+
+    image_size: int = 224
+    patch_size: int = 14
+    width: int = 192
+    depth: int = 12
+    heads: int = 3
+    mlp: int = 768
+    state_hidden: int = 128
+    state_embed: int = 64
+    latent_dim: int = 256
+    action_hidden: int = 128
+    pred_depth: int = 6
+    pred_heads: int = 4
+    pred_mlp: int = 1024
+    pred_dropout: float = 0.1
+    max_seq_len: int = 64
+    history: int = 8
+    depth_hidden: int = 96
+    sigreg_projections: int = 512
+    sigreg_knots: int = 17
+    lambda_sigreg: float = 0.1
+    lambda_depth: float = 0.1
+    state_dim: int = STATE_DIM
+    action_dim: int = ACTION_DIM
+
+    def __post_init__(self):
+        if self.image_size % self.patch_size:
+            raise ValueError(f"image_size={self.image_size} is not a multiple of patch_size={self.patch_size}")
+        if DEPTH_LOW_SIDE % self.grid and self.grid % DEPTH_LOW_SIDE:
+            raise ValueError(f"the {self.grid}x{self.grid} patch grid cannot give the "
+                             f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} depth map; choose image_size / patch_size "
+                             f"dividing or divisible by {DEPTH_LOW_SIDE}")
+        for name in ("width", "latent_dim"):
+            heads = self.heads if name == "width" else self.pred_heads
+            if getattr(self, name) % heads:
+                raise ValueError(f"{name}={getattr(self, name)} is not divisible by its {heads} attention heads")
+        if self.sigreg_knots % 2 == 0 or self.sigreg_knots < 3:
+            raise ValueError(f"sigreg_knots={self.sigreg_knots}: use an odd number >= 3")
+        if not 1 <= self.history <= self.max_seq_len:
+            raise ValueError(f"history={self.history} must be in [1, max_seq_len={self.max_seq_len}]")
+
+    @property
+    def grid(self) -> int:
+        """Patches per image side."""
+        return self.image_size // self.patch_size
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """How Stage I trains (upstream: AdamW 1e-5, wd 0.05, batch 128, 50 epochs, 3 warm-up
+    epochs then cosine, clip 1.0, 20-frame windows with stride 5, jitter p 0.5).
+
+    Args:
+        window, window_stride: frames per training window, and between window starts.
+        batch_size: windows per step (per process under DDP).
+        lr, min_lr, weight_decay, betas: AdamW; cosine decay from lr to min_lr.
+        epochs, max_steps: the run ends at whichever comes first (max_steps 0 = no bound).
+        warmup: linear warm-up, as a fraction of the run's steps.
+        grad_clip: global gradient-norm clip.
+        jitter_p, jitter: brightness and contrast factors U(1 - jitter, 1 + jitter), each with
+            probability jitter_p.
+        num_workers: DataLoader worker processes.
+        log_every, save_every: steps between metric lines and between checkpoints.
+        seed: data order, augmentation, SIGReg projections and initialisation.
+    """
+
+    window: int = 20
+    window_stride: int = 5
+    batch_size: int = 128
+    lr: float = 1e-5
+    min_lr: float = 0.0
+    weight_decay: float = 0.05
+    betas: tuple[float, float] = (0.9, 0.999)
+    epochs: int = 50
+    max_steps: int = 0
+    warmup: float = 0.06
+    grad_clip: float = 1.0
+    jitter_p: float = 0.5
+    jitter: float = 0.2
+    num_workers: int = 4
+    log_every: int = 10
+    save_every: int = 500
+    seed: int = 42
+
+    def __post_init__(self):
+        if self.window < 2:
+            raise ValueError(f"window={self.window}: teacher forcing needs at least 2 frames")
+        if self.batch_size < 2:
+            raise ValueError(f"batch_size={self.batch_size}: BatchNorm and SIGReg need at least 2 windows")
+        if self.epochs < 1 or self.max_steps < 0:
+            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}: give epochs >= 1 and max_steps >= 0")
+        if not 0 <= self.warmup < 1:
+            raise ValueError(f"warmup={self.warmup} is a fraction of the run in [0, 1)")
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A model size and the training recipe that goes with it."""
+
+    name: str
+    description: str
+    model: ModelConfig
+    train: TrainConfig = field(default_factory=TrainConfig)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Preset":
+        train = dict(d["train"])
+        train["betas"] = tuple(train["betas"])
+        return cls(name=d["name"], description=d["description"], model=ModelConfig(**d["model"]),
+                   train=TrainConfig(**train))
+
+    def with_train(self, **changes) -> "Preset":
+        """The preset with some training settings replaced (None values are ignored)."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return replace(self, train=replace(self.train, **changes))
+
+
+def _paper() -> Preset:
+    return Preset("paper", "upstream Stage I: ViT-tiny/14 at 224 px, latent 256, 6-block predictor (a GPU)",
+                  ModelConfig(), TrainConfig())
+
+
+def _cpu() -> Preset:
+    model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
+                        state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
+                        depth_hidden=64, sigreg_projections=256)
+    train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
+                        epochs=100, max_steps=1200, warmup=0.05, num_workers=0, log_every=10, save_every=100)
+    return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
+                  "4-block predictor; < 60 min", model, train)
+
+
+def _tiny() -> Preset:
+    model = ModelConfig(image_size=64, patch_size=16, width=32, depth=1, heads=2, mlp=64, state_hidden=32,
+                        state_embed=16, latent_dim=32, action_hidden=32, pred_depth=1, pred_heads=2, pred_mlp=64,
+                        pred_dropout=0.1, max_seq_len=16, history=4, depth_hidden=16, sigreg_projections=32)
+    train = TrainConfig(window=6, window_stride=3, batch_size=4, lr=3e-3, min_lr=1e-4, epochs=2, max_steps=0,
+                        warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0)
+    return Preset("tiny", "a few thousand parameters, for tests", model, train)
+
+
+PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "tiny": _tiny}
+
+
+def get_preset(name: str) -> Preset:
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return PRESETS[name]()
+
+
+def field_names(cls) -> tuple[str, ...]:
+    return tuple(f.name for f in fields(cls))

@@ -1,0 +1,56 @@
+"""The causal latent predictor with AdaLN-Zero action conditioning (DiT's block, made causal).
+
+Position t of the sequence holds z_t and is modulated by the embedding of a_t; its output,
+after the final LayerNorm and the projector, is the prediction of z_{t+1}. The causal mask keeps
+every prediction blind to later frames and actions.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from orbitmodel.config import ModelConfig
+from orbitmodel.model.vit import Attention, Mlp
+
+
+def modulate(x: torch.Tensor, shift: torch.Tensor, scale: torch.Tensor) -> torch.Tensor:
+    return x * (1 + scale) + shift
+
+
+class AdaLNBlock(nn.Module):
+    """Pre-norm transformer block whose norms' shift, scale and residual gates come from the condition."""
+
+    def __init__(self, dim: int, heads: int, mlp: int, dropout: float):
+        super().__init__()
+        self.norm1 = nn.LayerNorm(dim, elementwise_affine=False, eps=1e-6)
+        self.attn = Attention(dim, heads, dropout)
+        self.norm2 = nn.LayerNorm(dim, elementwise_affine=False, eps=1e-6)
+        self.mlp = Mlp(dim, mlp, dropout)
+        self.adaln = nn.Sequential(nn.SiLU(), nn.Linear(dim, 6 * dim))
+
+    def forward(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:  # x, c: (B, T, D)
+        shift_msa, scale_msa, gate_msa, shift_mlp, scale_mlp, gate_mlp = self.adaln(c).chunk(6, dim=-1)
+        x = x + gate_msa * self.attn(modulate(self.norm1(x), shift_msa, scale_msa), causal=True)
+        return x + gate_mlp * self.mlp(modulate(self.norm2(x), shift_mlp, scale_mlp))
+
+
+class Predictor(nn.Module):
+    """(z (B, T, D), action embeddings (B, T, D)) -> next-latent features (B, T, D)."""
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        c = config
+        self.pos = nn.Parameter(torch.zeros(1, c.max_seq_len, c.latent_dim))
+        self.drop = nn.Dropout(c.pred_dropout)
+        self.blocks = nn.ModuleList(AdaLNBlock(c.latent_dim, c.pred_heads, c.pred_mlp, c.pred_dropout)
+                                    for _ in range(c.pred_depth))
+        self.norm = nn.LayerNorm(c.latent_dim)
+
+    def forward(self, z: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+        T = z.shape[1]
+        assert T <= self.pos.shape[1], f"sequence of {T} frames exceeds max_seq_len {self.pos.shape[1]}"
+        x = self.drop(z + self.pos[:, :T])
+        for block in self.blocks:
+            x = block(x, cond)
+        return self.norm(x)

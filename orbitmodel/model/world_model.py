@@ -1,0 +1,210 @@
+"""The Stage I latent world model: encode (image, state) to z_t, predict z_{t+1} from z_{<=t}
+and a_{<=t}, and read a coarse depth map from the image's patch tokens.
+
+    z_t   = BN(Linear([ViT_cls(o_t), StateMLP(s_t)]))                    (B, T, D)
+    c_t   = ActionMLP(a_t)                                               (B, T, D)
+    ẑ_t+1 = BN(Linear(Predictor(z_<=t, c_<=t)))    causal, AdaLN-Zero     (B, T, D)
+    d_t   = DepthMLP(ViT_patches(o_t))               16x16, metres
+
+The BatchNorms undo the transformers' final LayerNorms so that SIGReg can shape the latents.
+States and actions are normalised inside the model (from the dataset's ``meta/stats.json``),
+so callers pass raw dataset values.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from orbitdata.schema import DEPTH_LOW_SIDE
+from orbitmodel.config import ModelConfig
+from orbitmodel.model.predictor import Predictor
+from orbitmodel.model.sigreg import sigreg
+from orbitmodel.model.vit import ViT
+
+
+def mlp(dims: tuple[int, ...]) -> nn.Sequential:
+    """Linear layers with GELU between them."""
+    layers: list[nn.Module] = []
+    for i, (a, b) in enumerate(zip(dims[:-1], dims[1:])):
+        layers += [nn.Linear(a, b)] + ([nn.GELU()] if i < len(dims) - 2 else [])
+    return nn.Sequential(*layers)
+
+
+class LinearBN(nn.Module):
+    """Linear + BatchNorm1d over every (batch, time) sample."""
+
+    def __init__(self, d_in: int, d_out: int):
+        super().__init__()
+        self.linear = nn.Linear(d_in, d_out)
+        self.bn = nn.BatchNorm1d(d_out)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:  # (..., d_in) -> (..., d_out)
+        y = self.linear(x)
+        return self.bn(y.reshape(-1, y.shape[-1])).reshape(y.shape)
+
+
+class DepthHead(nn.Module):
+    """Per-patch-token MLP giving the 16x16 depth grid (normalised units; the model scales it).
+
+    With a g x g patch grid and g < 16, each token gives a (16/g)^2 block of cells (pixel
+    shuffle); with g > 16 the g x g map is area-pooled to 16x16.
+    """
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        self.grid = config.grid
+        self.up = max(DEPTH_LOW_SIDE // self.grid, 1)
+        self.net = mlp((config.width, config.depth_hidden, self.up * self.up))
+
+    def forward(self, patches: torch.Tensor) -> torch.Tensor:  # (B, g*g, width) -> (B, 16, 16)
+        B, g, u = len(patches), self.grid, self.up
+        cells = self.net(patches).view(B, g, g, u, u).permute(0, 1, 3, 2, 4).reshape(B, g * u, g * u)
+        if g * u != DEPTH_LOW_SIDE:
+            cells = F.adaptive_avg_pool2d(cells.unsqueeze(1), DEPTH_LOW_SIDE).squeeze(1)
+        return cells
+
+
+def images_to_float(images: torch.Tensor) -> torch.Tensor:
+    """uint8 (..., 3, H, W) -> float in [0, 1]; float input is taken as already scaled."""
+    return images.float() / 255.0 if images.dtype == torch.uint8 else images.float()
+
+
+class WorldModel(nn.Module):
+    """Orbit-Planner's Stage I model. Build it from a :class:`ModelConfig`, or load a trained one
+    with :meth:`from_pretrained`. Inference methods expect ``model.eval()`` (BatchNorm running
+    statistics); wrap them in ``torch.no_grad()`` unless you need gradients.
+    """
+
+    def __init__(self, config: ModelConfig):
+        super().__init__()
+        c = self.config = config
+        self.encoder = ViT(c)
+        self.state_encoder = mlp((c.state_dim, c.state_hidden, c.state_embed))
+        self.projector = LinearBN(c.width + c.state_embed, c.latent_dim)
+        self.action_encoder = mlp((c.action_dim, c.action_hidden, c.latent_dim))
+        self.predictor = Predictor(c)
+        self.pred_projector = LinearBN(c.latent_dim, c.latent_dim)
+        self.depth_head = DepthHead(c)
+        # Normalisation of the raw dataset values (set from meta/stats.json before training).
+        self.register_buffer("state_mean", torch.zeros(c.state_dim))
+        self.register_buffer("state_std", torch.ones(c.state_dim))
+        self.register_buffer("depth_scale", torch.tensor(50.1))  # metres per unit of the depth head
+        self.initialize_weights()
+
+    def initialize_weights(self) -> None:
+        """Xavier linears and truncated-normal embeddings (ViT / DiT), then zero every AdaLN
+        modulation so each predictor block starts as the identity on its residual path (DiT's
+        AdaLN-Zero): early training sees a plain causal transformer that actions then steer."""
+        def basic(m: nn.Module):
+            if isinstance(m, nn.Linear):
+                nn.init.xavier_uniform_(m.weight)
+                nn.init.zeros_(m.bias)
+        self.apply(basic)
+        w = self.encoder.patch.weight
+        nn.init.xavier_uniform_(w.view(w.shape[0], -1))
+        for p in (self.encoder.cls, self.encoder.pos, self.predictor.pos):
+            nn.init.trunc_normal_(p, std=0.02)
+        for block in self.predictor.blocks:
+            nn.init.zeros_(block.adaln[-1].weight)
+            nn.init.zeros_(block.adaln[-1].bias)
+
+    def set_normalisation(self, state_mean, state_std, depth_scale: float) -> None:
+        """Take the dataset's state mean/std (16,) and depth range (metres) from meta/stats.json."""
+        self.state_mean.copy_(torch.as_tensor(state_mean, dtype=torch.float32))
+        self.state_std.copy_(torch.as_tensor(state_std, dtype=torch.float32).clamp(min=1e-3))
+        self.depth_scale.fill_(float(depth_scale))
+
+    # ---- the three public operations --------------------------------------------------------
+    def encode(self, images: torch.Tensor, states: torch.Tensor) -> torch.Tensor:
+        """images (B, T, 3, H, W) uint8, states (B, T, 16) -> z (B, T, D)."""
+        return self._encode(images, states)[0]
+
+    def rollout(self, z_context: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Imagine n future latents from m context latents.
+
+        z_context (B, m, D) holds frames t-m+1..t; actions (B, m-1+n, 8) holds the m-1 actions
+        taken inside the context and then the n planned ones (frames t-m+1..t+n-1). Returns
+        z_future (B, n, D), frames t+1..t+n. Each prediction is fed back, and the predictor sees
+        a sliding window of the last ``config.history`` latents.
+        """
+        B, m, _ = z_context.shape
+        n = actions.shape[1] - m + 1
+        if n < 1:
+            raise ValueError(f"actions cover {actions.shape[1]} frames; with {m} context latents give at least {m}")
+        cond = self.action_encoder(self._norm_action(actions))  # (B, m-1+n, D)
+        z = z_context
+        for i in range(n):
+            end = m + i  # frames [0, end) are known; predict frame `end`
+            start = max(0, end - self.config.history)
+            out = self.predictor(z[:, start:end], cond[:, start:end])[:, -1]  # (B, D)
+            z = torch.cat([z, self.pred_projector(out).unsqueeze(1)], dim=1)
+        return z[:, m:]
+
+    def predict_depth(self, images: torch.Tensor) -> torch.Tensor:
+        """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres."""
+        B, T = images.shape[:2]
+        _, patches = self.encoder(images_to_float(images.flatten(0, 1)))
+        return (self.depth_head(patches) * self.depth_scale).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
+
+    # ---- training ---------------------------------------------------------------------------
+    def predict_next(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """Teacher-forced: ẑ (B, T, D), where ẑ[:, t] predicts z[:, t+1] from z[:, :t+1], a[:, :t+1]."""
+        cond = self.action_encoder(self._norm_action(actions))
+        return self.pred_projector(self.predictor(z, cond))
+
+    def loss(self, images: torch.Tensor, states: torch.Tensor, actions: torch.Tensor, depth_low: torch.Tensor,
+             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """Upstream's Stage I loss over windows of T frames (teacher forcing, no stop-gradient):
+        MSE(ẑ[:, :-1], z[:, 1:]) + lambda_sig SIGReg(z, per frame over the batch) + lambda_depth
+        MSE(depth). images (B, T, 3, H, W) float in [0, 1] or uint8; depth_low (B, T, 16, 16) m."""
+        c = self.config
+        z, patches = self._encode(images, states)  # (B, T, D), (B*T, P, width)
+        z_hat = self.predict_next(z, actions)
+        pred = F.mse_loss(z_hat[:, :-1], z[:, 1:])
+        sig = sigreg(z.transpose(0, 1), c.sigreg_projections, c.sigreg_knots, generator)
+        depth = F.mse_loss(self.depth_head(patches), (depth_low / self.depth_scale).flatten(0, 1))
+        total = pred + c.lambda_sigreg * sig + c.lambda_depth * depth
+        return total, {"pred": pred.detach(), "sigreg": sig.detach(), "depth": depth.detach()}
+
+    def forward(self, images, states, actions, depth_low, generator=None):
+        """The training loss (so DDP sees a forward): see :meth:`loss`."""
+        return self.loss(images, states, actions, depth_low, generator)
+
+    # ---- internals --------------------------------------------------------------------------
+    def _encode(self, images: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        B, T = images.shape[:2]
+        cls, patches = self.encoder(images_to_float(images.flatten(0, 1)))  # (B*T, width), (B*T, P, width)
+        s = self.state_encoder(((states - self.state_mean) / self.state_std).flatten(0, 1))  # (B*T, embed)
+        z = self.projector(torch.cat([cls, s], dim=-1))  # (B*T, D)
+        return z.view(B, T, -1), patches
+
+    @staticmethod
+    def _norm_action(actions: torch.Tensor) -> torch.Tensor:
+        return actions * 2.0 - 1.0  # thrust in [0, 1] -> [-1, 1]
+
+    # ---- persistence ------------------------------------------------------------------------
+    @classmethod
+    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "WorldModel":
+        """Load a trained model from a run folder (``orbitmodel train --out RUN``), in eval mode."""
+        from orbitmodel.train.checkpoint import load_weights, read_run_config
+
+        run = read_run_config(path)
+        model = cls(run.preset.model)
+        model.load_state_dict(load_weights(path))
+        model.run_info = run.dataset
+        return model.to(device).eval()
+
+    def num_parameters(self) -> int:
+        return sum(p.numel() for p in self.parameters())
+
+
+def effective_rank(z: torch.Tensor) -> float:
+    """exp(entropy) of the normalised singular values of centred z (N, D) (Roy & Vetterli 2007)."""
+    s = torch.linalg.svdvals(z - z.mean(0))
+    p = s / s.sum().clamp(min=1e-12)
+    return float(math.exp(-(p * torch.log(p.clamp(min=1e-12))).sum()))

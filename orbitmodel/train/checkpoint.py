@@ -1,0 +1,169 @@
+"""A run folder: what ``orbitmodel train`` (and the later stages) write, and how to resume.
+
+::
+
+    RUN/config.json                     the stage's preset, training settings and dataset facts
+    RUN/model.safetensors               the final weights (written when the run ends)
+    RUN/checkpoints/step-NNNNNNN/       model.safetensors + state.pt (optimiser, step, RNG)
+    RUN/checkpoints/latest              name of the newest complete checkpoint
+    RUN/metrics.jsonl                   one JSON line per logged step
+    RUN/tensorboard/                    event files, when tensorboard is installed
+
+A checkpoint folder is written under a temporary name and renamed, and ``latest`` is replaced
+atomically after it, so a run killed at any moment resumes from a complete checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+from safetensors import SafetensorError
+from safetensors.torch import load_file, save_file
+
+CONFIG = "config.json"
+WEIGHTS = "model.safetensors"
+STATE = "state.pt"
+CHECKPOINTS = "checkpoints"
+LATEST = "latest"
+METRICS = "metrics.jsonl"
+TENSORBOARD = "tensorboard"
+OWNED = (CONFIG, WEIGHTS, CHECKPOINTS, METRICS, TENSORBOARD)  # what --overwrite may remove
+KEEP = 2  # checkpoints kept on disk
+
+
+class RunError(ValueError):
+    """A run folder that cannot be used as asked (the CLI turns it into one line, exit 2)."""
+
+
+@dataclass
+class Checkpoint:
+    step: int
+    weights: dict[str, torch.Tensor]
+    state: dict
+
+
+def _write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, path)
+
+
+class RunDir:
+    """One stage's folder (a Stage I run, or its ``probe/`` sub-folder)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    # ---- config -----------------------------------------------------------------------------
+    def read_config(self) -> dict:
+        path = self.path / CONFIG
+        if not path.is_file():
+            raise RunError(f"{self.path} is not an orbitmodel run: it has no {CONFIG}")
+        try:
+            return json.loads(path.read_text())
+        except json.JSONDecodeError as err:
+            raise RunError(f"{path} is not valid JSON ({err}); train the run again") from None
+
+    def start(self, config: dict, resume: bool, overwrite: bool) -> None:
+        """Claim the folder for a run with ``config``: new, resumed, or overwritten."""
+        existing = self.path / CONFIG
+        if existing.exists() and overwrite:
+            for name in OWNED:
+                target = self.path / name
+                if target.is_dir():
+                    shutil.rmtree(target)
+                elif target.exists():
+                    target.unlink()
+        elif existing.exists():
+            old = self.read_config()
+            if old != config:
+                changed = sorted(k for k in set(old) | set(config) if old.get(k) != config.get(k))
+                raise RunError(f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
+                               "pass --overwrite to replace it, or choose another --out")
+            if not resume:
+                raise RunError(f"{self.path} already holds this run; pass --resume to continue it, "
+                               "or --overwrite to start again")
+        elif resume:
+            raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
+        elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):
+            raise RunError(f"{self.path} is not empty and not an orbitmodel run; choose another --out")
+        self.path.mkdir(parents=True, exist_ok=True)
+        _write_json_atomic(existing, config)
+
+    # ---- checkpoints ------------------------------------------------------------------------
+    def save_checkpoint(self, step: int, weights: dict[str, torch.Tensor], state: dict) -> None:
+        root = self.path / CHECKPOINTS
+        root.mkdir(exist_ok=True)
+        name = f"step-{step:07d}"
+        tmp = root / f".{name}.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        tmp.mkdir()
+        save_file({k: v.detach().contiguous().cpu() for k, v in weights.items()}, tmp / WEIGHTS,
+                  metadata={"step": str(step)})
+        torch.save(state, tmp / STATE)
+        shutil.rmtree(root / name, ignore_errors=True)
+        os.replace(tmp, root / name)
+        latest = root / LATEST
+        (root / f".{LATEST}.tmp").write_text(name + "\n")
+        os.replace(root / f".{LATEST}.tmp", latest)
+        for old in sorted(p for p in root.glob("step-*") if p.name != name)[:-(KEEP - 1) or None]:
+            shutil.rmtree(old, ignore_errors=True)
+
+    def latest_checkpoint(self) -> Checkpoint:
+        root = self.path / CHECKPOINTS
+        pointer = root / LATEST
+        if not pointer.is_file():
+            raise RunError(f"--resume: {self.path} has no checkpoint yet; start the run again without --resume")
+        folder = root / pointer.read_text().strip()
+        try:
+            weights = load_file(folder / WEIGHTS)
+            state = torch.load(folder / STATE, map_location="cpu", weights_only=True)
+        except (OSError, SafetensorError, RuntimeError, EOFError) as err:
+            raise RunError(f"checkpoint {folder} is corrupt ({type(err).__name__}); delete it and "
+                           f"point {pointer} at an older one, or start again with --overwrite") from None
+        return Checkpoint(int(state["step"]), weights, state)
+
+    def save_final(self, weights: dict[str, torch.Tensor], step: int) -> None:
+        tmp = self.path / f".{WEIGHTS}.tmp"
+        save_file({k: v.detach().contiguous().cpu() for k, v in weights.items()}, tmp, metadata={"step": str(step)})
+        os.replace(tmp, self.path / WEIGHTS)
+
+
+def load_weights(path: str | Path) -> dict[str, torch.Tensor]:
+    """The final weights of a run folder, else its newest checkpoint's; one clear error if corrupt."""
+    run = Path(path)
+    candidates = [run / WEIGHTS]
+    pointer = run / CHECKPOINTS / LATEST
+    if pointer.is_file():
+        candidates.append(run / CHECKPOINTS / pointer.read_text().strip() / WEIGHTS)
+    for file in candidates:
+        if file.is_file():
+            try:
+                return load_file(file)
+            except (OSError, SafetensorError) as err:
+                raise RunError(f"{file} is corrupt or truncated ({err}); train the run again") from None
+    raise RunError(f"{run} has no weights ({WEIGHTS}); train it first with `orbitmodel train`")
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    preset: "object"
+    dataset: "object"
+    raw: dict
+
+
+def read_run_config(path: str | Path) -> RunConfig:
+    """A Stage I run's preset and dataset facts, from its config.json."""
+    from orbitmodel.config import Preset
+    from orbitmodel.data import DatasetMeta
+
+    raw = RunDir(path).read_config()
+    try:
+        return RunConfig(Preset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
+    except (KeyError, TypeError, ValueError) as err:
+        raise RunError(f"{Path(path) / CONFIG} is not a Stage I run config ({err})") from None

@@ -1,0 +1,272 @@
+"""One training loop for every stage: data order, optimiser, schedule, precision, checkpoints,
+resume, DDP, metrics and progress.
+
+A stage hands in a :class:`Job`: the module whose ``forward(**inputs)`` returns
+``(loss, parts)``, the module whose weights a checkpoint holds, and how a batch becomes inputs.
+
+Resuming is exact on CPU: the data order is a pure function of (seed, epoch) and the step
+(a resumed run skips the batches it already took, without reading them), every augmentation
+and projection draw comes from a generator seeded by (seed, step), and the global torch RNG
+(dropout) is saved in each checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import time
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+import torch
+from torch import nn
+from torch.utils.data import DataLoader
+
+from orbitdata.load import collate_windows
+from orbitmodel.train.checkpoint import METRICS, TENSORBOARD, RunDir, RunError
+from orbitmodel.train.progress import Progress
+
+KILL_AFTER_STEP = "ORBITMODEL_KILL_AFTER_STEP"  # tests: SIGKILL the run right after this step's checkpoint
+
+
+class Job(Protocol):
+    module: nn.Module  # forward(**inputs) -> (loss, {name: scalar tensor})
+    saved: nn.Module  # whose state_dict a checkpoint holds (the module, or its trainable part)
+
+    def inputs(self, batch: dict[str, torch.Tensor], step: int, device: torch.device) -> dict: ...
+
+
+@dataclass(frozen=True)
+class LoopSettings:
+    """The loop's part of a stage's training config (every stage's TrainConfig has these)."""
+
+    batch_size: int
+    lr: float
+    min_lr: float
+    weight_decay: float
+    betas: tuple[float, float]
+    epochs: int
+    max_steps: int
+    warmup: float
+    grad_clip: float
+    num_workers: int
+    log_every: int
+    save_every: int
+    seed: int
+
+    @classmethod
+    def of(cls, train) -> "LoopSettings":
+        return cls(**{k: getattr(train, k) for k in cls.__dataclass_fields__})
+
+
+@dataclass
+class FitResult:
+    steps: int
+    seconds: float
+    windows_per_s: float
+    data_wait: float  # fraction of step time spent waiting for the next batch
+    last: dict = field(default_factory=dict)
+
+
+def resolve_device(name: str) -> torch.device:
+    """'auto' -> cuda when available (this rank's GPU under torchrun), else cpu."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    if name == "cuda":
+        if not torch.cuda.is_available():
+            raise RunError("--device cuda: no CUDA device is available; use --device cpu or auto")
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
+    if name != "cpu":
+        raise RunError(f"--device {name}: choose auto, cpu or cuda")
+    return torch.device("cpu")
+
+
+def distributed(device: torch.device) -> tuple[int, int]:
+    """(rank, world size); under torchrun, join the process group (NCCL on GPU, gloo on CPU)."""
+    world = int(os.environ.get("WORLD_SIZE", 1))
+    if world == 1:
+        return 0, 1
+    import torch.distributed as dist
+
+    if not dist.is_initialized():
+        dist.init_process_group("nccl" if device.type == "cuda" else "gloo")
+        if device.type == "cuda":
+            torch.cuda.set_device(device)
+    return dist.get_rank(), dist.get_world_size()
+
+
+def lr_at(step: int, total: int, s: LoopSettings) -> float:
+    """Linear warm-up over ``warmup * total`` steps, then cosine from lr to min_lr."""
+    warm = max(1, round(s.warmup * total)) if s.warmup > 0 else 0
+    if step < warm:
+        return s.lr * (step + 1) / warm
+    progress = (step - warm) / max(1, total - warm)
+    return s.min_lr + 0.5 * (s.lr - s.min_lr) * (1 + math.cos(math.pi * min(progress, 1.0)))
+
+
+def step_generator(seed: int, step: int, stream: int, rank: int = 0) -> torch.Generator:
+    """A generator for one purpose (stream) at one step: resumable without saved state."""
+    return torch.Generator().manual_seed(((seed * 1_000_003 + step) * 31 + stream) * 257 + rank)
+
+
+def _optimizer(params: list[nn.Parameter], s: LoopSettings) -> torch.optim.AdamW:
+    decay = [p for p in params if p.ndim >= 2]  # matrices; no decay on biases, norms, embeddings' 1-D parts
+    rest = [p for p in params if p.ndim < 2]
+    return torch.optim.AdamW([{"params": decay, "weight_decay": s.weight_decay},
+                              {"params": rest, "weight_decay": 0.0}], lr=s.lr, betas=s.betas)
+
+
+def _rng_state() -> dict:
+    state = {"torch": torch.get_rng_state()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+class _Metrics:
+    """metrics.jsonl (appended across resumes) and TensorBoard when it is installed."""
+
+    def __init__(self, run: RunDir, enabled: bool, start_step: int):
+        self.enabled = enabled
+        self.file = None
+        self.tb = None
+        if not enabled:
+            return
+        path = run.path / METRICS
+        if path.exists():  # drop lines past the checkpoint we resume from
+            lines = [l for l in path.read_text().splitlines() if l and json.loads(l)["step"] <= start_step]
+            path.write_text("".join(l + "\n" for l in lines))
+        self.file = path.open("a")
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.tb = SummaryWriter(str(run.path / TENSORBOARD), purge_step=start_step + 1)
+        except ImportError:
+            self.tb = None
+
+    def write(self, record: dict) -> None:
+        if not self.enabled:
+            return
+        self.file.write(json.dumps(record) + "\n")
+        self.file.flush()
+        if self.tb is not None:
+            for k, v in record.items():
+                if k != "step" and isinstance(v, (int, float)):
+                    self.tb.add_scalar(k, v, record["step"])
+
+    def close(self) -> None:
+        if self.file:
+            self.file.close()
+        if self.tb is not None:
+            self.tb.close()
+
+
+def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.device, resume: bool = False,
+        label: str = "train", on_log: Callable[[dict], None] | None = None) -> FitResult:
+    """Train ``job`` on map-style window ``dataset`` until ``epochs`` or ``max_steps``."""
+    s = settings
+    rank, world = distributed(device)
+    sampler = dataset.sampler(seed=s.seed, drop_last=True, rank=rank, world_size=world)
+    per_epoch = len(sampler) // s.batch_size
+    if per_epoch == 0:
+        raise RunError(f"{len(dataset)} windows give no batch of {s.batch_size} per process; "
+                       "use a larger dataset or a smaller --batch-size")
+    total = per_epoch * s.epochs if not s.max_steps else min(per_epoch * s.epochs, s.max_steps)
+    params = [p for p in job.module.parameters() if p.requires_grad]
+    optimizer = _optimizer(params, s)
+    torch.manual_seed(s.seed + rank)
+    step = 0
+    if resume:
+        ckpt = run.latest_checkpoint()
+        job.saved.load_state_dict(ckpt.weights)
+        optimizer.load_state_dict(ckpt.state["optimizer"])
+        _set_rng_state(ckpt.state["rng"][rank] if isinstance(ckpt.state["rng"], list) else ckpt.state["rng"])
+        step = ckpt.step
+    job.module.to(device)
+    model = job.module
+    if world > 1:
+        model = nn.parallel.DistributedDataParallel(job.module, device_ids=[device.index] if device.type == "cuda"
+                                                    else None)
+    autocast = torch.autocast("cuda", dtype=torch.bfloat16) if device.type == "cuda" else nullcontext()
+    kill_after = int(os.environ.get(KILL_AFTER_STEP, "0"))
+    main = rank == 0
+    metrics = _Metrics(run, main, step)
+    progress = Progress(label, total, step, enabled=main)
+    sums: dict[str, float] = {}
+    count, wait, busy, windows = 0, 0.0, 0.0, 0
+    started = time.perf_counter()
+    try:
+        while step < total:
+            epoch, offset = divmod(step, per_epoch)
+            sampler.set_epoch(epoch)
+            order = list(sampler)
+            batches = [order[i * s.batch_size:(i + 1) * s.batch_size]
+                       for i in range(offset, min(per_epoch, offset + total - step))]
+            loader = DataLoader(dataset, batch_sampler=batches, num_workers=s.num_workers,
+                                collate_fn=collate_windows, pin_memory=device.type == "cuda")
+            tick = time.perf_counter()
+            for batch in loader:
+                got = time.perf_counter()
+                wait += got - tick
+                lr = lr_at(step, total, s)
+                for group in optimizer.param_groups:
+                    group["lr"] = lr
+                inputs = job.inputs(batch, step, device)
+                with autocast:
+                    loss, parts = model(**inputs)
+                optimizer.zero_grad(set_to_none=True)
+                loss.backward()
+                grad_norm = torch.nn.utils.clip_grad_norm_(params, s.grad_clip)
+                optimizer.step()
+                step += 1
+                windows += len(batch[next(iter(batch))]) * world
+                for k, v in {"loss": loss.detach(), **parts, "grad_norm": grad_norm}.items():
+                    sums[k] = sums.get(k, 0.0) + float(v)
+                count += 1
+                tick = time.perf_counter()
+                busy += tick - got
+                if step % s.log_every == 0 or step == total:
+                    elapsed = time.perf_counter() - started
+                    record = {"step": step, "epoch": epoch, "lr": lr,
+                              **{k: v / count for k, v in sums.items()},
+                              "windows_per_s": windows / max(elapsed, 1e-9),
+                              "data_wait": wait / max(wait + busy, 1e-9), "elapsed_s": elapsed}
+                    metrics.write(record)
+                    progress.update(step, record)
+                    if on_log:
+                        on_log(record)
+                    sums, count = {}, 0
+                if step % s.save_every == 0 or step == total:
+                    _save(run, job, optimizer, step, world, main)
+                    if kill_after and step >= kill_after:
+                        os.kill(os.getpid(), signal.SIGKILL)
+        if main:
+            run.save_final(job.saved.state_dict(), step)
+    finally:
+        progress.close()
+        metrics.close()
+    elapsed = time.perf_counter() - started
+    return FitResult(steps=step, seconds=elapsed, windows_per_s=windows / max(elapsed, 1e-9),
+                     data_wait=wait / max(wait + busy, 1e-9))
+
+
+def _save(run: RunDir, job: Job, optimizer, step: int, world: int, main: bool) -> None:
+    rng = _rng_state()
+    if world > 1:
+        import torch.distributed as dist
+
+        gathered = [None] * world
+        dist.all_gather_object(gathered, rng)
+        rng = gathered
+    if main:
+        run.save_checkpoint(step, job.saved.state_dict(),
+                            {"step": step, "optimizer": optimizer.state_dict(), "rng": rng})
