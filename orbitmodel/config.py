@@ -163,7 +163,7 @@ def _cpu() -> Preset:
                         state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
                         depth_hidden=64, sigreg_projections=256)
     train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
-                        epochs=100, max_steps=1200, warmup=0.05, num_workers=0, log_every=10, save_every=100)
+                        epochs=100, max_steps=1000, warmup=0.05, num_workers=0, log_every=10, save_every=100)
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
                   "4-block predictor; < 60 min", model, train)
 

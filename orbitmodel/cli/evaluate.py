@@ -1,9 +1,35 @@
-"""``orbitmodel eval ...``: measurements of a trained run."""
+"""``orbitmodel eval rollout``: the latent rollout and depth evaluation of a Stage I run."""
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Annotated, Optional
+
 import typer
+
+from orbitmodel.cli.errors import friendly
 
 
 def register(app: typer.Typer) -> None:
-    pass
+    app.command("rollout")(rollout)
+
+
+@friendly
+def rollout(
+    run: Annotated[Path, typer.Argument(help="a Stage I run folder (orbitmodel train --out RUN)")],
+    dataset: Annotated[str, typer.Argument(help="the orbitdata dataset (its test split is used)")],
+    windows: Annotated[int, typer.Option(min=2, help="test windows, chosen at random with --seed")] = 100,
+    horizon: Annotated[int, typer.Option(min=1, max=200, help="rollout steps")] = 50,
+    seed: Annotated[int, typer.Option(min=0)] = 0,
+    out: Annotated[Optional[Path], typer.Option(help="folder for rollout.json/.png and depth.png [RUN/eval]")] = None,
+) -> None:
+    """Latent rollout error vs horizon with persistence and shuffled-action baselines (Fig. 3),
+    depth predictions vs ground truth (Fig. 4), and collapse diagnostics."""
+    from orbitmodel.evaluate.rollout import RolloutEvalConfig, evaluate_rollout, summary_lines, write_rollout_report
+
+    result = evaluate_rollout(run, dataset, RolloutEvalConfig(horizon=horizon, windows=windows, seed=seed,
+                                                              check_h=min(12, horizon)))
+    paths = write_rollout_report(result, out or Path(run) / "eval")
+    for line in summary_lines(result):
+        typer.echo(line)
+    typer.echo("wrote " + ", ".join(str(p) for p in paths))

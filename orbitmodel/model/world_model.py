@@ -3,10 +3,15 @@ and a_{<=t}, and read a coarse depth map from the image's patch tokens.
 
     z_t   = BN(Linear([ViT_cls(o_t), StateMLP(s_t)]))                    (B, T, D)
     c_t   = ActionMLP(a_t)                                               (B, T, D)
-    ẑ_t+1 = BN(Linear(Predictor(z_<=t, c_<=t)))    causal, AdaLN-Zero     (B, T, D)
+    ẑ_t+1 = z_t + BN(Linear(Predictor(z_<=t, c_<=t)))   causal, AdaLN-Zero (B, T, D)
     d_t   = DepthMLP(ViT_patches(o_t))               16x16, metres
 
 The BatchNorms undo the transformers' final LayerNorms so that SIGReg can shape the latents.
+
+One change from upstream, which predicts z_{t+1} outright: the predictor predicts the change
+z_{t+1} - z_t, and its BatchNorm's scale starts at zero, so an untrained model is exactly the
+persistence baseline z_{t+1} = z_t. At 25 Hz consecutive latents differ by a few per cent of
+their spread, and predicting them outright spends most of a short CPU run re-learning z_t.
 States and actions are normalised inside the model (from the dataset's ``meta/stats.json``),
 so callers pass raw dataset values.
 """
@@ -112,6 +117,8 @@ class WorldModel(nn.Module):
         for block in self.predictor.blocks:
             nn.init.zeros_(block.adaln[-1].weight)
             nn.init.zeros_(block.adaln[-1].bias)
+        # The predicted change starts at zero: an untrained model is the persistence baseline.
+        nn.init.zeros_(self.pred_projector.bn.weight)
 
     def set_normalisation(self, state_mean, state_std, depth_scale: float) -> None:
         """Take the dataset's state mean/std (16,) and depth range (metres) from meta/stats.json."""
@@ -142,7 +149,7 @@ class WorldModel(nn.Module):
             end = m + i  # frames [0, end) are known; predict frame `end`
             start = max(0, end - self.config.history)
             out = self.predictor(z[:, start:end], cond[:, start:end])[:, -1]  # (B, D)
-            z = torch.cat([z, self.pred_projector(out).unsqueeze(1)], dim=1)
+            z = torch.cat([z, (z[:, end - 1] + self.pred_projector(out)).unsqueeze(1)], dim=1)
         return z[:, m:]
 
     def predict_depth(self, images: torch.Tensor) -> torch.Tensor:
@@ -153,9 +160,10 @@ class WorldModel(nn.Module):
 
     # ---- training ---------------------------------------------------------------------------
     def predict_next(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        """Teacher-forced: ẑ (B, T, D), where ẑ[:, t] predicts z[:, t+1] from z[:, :t+1], a[:, :t+1]."""
+        """Teacher-forced: ẑ (B, T, D), where ẑ[:, t] = z[:, t] + change predicts z[:, t+1] from
+        z[:, :t+1] and a[:, :t+1]."""
         cond = self.action_encoder(self._norm_action(actions))
-        return self.pred_projector(self.predictor(z, cond))
+        return z + self.pred_projector(self.predictor(z, cond))
 
     def loss(self, images: torch.Tensor, states: torch.Tensor, actions: torch.Tensor, depth_low: torch.Tensor,
              generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:

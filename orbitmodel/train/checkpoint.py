@@ -72,6 +72,7 @@ class RunDir:
     def start(self, config: dict, resume: bool, overwrite: bool) -> None:
         """Claim the folder for a run with ``config``: new, resumed, or overwritten."""
         existing = self.path / CONFIG
+        config = json.loads(json.dumps(config))  # as it reads back (tuples become lists)
         if existing.exists() and overwrite:
             for name in OWNED:
                 target = self.path / name

@@ -239,7 +239,8 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
                     record = {"step": step, "epoch": epoch, "lr": lr,
                               **{k: v / count for k, v in sums.items()},
                               "windows_per_s": windows / max(elapsed, 1e-9),
-                              "data_wait": wait / max(wait + busy, 1e-9), "elapsed_s": elapsed}
+                              "data_wait": wait / max(wait + busy, 1e-9), "elapsed_s": elapsed,
+                              "world_size": world}
                     metrics.write(record)
                     progress.update(step, record)
                     if on_log:

@@ -1,0 +1,1 @@
+"""Evaluation: measurements of a trained run, each with the baselines beside it."""

@@ -1,0 +1,168 @@
+"""``orbitmodel train``: the loss falls, checkpoints round-trip, a killed run resumes exactly,
+DDP runs on two CPU processes, and bad input gets one line and exit 2."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+from safetensors.torch import load_file
+from typer.testing import CliRunner
+
+from orbitmodel.cli.app import app
+from orbitmodel.config import get_preset
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.train.checkpoint import RunError
+from orbitmodel.train.loop import KILL_AFTER_STEP
+from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+runner = CliRunner()
+
+
+def _cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "orbitmodel.cli.app", *args], capture_output=True, text=True,
+                          env={**os.environ, **(env or {})}, timeout=300)
+
+
+def _train(dataset, out, steps: int, **train) -> None:
+    preset = get_preset("tiny").with_train(max_steps=steps, **train)
+    train_world_model(Stage1Request(dataset=str(dataset), preset=preset, out=out, device="cpu"))
+
+
+@pytest.fixture(scope="module")
+def trained(tiny_dataset_master, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "wm"
+    _train(tiny_dataset_master, out, steps=30, save_every=10, log_every=1)
+    return out
+
+
+def test_training_lowers_the_loss(trained):
+    losses = [json.loads(line)["loss"] for line in (trained / "metrics.jsonl").read_text().splitlines()]
+    assert len(losses) == 30
+    assert sum(losses[-5:]) / 5 < 0.7 * sum(losses[:5]) / 5
+
+
+def test_metrics_carry_the_three_losses_and_the_data_wait(trained):
+    record = json.loads((trained / "metrics.jsonl").read_text().splitlines()[-1])
+    for key in ("step", "lr", "loss", "pred", "sigreg", "depth", "grad_norm", "windows_per_s", "data_wait"):
+        assert key in record
+    assert 0 <= record["data_wait"] <= 1
+
+
+def test_checkpoint_round_trip(trained):
+    model = WorldModel.from_pretrained(trained)
+    assert not model.training
+    weights = load_file(trained / "model.safetensors")
+    for name, value in model.state_dict().items():
+        torch.testing.assert_close(value, weights[name], rtol=0, atol=0)
+    fresh = WorldModel(get_preset("tiny").model)
+    assert not torch.equal(fresh.state_dict()["encoder.pos"], model.state_dict()["encoder.pos"])
+    assert model.run_info.image_size == 64 and len(model.run_info.state_mean) == 16
+    assert torch.allclose(model.state_mean, torch.tensor(model.run_info.state_mean))
+
+
+def test_a_killed_run_resumes_to_the_same_weights(tiny_dataset_master, tmp_path):
+    common = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "8", "--device", "cpu"]
+    straight = _cli(*common, "--out", str(tmp_path / "a"))
+    assert straight.returncode == 0, straight.stderr
+    killed = _cli(*common, "--out", str(tmp_path / "b"), env={KILL_AFTER_STEP: "4"})
+    assert killed.returncode == -9  # SIGKILL right after the step-4 checkpoint
+    assert not (tmp_path / "b" / "model.safetensors").exists()
+    assert (tmp_path / "b" / "checkpoints" / "latest").read_text().strip() == "step-0000004"
+    resumed = _cli(*common, "--out", str(tmp_path / "b"), "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    a = load_file(tmp_path / "a" / "model.safetensors")
+    b = load_file(tmp_path / "b" / "model.safetensors")
+    assert a.keys() == b.keys()
+    for name in a:
+        assert torch.equal(a[name], b[name]), name
+    steps = [json.loads(l)["step"] for l in (tmp_path / "b" / "metrics.jsonl").read_text().splitlines()]
+    assert steps == list(range(1, 9))  # no step logged twice
+
+
+def test_ddp_on_two_cpu_processes(tiny_dataset_master, tmp_path):
+    out = tmp_path / "ddp"
+    proc = subprocess.run(
+        [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--master_port", "29517",
+         "-m", "orbitmodel.cli.app", "train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "3",
+         "--device", "cpu", "--out", str(out)],
+        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    records = [json.loads(l) for l in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["step"] for r in records] == [1, 2, 3]  # rank 0 alone writes
+    assert records[-1]["world_size"] == 2
+    assert (out / "model.safetensors").exists()
+
+
+def test_training_is_reproducible_from_the_seed(tiny_dataset_master, tmp_path):
+    _train(tiny_dataset_master, tmp_path / "a", steps=3)
+    _train(tiny_dataset_master, tmp_path / "b", steps=3)
+    a, b = load_file(tmp_path / "a" / "model.safetensors"), load_file(tmp_path / "b" / "model.safetensors")
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+# ---- bad input: one line, exit 2 ---------------------------------------------------------------
+def _one_line_exit_2(result, *needles: str) -> None:
+    assert result.exit_code == 2, result.output
+    lines = [l for l in result.output.splitlines() if l.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.output, result.output
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+def test_missing_dataset(tmp_path):
+    _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "nope"), "--out", str(tmp_path / "r")]), "nope")
+
+
+def test_folder_that_is_not_a_dataset(tmp_path):
+    (tmp_path / "plain").mkdir()
+    _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
+                     "not an orbitdata dataset")
+
+
+def test_image_size_the_preset_cannot_take(tiny_dataset_master, tmp_path):
+    result = runner.invoke(app, ["train", str(tiny_dataset_master), "--preset", "paper", "--out", str(tmp_path / "r")])
+    _one_line_exit_2(result, "224 px", "64 px", "--image-size 224")
+
+
+def test_unknown_preset(tiny_dataset_master, tmp_path):
+    result = runner.invoke(app, ["train", str(tiny_dataset_master), "--preset", "huge", "--out", str(tmp_path / "r")])
+    assert result.exit_code == 2 and "huge" in result.output
+
+
+def test_run_folder_with_another_config_needs_overwrite(tiny_dataset_master, trained, tmp_path):
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(trained, run)
+    args = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "2", "--out", str(run)]
+    _one_line_exit_2(runner.invoke(app, args), "another config", "--overwrite")
+    assert runner.invoke(app, [*args, "--overwrite"]).exit_code == 0
+
+
+def test_a_corrupt_checkpoint_is_one_line(trained, tmp_path):
+    import shutil
+
+    run = tmp_path / "run"
+    shutil.copytree(trained, run)
+    (run / "model.safetensors").write_bytes(b"\x00" * 100)
+    with pytest.raises(RunError, match="corrupt"):
+        WorldModel.from_pretrained(run)
+    result = runner.invoke(app, ["eval", "rollout", str(run), str(run)])
+    _one_line_exit_2(result, "corrupt")
+
+
+def test_resume_without_a_run(tiny_dataset_master, tmp_path):
+    result = runner.invoke(app, ["train", str(tiny_dataset_master), "--preset", "tiny", "--resume",
+                                 "--out", str(tmp_path / "empty")])
+    _one_line_exit_2(result, "--resume")
+
+
+def test_tensorboard_event_files_when_installed(trained):
+    pytest.importorskip("tensorboard", reason="the tensorboard extra is not installed")
+    events = list((trained / "tensorboard").glob("events.out.tfevents.*"))
+    assert events and events[0].stat().st_size > 0

@@ -1,0 +1,180 @@
+"""The Stage I model: shapes, the causal mask, AdaLN-Zero, SIGReg, rollouts, the paper preset."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import torch
+
+from orbitmodel.config import get_preset
+from orbitmodel.model.sigreg import sigreg
+from orbitmodel.model.world_model import WorldModel, effective_rank
+
+B, T = 3, 6
+
+
+def _model(seed: int = 0, steer: bool = True) -> WorldModel:
+    """The tiny model; ``steer`` gives the zero-initialised AdaLN and change projector random
+    weights, so that actions and the predictor actually move the predictions."""
+    torch.manual_seed(seed)
+    model = WorldModel(get_preset("tiny").model)
+    if steer:
+        g = torch.Generator().manual_seed(seed)
+        with torch.no_grad():
+            for block in model.predictor.blocks:
+                block.adaln[-1].weight.copy_(0.1 * torch.randn(block.adaln[-1].weight.shape, generator=g))
+            model.pred_projector.bn.weight.fill_(1.0)
+    return model.eval()
+
+
+def _batch(model: WorldModel, seed: int = 0):
+    g = torch.Generator().manual_seed(seed)
+    S = model.config.image_size
+    images = torch.randint(0, 256, (B, T, 3, S, S), generator=g, dtype=torch.uint8)
+    states = torch.randn(B, T, 16, generator=g)
+    actions = torch.rand(B, T, 8, generator=g)
+    depth = 50 * torch.rand(B, T, 16, 16, generator=g)
+    return images, states, actions, depth
+
+
+def test_shapes_and_dtypes_through_every_module():
+    model = _model()
+    c = model.config
+    images, states, actions, depth = _batch(model)
+    cls, patches = model.encoder(images.flatten(0, 1).float() / 255)
+    assert cls.shape == (B * T, c.width) and patches.shape == (B * T, c.grid ** 2, c.width)
+    z = model.encode(images, states)
+    assert z.shape == (B, T, c.latent_dim) and z.dtype == torch.float32
+    assert model.predict_next(z, actions).shape == (B, T, c.latent_dim)
+    future = model.rollout(z[:, :4], torch.cat([actions, actions], dim=1)[:, :4 - 1 + 7])
+    assert future.shape == (B, 7, c.latent_dim)
+    d = model.predict_depth(images)
+    assert d.shape == (B, T, 16, 16) and d.dtype == torch.float32
+    model.train()
+    loss, parts = model(images.float() / 255, states, actions, depth, torch.Generator().manual_seed(0))
+    assert loss.ndim == 0 and torch.isfinite(loss)
+    assert set(parts) == {"pred", "sigreg", "depth"}
+
+
+def test_depth_head_maps_any_patch_grid_to_16x16():
+    for image, patch in ((64, 8), (64, 4), (64, 2)):  # 8x8, 16x16 and 32x32 patch grids
+        c = dataclasses.replace(get_preset("tiny").model, image_size=image, patch_size=patch)
+        model = WorldModel(c).eval()
+        out = model.predict_depth(torch.zeros(1, 2, 3, image, image, dtype=torch.uint8))
+        assert out.shape == (1, 2, 16, 16)
+
+
+def test_changing_a_future_action_leaves_earlier_predictions_unchanged():
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    with torch.no_grad():
+        z = model.encode(images, states)
+        before = model.predict_next(z, actions)
+        changed = actions.clone()
+        changed[:, 3] = 1.0 - changed[:, 3]
+        after = model.predict_next(z, changed)
+    torch.testing.assert_close(after[:, :3], before[:, :3], rtol=0, atol=0)
+    assert (after[:, 3] - before[:, 3]).abs().max() > 1e-4  # the action at t = 3 steers z_4
+
+
+def test_changing_a_later_latent_leaves_earlier_predictions_unchanged():
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    with torch.no_grad():
+        z = model.encode(images, states)
+        before = model.predict_next(z, actions)
+        z2 = z.clone()
+        z2[:, 4] += 1.0
+        after = model.predict_next(z2, actions)
+    torch.testing.assert_close(after[:, :4], before[:, :4], rtol=0, atol=0)
+
+
+def test_adaln_zero_blocks_start_as_the_identity_and_the_model_as_persistence():
+    model = _model(steer=False)
+    x = torch.randn(2, 5, model.config.latent_dim)
+    c = torch.randn(2, 5, model.config.latent_dim)
+    for block in model.predictor.blocks:
+        torch.testing.assert_close(block(x, c), x, rtol=0, atol=0)
+    images, states, actions, _ = _batch(model)
+    with torch.no_grad():
+        z = model.encode(images, states)
+        torch.testing.assert_close(model.predict_next(z, actions), z)  # z_{t+1} = z_t before training
+
+
+def test_rollout_of_one_step_equals_the_teacher_forced_prediction():
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    m = model.config.history  # the whole context fits the predictor's window
+    with torch.no_grad():
+        z = model.encode(images, states)[:, :m]
+        rolled = model.rollout(z, actions[:, :m])  # m-1 context actions + 1 planned
+        forced = model.predict_next(z, actions[:, :m])[:, -1]
+    torch.testing.assert_close(rolled[:, 0], forced)
+
+
+def test_rollout_slides_a_window_of_history_latents():
+    """Latents older than ``history`` frames cannot change a prediction."""
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    h = model.config.history
+    m = h + 2
+    imgs = torch.cat([images, images], dim=1)[:, :m]
+    sts = torch.cat([states, states], dim=1)[:, :m]
+    acts = torch.cat([actions, actions, actions], dim=1)[:, :m - 1 + 3]
+    with torch.no_grad():
+        z = model.encode(imgs, sts)
+        a = model.rollout(z, acts)
+        z_old = z.clone()
+        z_old[:, :2] += 5.0  # older than the window for every step
+        b = model.rollout(z_old, acts)
+    torch.testing.assert_close(a, b, rtol=0, atol=0)
+
+
+def test_rollout_refuses_too_few_actions():
+    model = _model()
+    with pytest.raises(ValueError, match="at least 4"):
+        model.rollout(torch.zeros(1, 4, model.config.latent_dim), torch.zeros(1, 3, 8))
+
+
+def test_sigreg_is_small_for_gaussian_samples_and_large_for_collapsed_ones():
+    g = torch.Generator().manual_seed(0)
+    gaussian = torch.randn(4, 256, 32, generator=g)  # (T, N, D)
+    collapsed = torch.zeros(4, 256, 32) + 0.01 * torch.randn(4, 256, 1, generator=g)  # one direction, tiny
+    low_rank = torch.randn(4, 256, 2, generator=g) @ torch.randn(2, 32, generator=g)
+    proj = lambda x: float(sigreg(x, 128, 17, torch.Generator().manual_seed(1)))  # noqa: E731
+    assert proj(gaussian) < 2.0  # its expectation under the null is about 1.1
+    assert proj(collapsed) > 20 * proj(gaussian)
+    assert proj(low_rank) > 5 * proj(gaussian)
+
+
+def test_sigreg_draws_its_projections_from_the_generator():
+    z = torch.randn(2, 64, 16, generator=torch.Generator().manual_seed(0)) ** 3
+    a = sigreg(z, 32, 17, torch.Generator().manual_seed(5))
+    b = sigreg(z, 32, 17, torch.Generator().manual_seed(5))
+    c = sigreg(z, 32, 17, torch.Generator().manual_seed(6))
+    assert a == b and a != c
+
+
+def test_effective_rank_counts_the_directions_used():
+    g = torch.Generator().manual_seed(0)
+    assert effective_rank(torch.randn(4000, 16, generator=g)) > 15
+    assert effective_rank(torch.randn(4000, 1, generator=g) @ torch.ones(1, 16)) < 1.5
+
+
+def test_paper_preset_runs_a_forward_and_backward_pass_at_batch_2():
+    preset = get_preset("paper")
+    c = preset.model
+    assert (c.image_size, c.patch_size, c.width, c.depth, c.heads, c.mlp) == (224, 14, 192, 12, 3, 768)
+    assert (c.latent_dim, c.pred_depth, c.pred_heads, c.pred_mlp) == (256, 6, 4, 1024)
+    torch.manual_seed(0)
+    model = WorldModel(c).train()
+    T2 = 3
+    images = torch.rand(2, T2, 3, 224, 224)
+    loss, _ = model(images, torch.randn(2, T2, 16), torch.rand(2, T2, 8), 50 * torch.rand(2, T2, 16, 16),
+                    torch.Generator().manual_seed(0))
+    loss.backward()
+    grads = [p.grad for p in model.parameters() if p.requires_grad]
+    assert all(g is not None and torch.isfinite(g).all() for g in grads)
+    assert model.encoder.patch.weight.grad.abs().sum() > 0  # the loss reaches the ViT
+    assert 12e6 < model.num_parameters() < 14e6  # upstream's ~12.8M
