@@ -211,8 +211,11 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
             order = list(sampler)
             batches = [order[i * s.batch_size:(i + 1) * s.batch_size]
                        for i in range(offset, min(per_epoch, offset + total - step))]
+            # Its own generator: a DataLoader draws its workers' base seed from the global RNG
+            # otherwise, and a resumed run (a new loader mid-epoch) would shift the dropout masks.
             loader = DataLoader(dataset, batch_sampler=batches, num_workers=s.num_workers,
-                                collate_fn=collate_windows, pin_memory=device.type == "cuda")
+                                collate_fn=collate_windows, pin_memory=device.type == "cuda",
+                                generator=step_generator(s.seed, step, stream=99, rank=rank))
             tick = time.perf_counter()
             for batch in loader:
                 got = time.perf_counter()
