@@ -28,7 +28,7 @@ from pathlib import Path
 os.environ.setdefault("LP_NUM_THREADS", "1")  # one core, like one worker
 
 from orbitdata.config import GenerationConfig  # noqa: E402
-from orbitdata.dataset.generate import generate  # noqa: E402
+from orbitdata.write.generate import generate  # noqa: E402
 import numpy as np  # noqa: E402
 
 from orbitdata.sim import CubeSatEnv  # noqa: E402
@@ -37,7 +37,7 @@ MEM_SCRIPT = """
 import resource, sys, os
 os.environ.setdefault("LP_NUM_THREADS", "1")
 from orbitdata.config import GenerationConfig
-from orbitdata.dataset.generate import generate
+from orbitdata.write.generate import generate
 cfg = GenerationConfig.from_dict(__import__("json").loads(sys.argv[2]))
 generate(sys.argv[1], cfg, workers=1)
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
@@ -58,7 +58,7 @@ def render_bound(cfg: GenerationConfig, dataset: Path) -> float:
     import pyarrow.parquet as pq
 
     from orbitdata import schema as S
-    from orbitdata.sim.state import rot6d_to_matrix
+    from orbitdata.state import rot6d_to_matrix
 
     env = CubeSatEnv(cfg.sim, cfg.scenario)
     frames, busy = 0, 0.0

@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from orbitdata.pilots import make_pilot
-from orbitdata.rollout import fly_episode
+from orbitdata.fly.pilots import make_pilot
+from orbitdata.fly.rollout import fly_episode
 from orbitdata.scenario import sample_scenario
 from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
 

@@ -16,28 +16,52 @@ keyed by the dataset's column names::
 Batch with ``DataLoader(..., collate_fn=collate_windows)``: a map-style batch is then decoded
 in place rather than stacked (``default_collate`` works too, one copy slower).
 
-Pipeline: ``source`` (resolve, check the schema version, load tables) -> ``select``
-(episodes filter) -> ``index`` (window starts) -> ``decode`` (Arrow rows to tensors) ->
-``windows`` (map-style) or ``streaming`` (iterable) -> ``collate`` (batches).
+Pipeline: ``source`` (folder or Hub repo, meta/info.json and its schema version) -> ``tables``
+(load the split) -> ``select`` (episodes filter) -> ``index`` (window starts) -> ``decode``
+(Arrow rows to tensors) -> ``windows`` (map-style) or ``streaming`` (iterable) -> ``collate``.
+
+The same reader layer opens a dataset for everything else: :func:`read_meta` (info and the
+normalisation stats), ``episodes`` (one episode, its rows read by row group: ``rows``) and
+``summary`` (what ``orbitdata info`` shows). Only ``load_windows`` and the window datasets need
+torch and ``datasets``; they import on first use.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from orbitdata.info import Info
+from orbitdata.load.source import HubUnavailable, dataset_folder, is_repo_id, read_info, read_meta
 
-from orbitdata import schema as S
-from orbitdata.load.collate import collate_windows
-from orbitdata.load.config import IS_PAD, WindowConfig
-from orbitdata.load.index import check_lengths, check_windows
-from orbitdata.load.select import EpisodeFilter, select_episodes
-from orbitdata.load.source import check_schema_version, load_episode_table, load_steps, read_info
-from orbitdata.load.streaming import StreamingWindowDataset
-from orbitdata.load.windows import WindowDataset
+if TYPE_CHECKING:
+    from orbitdata.load.select import EpisodeFilter
+    from orbitdata.load.streaming import StreamingWindowDataset
+    from orbitdata.load.windows import WindowDataset
 
-__all__ = ["load_windows", "WindowDataset", "StreamingWindowDataset", "WindowConfig", "collate_windows", "IS_PAD",
-           "EpisodeFilter"]
+_LAZY = {
+    "WindowDataset": "orbitdata.load.windows",
+    "StreamingWindowDataset": "orbitdata.load.streaming",
+    "WindowConfig": "orbitdata.load.config",
+    "IS_PAD": "orbitdata.load.config",
+    "collate_windows": "orbitdata.load.collate",
+    "EpisodeFilter": "orbitdata.load.select",
+    "Episode": "orbitdata.load.episodes",
+    "load_episode": "orbitdata.load.episodes",
+    "read_episodes": "orbitdata.load.episodes",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'orbitdata.load' has no attribute {name!r}")
+
+
+__all__ = ["load_windows", "read_meta", "read_info", "Info", "HubUnavailable", "dataset_folder", "is_repo_id",
+           *_LAZY]
 
 
 def load_windows(
@@ -79,6 +103,16 @@ def load_windows(
         ValueError: unknown schema version, missing column, an episodes filter that selects
             nothing, a window longer than every selected episode, inconsistent tables.
     """
+    import numpy as np
+
+    from orbitdata import schema as S
+    from orbitdata.load.config import WindowConfig
+    from orbitdata.load.index import check_lengths, check_windows
+    from orbitdata.load.select import select_episodes
+    from orbitdata.load.streaming import StreamingWindowDataset
+    from orbitdata.load.tables import load_episode_table, load_steps
+    from orbitdata.load.windows import WindowDataset
+
     if not streaming and (shuffle_buffer or seed):
         raise ValueError("shuffle_buffer/seed are for streaming=True; "
                          "shuffle a map-style dataset with ds.sampler(seed=...)")

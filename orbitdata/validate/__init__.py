@@ -6,11 +6,25 @@
 
 The checks are listed in :mod:`orbitdata.validate.checks`; each module ``checks_*`` owns a
 group of them, :mod:`~orbitdata.validate.rowgroup` is the unit of parallel work and
-:mod:`~orbitdata.validate.runner` puts it together.
+:mod:`~orbitdata.validate.runner` puts it together. Names import on first use.
 """
 
-from orbitdata.validate.checks import CHECKS, Check
-from orbitdata.validate.report import Finding, Report
-from orbitdata.validate.runner import ValidateOptions, validate
+_LAZY = {
+    "CHECKS": "orbitdata.validate.checks",
+    "Check": "orbitdata.validate.checks",
+    "Finding": "orbitdata.validate.report",
+    "Report": "orbitdata.validate.report",
+    "ValidateOptions": "orbitdata.validate.runner",
+    "validate": "orbitdata.validate.runner",
+}
 
-__all__ = ["CHECKS", "Check", "Finding", "Report", "ValidateOptions", "validate"]
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'orbitdata.validate' has no attribute {name!r}")
+
+
+__all__ = sorted(_LAZY)

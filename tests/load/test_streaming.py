@@ -10,7 +10,7 @@ import torch
 from torch.utils.data import DataLoader
 
 from orbitdata import schema as S
-from orbitdata.dataset.shard import StorageSettings, write_shards
+from orbitdata.write.shard import StorageSettings, write_shards
 from orbitdata.load import IS_PAD, StreamingWindowDataset, load_windows
 
 LIGHT = [S.IMAGE, S.STATE, S.ACTION, S.SUCCESS]  # no full-res depth: faster, same code paths

@@ -132,7 +132,7 @@ def test_push_to_a_branch(hub_client, tiny_dataset_master):
 
 
 def test_repush_of_a_resharded_dataset_removes_stale_shards(hub_client, tiny_dataset):
-    from orbitdata.dataset.generate import shard
+    from orbitdata.write.generate import shard
 
     push(tiny_dataset, REPO)
     shard(tiny_dataset, max_shard_bytes=100_000)  # several smaller shards replace each split's one

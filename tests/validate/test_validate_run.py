@@ -133,7 +133,7 @@ def test_counts_match_the_generators_definition(tiny_dataset_master):
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from orbitdata.dataset.meta import counts as generator_counts
+    from orbitdata.write.meta import counts as generator_counts
     from orbitdata.validate.checks_consistency import counts
     from orbitdata.validate.checks_episodes import episode_rows
 

@@ -12,7 +12,7 @@ import pytest
 from PIL import Image
 
 from orbitdata import schema as S
-from orbitdata.viz.episode import read_episodes
+from orbitdata.load.episodes import read_episodes
 from orbitdata.viz.overview import frames_to_show, sample_episodes, write_overview
 
 
@@ -62,7 +62,7 @@ def test_an_empty_table_is_refused(tiny_dataset):
 
 
 def test_shard_skips_the_overview_without_matplotlib(tiny_dataset, monkeypatch):
-    from orbitdata.dataset.generate import shard
+    from orbitdata.write.generate import shard
 
     (tiny_dataset / S.OVERVIEW_PATH).unlink()
     monkeypatch.setitem(sys.modules, "matplotlib", None)

@@ -12,7 +12,7 @@ from orbitdata import schema as S
 from orbitdata.cli.app import app
 from orbitdata.viz import plots as P
 from orbitdata.viz.contact_sheet import ContactSheet, key_frames
-from orbitdata.viz.episode import EpisodeNotFound, load_episode, read_episodes
+from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_episodes
 from orbitdata.viz.show import EpisodeVideo, show_episode
 from orbitdata.viz.topdown import PATH
 
