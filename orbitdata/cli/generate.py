@@ -118,7 +118,7 @@ def register(app: typer.Typer) -> None:
         from orbitdata.write.finalize import finalize
 
         with usage_errors(FileNotFoundError, NotADirectoryError):
-            folder = local_folder(folder)
+            folder = local_folder(folder, repo_ok=False)
         info = finalize(folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
                         figure=overview_figure)
         shards = [rel for rel in info.files if S.SHARD_RE.match(rel)]

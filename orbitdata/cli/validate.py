@@ -48,7 +48,7 @@ def register(app: typer.Typer) -> None:
         from orbitdata.validate import ValidateOptions, validate as run
 
         with usage_errors(FileNotFoundError, NotADirectoryError):
-            folder = local_folder(folder.expanduser())
+            folder = local_folder(folder.expanduser(), repo_ok=False)
             if json_out is not None and not json_out.expanduser().parent.is_dir():
                 raise FileNotFoundError(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
         options = ValidateOptions(quick=quick, workers=workers, max_per_check=max_per_check)

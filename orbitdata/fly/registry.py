@@ -76,7 +76,10 @@ def pilot_factory(name: str) -> PilotFactory:
         entry = _entry_points().get(name)
         if entry is None:
             raise ValueError(f"unknown pilot {name!r}; expected one of {', '.join(list_pilots())}")
-        register_pilot(name, entry.load())
+        factory = entry.load()
+        if not callable(factory):
+            raise TypeError(f"entry point {entry.value!r} of pilot {name!r} is not a factory(config, **options)")
+        _FACTORIES.setdefault(name, factory)  # unless importing it registered the name itself
     return _FACTORIES[name]
 
 

@@ -118,7 +118,10 @@ def load_windows(
                          "shuffle a map-style dataset with ds.sampler(seed=...)")
     config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
                           columns=None if columns is None else tuple(columns))
-    check_schema_version(read_info(source, load_dataset_kwargs), source)
+    try:  # checks the schema version before anything is read
+        read_info(source, load_dataset_kwargs.get("revision"), load_dataset_kwargs.get("token"))
+    except HubUnavailable:
+        pass  # offline, private or gated: load_dataset says more (or reads its own cache)
     where = f"split {split!r} of {source}"
     table = load_episode_table(source, split, load_dataset_kwargs)
     selected = select_episodes(table, episodes, split)  # (E,) sorted episode_index

@@ -50,8 +50,8 @@ def is_repo_id(source: str | Path) -> bool:
     return True
 
 
-def local_folder(source: str | Path) -> Path | None:
-    """The folder ``source`` names, or None for a Hub repo id; raises if it is neither."""
+def local_folder(source: str | Path, repo_ok: bool = True) -> Path | None:
+    """The folder ``source`` names, or None for a Hub repo id (when ``repo_ok``); raises if it is neither."""
     path = Path(source).expanduser()
     if path.is_dir():
         return path
@@ -59,17 +59,17 @@ def local_folder(source: str | Path) -> Path | None:
         raise NotADirectoryError(f"{source} is a file, not a dataset folder: give the folder that holds "
                                  f"{S.INFO_PATH}")
     if is_repo_id(source):
-        return None
-    raise FileNotFoundError(f"no dataset folder at {source}: give a folder made by `orbitdata generate`, "
-                            f"or {REPO_ID_HINT}")
+        if repo_ok:
+            return None
+        raise FileNotFoundError(f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
+                                f"first (`hf download {source} --repo-type dataset --local-dir DIR`)")
+    raise FileNotFoundError(f"no dataset folder at {source}: give a folder made by `orbitdata generate`"
+                            + (f", or {REPO_ID_HINT}" if repo_ok else ""))
 
 
 def dataset_folder(source: str | Path) -> Path:
     """A local, finished dataset folder (it holds meta/info.json); raises saying what is wrong."""
-    folder = local_folder(source)
-    if folder is None:
-        raise FileNotFoundError(f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
-                                f"first (`hf download {source} --repo-type dataset --local-dir DIR`)")
+    folder = local_folder(source, repo_ok=False)
     if not (folder / S.INFO_PATH).is_file():
         raise FileNotFoundError(f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset "
                                 "(if a `generate` run into it was interrupted, run the same command again)")

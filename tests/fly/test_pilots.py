@@ -5,7 +5,7 @@ import hashlib
 import numpy as np
 import pytest
 
-from orbitdata.fly.pilots import make_pilot
+from orbitdata.fly import make_pilot
 from orbitdata.fly.rollout import fly_episode
 from orbitdata.scenario.spec import Lighting, Obstacle, Scenario
 from orbitdata.sim import CubeSatEnv, SimConfig

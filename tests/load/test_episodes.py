@@ -8,7 +8,8 @@ import pyarrow.parquet as pq
 import pytest
 
 from orbitdata import schema as S
-from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_cells, read_episodes, read_rows
+from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_episodes
+from orbitdata.load.rows import read_cells, read_rows
 
 
 def _all_steps(root):
@@ -51,7 +52,7 @@ def test_a_missing_episode_names_the_range(tiny_dataset_master, bad):
 def test_a_folder_that_is_not_a_dataset(tmp_path):
     with pytest.raises(FileNotFoundError, match="not a finished orbitdata dataset"):
         load_episode(tmp_path, 0)
-    with pytest.raises(FileNotFoundError, match="is not a folder"):
+    with pytest.raises(FileNotFoundError, match="no dataset folder at"):
         load_episode(tmp_path / "nope", 0)
 
 

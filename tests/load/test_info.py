@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 
 from orbitdata import schema as S
 from orbitdata.cli.app import app
-from orbitdata.load.summary import is_repo_id, summarize
+from orbitdata.load.source import is_repo_id
+from orbitdata.load.summary import summarize
 from orbitdata.load.episodes import read_episodes
 
 runner = CliRunner()
@@ -72,7 +73,7 @@ def test_a_repo_id_offline_is_one_clear_line(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("make, message", [
-    (lambda p: p / "missing", "is not a folder, nor a Hub repo id"),
+    (lambda p: p / "missing", "no dataset folder at"),
     (lambda p: p, "meta/info.json is missing"),
 ])
 def test_info_on_something_that_is_not_a_dataset(tmp_path, make, message):
@@ -87,3 +88,23 @@ def test_repo_ids_are_told_from_paths(tmp_path, monkeypatch):
     assert not is_repo_id("./user/orbit_planner") and not is_repo_id("/abs/path") and not is_repo_id("name")
     (tmp_path / "user" / "orbit_planner").mkdir(parents=True)
     assert not is_repo_id("user/orbit_planner")  # an existing folder wins
+
+
+def test_read_meta_gives_the_typed_info_and_the_stats(tiny_dataset_master, tmp_path, monkeypatch):
+    from orbitdata import read_meta
+    from orbitdata.info import Info
+    from orbitdata.load import HubUnavailable
+
+    info, stats = read_meta(tiny_dataset_master)
+    raw = json.loads((tiny_dataset_master / S.INFO_PATH).read_text())
+    assert isinstance(info, Info) and info.to_dict() == raw
+    assert info.image_size == 64 and info.counts["episodes"] == 6 and info.generation_config().sim.camera.image_size == 64
+    assert stats == json.loads((tiny_dataset_master / S.STATS_PATH).read_text())
+    assert len(stats[S.STATE]["mean"]) == S.STATE_DIM and len(stats[S.IMAGE]["std"]) == 3
+    from huggingface_hub import constants
+
+    monkeypatch.setattr(constants, "HF_HUB_OFFLINE", True)
+    monkeypatch.setattr(constants, "HF_HUB_CACHE", str(tmp_path / "cache"))
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(HubUnavailable, match="HF_HUB_OFFLINE"):
+        read_meta("nobody/orbit")

@@ -6,7 +6,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -15,6 +14,8 @@ import yaml
 
 from tiny import tiny_config
 from orbitdata import schema as S
+from orbitdata.viz import overview_figure
+from orbitdata.write.finalize import finalize
 from orbitdata.write.generate import generate
 
 
@@ -95,7 +96,7 @@ def test_counts_agree_between_card_info_and_data(tiny_dataset_master):
 
 def test_info_records_config_hashes_and_stats(tiny_dataset_master):
     from orbitdata.config import GenerationConfig
-    from orbitdata.write.meta import sha256_file
+    from orbitdata.info import sha256_file
 
     info = json.loads((tiny_dataset_master / S.INFO_PATH).read_text())
     assert info["schema_version"] == S.SCHEMA_VERSION and info["fps"] == 25
@@ -126,41 +127,52 @@ def test_episode_rows_point_at_their_frames(tiny_dataset_master):
 
 def test_workers_one_and_two_give_identical_bytes(tiny_dataset_master, tmp_path):
     out = tmp_path / "two" / "orbit"  # same folder name: the card mentions it
-    generate(out, tiny_config(), workers=2)
+    generate(out, tiny_config(), workers=2, figure=overview_figure)
     assert tree_digest(out) == tree_digest(tiny_dataset_master)
 
 
 def test_ray_executor_gives_identical_bytes(tiny_dataset_master, tmp_path):
     pytest.importorskip("ray", reason="the Ray executor is the orbitdata[ray] extra")
     out = tmp_path / "ray" / "orbit"
-    generate(out, tiny_config(), workers=2, executor="ray")
+    generate(out, tiny_config(), workers=2, executor="ray", figure=overview_figure)
     assert tree_digest(out) == tree_digest(tiny_dataset_master)
 
 
+# Dies by SIGKILL in the middle of writing the third unit: its frames are on disk, its episode
+# rows (the mark of a finished unit) are not. Deterministic: no polling, no timing.
 KILL_SCRIPT = """
-import sys
+import os, signal, sys
 from tiny import tiny_config
+from orbitdata.write import parts
 from orbitdata.write.generate import generate
+
+write_unit, done = parts.write_unit, []
+
+
+def write_unit_or_die(out, name, steps, episodes):
+    if len(done) == 2:
+        parts.atomic_write(parts.steps_part(out, name), steps)
+        os.kill(os.getpid(), signal.SIGKILL)
+    write_unit(out, name, steps, episodes)
+    done.append(name)
+
+
+parts.write_unit = write_unit_or_die
 generate(sys.argv[1], tiny_config(episodes_per_unit=1), workers=1)
 """
 
 
 def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
     clean = tmp_path / "clean" / "orbit"
-    generate(clean, tiny_config(episodes_per_unit=1), workers=1)
+    generate(clean, tiny_config(episodes_per_unit=1), workers=1, figure=overview_figure)
     out = tmp_path / "killed" / "orbit"
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).parents[1]))  # tests/, for tiny.py
-    proc = subprocess.Popen([sys.executable, "-c", KILL_SCRIPT, str(out)], env=env)
-    # Kill mid-way: after at least one unit is on disk, before the run can finish.
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and len(list((out / "parts").glob("*.episodes.parquet"))) < 2:
-        time.sleep(0.02)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    done = len(list((out / "parts").glob("*.episodes.parquet")))
-    assert 2 <= done < 6, "the kill should land mid-way"
+    proc = subprocess.run([sys.executable, "-c", KILL_SCRIPT, str(out)], env=env, timeout=300)
+    assert proc.returncode == -signal.SIGKILL
+    assert len(list((out / "parts").glob("*.episodes.parquet"))) == 2  # two whole units
+    assert len(list((out / "parts").glob("*.steps.parquet"))) == 3  # and the frames of a third
     assert not (out / S.INFO_PATH).exists()
-    generate(out, tiny_config(episodes_per_unit=1), workers=1)  # resume
+    generate(out, tiny_config(episodes_per_unit=1), workers=1, figure=overview_figure)  # resume
     assert tree_digest(out) == tree_digest(clean)
 
 
@@ -174,22 +186,18 @@ def test_a_complete_dataset_is_not_regenerated(tiny_dataset, monkeypatch):
 
 
 def test_reshard_into_smaller_files_keeps_every_row(tiny_dataset):
-    from orbitdata.write.generate import shard
-
-    info = shard(tiny_dataset, max_shard_bytes=50_000)
+    info = finalize(tiny_dataset, max_shard_bytes=50_000, figure=overview_figure)
     train = sorted(tiny_dataset.glob("data/train-*.parquet"))
     assert len(train) > 1 and all(S.SHARD_RE.match(f"data/{p.name}") for p in train)
-    assert info["counts"]["frames"] == sum(pq.read_metadata(p).num_rows for p in tiny_dataset.glob("data/*.parquet"))
+    assert info.counts["frames"] == sum(pq.read_metadata(p).num_rows for p in tiny_dataset.glob("data/*.parquet"))
     from datasets import load_dataset
 
-    assert load_dataset(str(tiny_dataset), split="train").num_rows == info["counts"]["splits"]["train"]["frames"]
+    assert load_dataset(str(tiny_dataset), split="train").num_rows == info.counts["splits"]["train"]["frames"]
 
 
 def test_reshard_round_trip_reproduces_the_generated_bytes(tiny_dataset, tiny_dataset_master):
     """Shard bytes depend on the rows alone, not on whether they came from parts or shards."""
-    from orbitdata.write.generate import shard
-
-    shard(tiny_dataset, max_shard_bytes=50_000)
+    finalize(tiny_dataset, max_shard_bytes=50_000, figure=overview_figure)
     assert tree_digest(tiny_dataset) != tree_digest(tiny_dataset_master)
-    shard(tiny_dataset, max_shard_bytes=500_000_000)
+    finalize(tiny_dataset, max_shard_bytes=500_000_000, figure=overview_figure)
     assert tree_digest(tiny_dataset) == tree_digest(tiny_dataset_master)

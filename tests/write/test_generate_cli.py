@@ -21,7 +21,7 @@ runner = CliRunner()
         (["--executor", "dask"], "--executor"),
         (["--workers", "-1"], "--workers"),
         (["--seed", "-5"], "--seed"),
-        (["--max-shard-size", "0"], "--max-shard-size"),
+        (["--max-shard-mb", "0"], "--max-shard-mb"),
     ],
 )
 def test_bad_flags(tmp_path, args, message):
@@ -35,9 +35,22 @@ def test_config_file_errors(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text("[scenario]\nn_obstacles = [1, 5]\nbogus = 3\n")
     res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(bad)])
-    assert res.exit_code == 1 and "bogus" in res.output and "unknown setting" in res.output
+    assert res.exit_code == 2 and "bogus" in res.output and "unknown setting" in res.output
     res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(tmp_path / "missing.toml")])
-    assert res.exit_code == 1 and "does not exist" in res.output
+    assert res.exit_code == 2 and "does not exist" in res.output
+
+
+def test_a_sim_dt_other_than_the_schemas_is_refused(tmp_path):
+    from orbitdata.sim.config import SimConfig
+
+    with pytest.raises(ValueError, match="sim.dt must be 0.04 s"):
+        SimConfig(dt=0.02)
+    assert SimConfig(dt=0.04).dt == 0.04  # written out in a TOML, 0.04 is the same number
+    toml = tmp_path / "fast.toml"
+    toml.write_text("[sim]\ndt = 0.02\n")
+    res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(toml)])
+    assert res.exit_code == 2 and "sim.dt must be 0.04 s" in res.output
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.fixture
