@@ -7,29 +7,14 @@ The interface a pilot implements is :class:`Pilot` (``reset(task)``, ``act(obs)`
 Names import on first use: the registry and the interface are light, flying loads MuJoCo.
 """
 
-_LAZY = {
-    "Pilot": "orbitdata.fly.pilot",
-    "Task": "orbitdata.fly.pilot",
-    "ENTRY_POINT_GROUP": "orbitdata.fly.registry",
-    "PilotFactory": "orbitdata.fly.registry",
-    "list_pilots": "orbitdata.fly.registry",
-    "make_pilot": "orbitdata.fly.registry",
-    "pilot_factory": "orbitdata.fly.registry",
-    "register_pilot": "orbitdata.fly.registry",
-    "EpisodeResult": "orbitdata.fly.rollout",
-    "fly_episode": "orbitdata.fly.rollout",
-    "CellResult": "orbitdata.fly.grid",
-    "fly_grid": "orbitdata.fly.grid",
-    "grid_report": "orbitdata.fly.grid",
+from orbitdata import lazy_getattr
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("Pilot", "Task"), "orbitdata.fly.pilot"),
+    **dict.fromkeys(("ENTRY_POINT_GROUP", "PilotFactory", "list_pilots", "make_pilot", "pilot_factory", "register_pilot"), "orbitdata.fly.registry"),
+    **dict.fromkeys(("EpisodeResult", "fly_episode"), "orbitdata.fly.rollout"),
+    **dict.fromkeys(("CellResult", "fly_grid", "grid_report"), "orbitdata.fly.grid"),
 }
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'orbitdata.fly' has no attribute {name!r}")
-
-
+__getattr__ = lazy_getattr(__name__, _LAZY)
 __all__ = sorted(_LAZY)

@@ -31,6 +31,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from orbitdata import lazy_getattr
 from orbitdata.info import Info
 from orbitdata.load.source import HubUnavailable, dataset_folder, is_repo_id, read_info, read_meta
 
@@ -39,27 +40,16 @@ if TYPE_CHECKING:
     from orbitdata.load.streaming import StreamingWindowDataset
     from orbitdata.load.windows import WindowDataset
 
-_LAZY = {
-    "WindowDataset": "orbitdata.load.windows",
-    "StreamingWindowDataset": "orbitdata.load.streaming",
-    "WindowConfig": "orbitdata.load.config",
-    "IS_PAD": "orbitdata.load.config",
-    "collate_windows": "orbitdata.load.collate",
-    "EpisodeFilter": "orbitdata.load.select",
-    "Episode": "orbitdata.load.episodes",
-    "load_episode": "orbitdata.load.episodes",
-    "read_episodes": "orbitdata.load.episodes",
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("WindowDataset",), "orbitdata.load.windows"),
+    **dict.fromkeys(("StreamingWindowDataset",), "orbitdata.load.streaming"),
+    **dict.fromkeys(("WindowConfig", "IS_PAD"), "orbitdata.load.config"),
+    **dict.fromkeys(("collate_windows",), "orbitdata.load.collate"),
+    **dict.fromkeys(("EpisodeFilter",), "orbitdata.load.select"),
+    **dict.fromkeys(("Episode", "load_episode", "read_episodes"), "orbitdata.load.episodes"),
 }
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'orbitdata.load' has no attribute {name!r}")
-
-
+__getattr__ = lazy_getattr(__name__, _LAZY)
 __all__ = ["load_windows", "read_meta", "read_info", "Info", "HubUnavailable", "dataset_folder", "is_repo_id",
            *_LAZY]
 

@@ -6,23 +6,13 @@ MuJoCo::
     from orbitdata.sim import CubeSatEnv, SimConfig
 """
 
-_LAZY = {
-    "CameraConfig": "orbitdata.sim.config",
-    "CubeSatConfig": "orbitdata.sim.config",
-    "SimConfig": "orbitdata.sim.config",
-    "CubeSatEnv": "orbitdata.sim.env",
-    "validate_action": "orbitdata.sim.env",
-    "thruster_layout": "orbitdata.sim.thrusters",
-    "wrench_matrix": "orbitdata.sim.thrusters",
+from orbitdata import lazy_getattr
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("CameraConfig", "CubeSatConfig", "SimConfig"), "orbitdata.sim.config"),
+    **dict.fromkeys(("CubeSatEnv", "validate_action"), "orbitdata.sim.env"),
+    **dict.fromkeys(("thruster_layout", "wrench_matrix"), "orbitdata.sim.thrusters"),
 }
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'orbitdata.sim' has no attribute {name!r}")
-
-
+__getattr__ = lazy_getattr(__name__, _LAZY)
 __all__ = sorted(_LAZY)

@@ -9,22 +9,13 @@ group of them, :mod:`~orbitdata.validate.rowgroup` is the unit of parallel work 
 :mod:`~orbitdata.validate.runner` puts it together. Names import on first use.
 """
 
-_LAZY = {
-    "CHECKS": "orbitdata.validate.checks",
-    "Check": "orbitdata.validate.checks",
-    "Finding": "orbitdata.validate.report",
-    "Report": "orbitdata.validate.report",
-    "ValidateOptions": "orbitdata.validate.runner",
-    "validate": "orbitdata.validate.runner",
+from orbitdata import lazy_getattr
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("CHECKS", "Check"), "orbitdata.validate.checks"),
+    **dict.fromkeys(("Finding", "Report"), "orbitdata.validate.report"),
+    **dict.fromkeys(("ValidateOptions", "validate"), "orbitdata.validate.runner"),
 }
 
-
-def __getattr__(name):
-    if name in _LAZY:
-        import importlib
-
-        return getattr(importlib.import_module(_LAZY[name]), name)
-    raise AttributeError(f"module 'orbitdata.validate' has no attribute {name!r}")
-
-
+__getattr__ = lazy_getattr(__name__, _LAZY)
 __all__ = sorted(_LAZY)
