@@ -41,7 +41,7 @@ def run(kind: str, args: list[str]) -> dict:
     paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
     res = subprocess.run([sys.executable, "-c", SCRIPT, kind, json.dumps(args)], env=env, capture_output=True,
-                         text=True, timeout=300)
+                         text=True, timeout=900)  # a guard: seconds normally
     assert res.returncode == 0, res.stderr
     return json.loads(res.stdout.strip().splitlines()[-1])
 

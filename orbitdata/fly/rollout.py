@@ -55,6 +55,9 @@ def fly_episode(
 ) -> EpisodeResult:
     """Reset ``env`` with ``seed`` (or the given scenario), fly ``pilot`` until the episode ends."""
     options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
+    if pilot.needs_images and not env.sim.render:
+        raise ValueError(f"pilot {pilot.name!r} needs camera images, but the env does not render: "
+                         "use SimConfig(render=True)")
     obs, info = env.reset(seed=seed, options=options)
     scn = env.scenario
     task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)
@@ -62,9 +65,6 @@ def fly_episode(
         pilot.reset(task, scenario=scn)
     else:
         pilot.reset(task)
-    if pilot.needs_images and "image" not in obs:
-        raise ValueError(f"pilot {pilot.name!r} needs camera images, but the env does not render: "
-                         "use SimConfig(render=True)")
     max_frames = env.sim.max_steps
     states = np.zeros((max_frames, STATE_DIM), np.float32)
     actions = np.zeros((max_frames, ACTION_DIM), np.float32)

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 
 from orbitdata import lazy_getattr
 from orbitdata.info import Info
+from orbitdata.load.config import IS_PAD, WindowConfig
 from orbitdata.load.source import HubUnavailable, dataset_folder, is_repo_id, read_info, read_meta
 
 if TYPE_CHECKING:
@@ -43,7 +44,6 @@ if TYPE_CHECKING:
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("WindowDataset",), "orbitdata.load.windows"),
     **dict.fromkeys(("StreamingWindowDataset",), "orbitdata.load.streaming"),
-    **dict.fromkeys(("WindowConfig", "IS_PAD"), "orbitdata.load.config"),
     **dict.fromkeys(("collate_windows",), "orbitdata.load.collate"),
     **dict.fromkeys(("EpisodeFilter",), "orbitdata.load.select"),
     **dict.fromkeys(("Episode", "load_episode", "read_episodes"), "orbitdata.load.episodes"),
@@ -51,17 +51,17 @@ _LAZY = {  # name -> the module that defines it
 
 __getattr__ = lazy_getattr(__name__, _LAZY)
 __all__ = ["load_windows", "read_meta", "read_info", "Info", "HubUnavailable", "dataset_folder", "is_repo_id",
-           *_LAZY]
+           "WindowConfig", "IS_PAD", *_LAZY]
 
 
 def load_windows(
     source: str | Path,
     split: str = "train",
-    context: int = 8,
-    horizon: int = 12,
-    stride: int = 1,
-    pad: bool = False,
-    image_size: int | None = None,
+    context: int = WindowConfig.context,
+    horizon: int = WindowConfig.horizon,
+    stride: int = WindowConfig.stride,
+    pad: bool = WindowConfig.pad,
+    image_size: int | None = WindowConfig.image_size,
     columns: list[str] | tuple[str, ...] | None = None,
     episodes: EpisodeFilter = None,
     streaming: bool = False,
@@ -96,7 +96,6 @@ def load_windows(
     import numpy as np
 
     from orbitdata import schema as S
-    from orbitdata.load.config import WindowConfig
     from orbitdata.load.index import check_lengths, check_windows
     from orbitdata.load.select import select_episodes
     from orbitdata.load.streaming import StreamingWindowDataset

@@ -15,9 +15,10 @@ import pytest
 from orbitdata.fly.pilots.planner import PlannerConfig, plan_path
 from orbitdata.scenario import Obstacle, clearance, sample_scenario
 from orbitdata.seeding import rng
+from orbitdata.sim.config import CubeSatConfig
 
 CFG = PlannerConfig()
-INFLATION = 0.05 * math.sqrt(3.0) + CFG.margin  # 1U hull bounding radius + safety margin, m
+INFLATION = CubeSatConfig().bounding_radius + CFG.margin  # hull bounding radius + safety margin, m
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -94,14 +95,15 @@ def test_subprocess_gives_the_same_path():
     _plan(9)  # this process has planned before; the fresh one has not
     here = [_digest(_plan(seed)[1].path) for seed in (2, 6)]
     code = (
-        "import hashlib, math, numpy as np\n"
+        "import hashlib, numpy as np\n"
         "from orbitdata.fly.pilots.planner import PlannerConfig, plan_path\n"
         "from orbitdata.scenario import sample_scenario\n"
         "from orbitdata.seeding import rng\n"
+        "from orbitdata.sim.config import CubeSatConfig\n"
         "cfg = PlannerConfig()\n"
         "for seed in (6, 2):\n"  # the other order, too
         "    scn = sample_scenario(seed, n_obstacles=5, speed=2.0)\n"
-        "    r = plan_path((0.0, 0.0, 0.0), scn.goal, scn.obstacles, 0.05 * math.sqrt(3.0) + cfg.margin,\n"
+        "    r = plan_path((0.0, 0.0, 0.0), scn.goal, scn.obstacles, CubeSatConfig().bounding_radius + cfg.margin,\n"
         "                  cfg, rng(seed, 'planner'))\n"
         "    print(seed, hashlib.sha256(np.ascontiguousarray(r.path).tobytes()).hexdigest())\n"
     )

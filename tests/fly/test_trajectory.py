@@ -11,9 +11,10 @@ from orbitdata.fly.pilots.planner import PlannerConfig, plan_path
 from orbitdata.fly.pilots.trajectory import TrajectoryConfig, time_parametrise
 from orbitdata.scenario import Obstacle, clearance, sample_scenario
 from orbitdata.seeding import rng
+from orbitdata.sim.config import CubeSatConfig
 
 CFG = TrajectoryConfig()
-INFLATION = 0.05 * math.sqrt(3.0) + PlannerConfig().margin  # m
+INFLATION = CubeSatConfig().bounding_radius + PlannerConfig().margin  # m
 TOL = 1e-9
 
 
