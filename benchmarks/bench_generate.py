@@ -28,7 +28,8 @@ from pathlib import Path
 os.environ.setdefault("LP_NUM_THREADS", "1")  # one core, like one worker
 
 from orbitdata.config import GenerationConfig  # noqa: E402
-from orbitdata.dataset.generate import generate  # noqa: E402
+from orbitdata.viz import overview_figure  # noqa: E402
+from orbitdata.write.generate import generate  # noqa: E402
 import numpy as np  # noqa: E402
 
 from orbitdata.sim import CubeSatEnv  # noqa: E402
@@ -37,9 +38,10 @@ MEM_SCRIPT = """
 import resource, sys, os
 os.environ.setdefault("LP_NUM_THREADS", "1")
 from orbitdata.config import GenerationConfig
-from orbitdata.dataset.generate import generate
+from orbitdata.viz import overview_figure
+from orbitdata.write.generate import generate
 cfg = GenerationConfig.from_dict(__import__("json").loads(sys.argv[2]))
-generate(sys.argv[1], cfg, workers=1)
+generate(sys.argv[1], cfg, workers=1, figure=overview_figure)
 print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
 
@@ -58,7 +60,7 @@ def render_bound(cfg: GenerationConfig, dataset: Path) -> float:
     import pyarrow.parquet as pq
 
     from orbitdata import schema as S
-    from orbitdata.sim.state import rot6d_to_matrix
+    from orbitdata.state import rot6d_to_matrix
 
     env = CubeSatEnv(cfg.sim, cfg.scenario)
     frames, busy = 0, 0.0
@@ -95,10 +97,10 @@ def main() -> None:
     cfg = config(args.episodes, args.image_size)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        info = generate(Path(tmp) / "ds", cfg, workers=1)
+        info = generate(Path(tmp) / "ds", cfg, workers=1, figure=overview_figure)
         wall = time.perf_counter() - start
-        frames = info["counts"]["frames"]
-        size = sum(f["bytes"] for f in info["files"].values())
+        frames = info.counts["frames"]
+        size = info.bytes
         bound = render_bound(cfg, Path(tmp) / "ds")
     fps = frames / wall
     print(f"generate, 1 worker: {args.episodes} episodes, {frames} frames in {wall:.1f} s = {fps:,.0f} frames/s per core")

@@ -55,7 +55,7 @@ CONFIGS = {  # name: (mode, DataLoader workers)
 def ensure_dataset(out: Path, episodes: int, size: int) -> Path:
     """Generate (or resume, or reuse) a ``size`` px dataset of ``episodes`` episodes in ``out``."""
     from orbitdata.config import GenerationConfig
-    from orbitdata.dataset.generate import generate
+    from orbitdata.write.generate import generate
 
     cfg = GenerationConfig()
     cfg = cfg.replace(dataset={"episodes": episodes, "seed": 0, "test_fraction": 0.2},

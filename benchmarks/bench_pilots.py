@@ -14,8 +14,7 @@ import time
 
 import numpy as np
 
-from orbitdata.pilots import make_pilot
-from orbitdata.rollout import fly_episode
+from orbitdata.fly import Pilot, Task, fly_episode, make_pilot
 from orbitdata.scenario import sample_scenario
 from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
 
@@ -25,22 +24,23 @@ def planning_times(episodes: int, **overrides) -> np.ndarray:
     for seed in range(episodes):
         scn = sample_scenario(seed, **overrides)
         pilot = make_pilot("expert")
+        task = Task(scn.goal, scn.goal_radius, scn.initial_velocity, seed)
         start = time.perf_counter()
-        pilot.reset(scn, seed)
+        pilot.reset(task, scenario=scn)
         times.append(time.perf_counter() - start)
     return np.array(times)
 
 
-class TimedPilot:
+class TimedPilot(Pilot):
     def __init__(self, pilot):
-        self.pilot, self.level, self.elapsed, self.calls = pilot, pilot.level, 0.0, 0
+        self.pilot, self.name, self.privileged, self.elapsed, self.calls = pilot, pilot.name, pilot.privileged, 0.0, 0
 
-    def reset(self, scenario, seed):
-        self.pilot.reset(scenario, seed)
+    def reset(self, task, **scenario):
+        self.pilot.reset(task, **scenario)
 
-    def act(self, state):
+    def act(self, obs):
         start = time.perf_counter()
-        a = self.pilot.act(state)
+        a = self.pilot.act(obs)
         self.elapsed += time.perf_counter() - start
         self.calls += 1
         return a

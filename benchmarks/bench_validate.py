@@ -61,7 +61,7 @@ print(json.dumps({"ok": report.ok, "failed": report.failed(), "seconds": seconds
 def generate(out: Path, episodes: int, image_size: int, workers: int, config: dict | None = None) -> float:
     """Generate a dataset; returns frames per second of the whole run (fly, render, encode, shard)."""
     from orbitdata.config import GenerationConfig
-    from orbitdata.dataset.generate import generate as run
+    from orbitdata.write.generate import generate as run
 
     cfg = GenerationConfig.from_dict(config) if config else GenerationConfig()
     cfg = cfg.replace(dataset={"episodes": episodes})

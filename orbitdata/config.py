@@ -13,7 +13,7 @@ import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from orbitdata.pilots.config import PilotsConfig
+from orbitdata.fly.pilots.config import PilotsConfig
 from orbitdata.scenario.config import ScenarioConfig
 from orbitdata.schema import LEVELS
 from orbitdata.sim.config import SimConfig
@@ -29,8 +29,8 @@ class DatasetConfig:
         seed: root seed; episode i is a pure function of (seed, i, this config).
         level_mix: share of expert / risky / exploratory episodes (normalised).
         episodes_per_unit: episodes per work unit (one part file, the resume granularity).
-        jpeg_quality: RGB frames are JPEG at this quality (4:2:0, libjpeg via Pillow).
-        png_compression: zlib level of the 16-bit depth PNGs (filter 'up').
+        jpeg_quality: RGB frames are JPEG at this quality (4:2:0, OpenCV's libjpeg-turbo).
+        png_compression: zlib level of the 16-bit depth PNGs (filter: ``codecs.PNG_FILTER``).
         row_group_rows: rows per Parquet row group.
         compression: Parquet codec for every column.
         max_shard_bytes: a data shard closes at the first episode boundary past this size.
@@ -64,6 +64,15 @@ class DatasetConfig:
 
 @dataclass(frozen=True)
 class GenerationConfig:
+    """Everything that defines a dataset (or a flight grid): one section per stage.
+
+    Attributes:
+        dataset: size, split, level mix and storage (:class:`DatasetConfig`).
+        scenario: how episodes are randomised (:class:`~orbitdata.scenario.config.ScenarioConfig`).
+        sim: physics, camera and hardware (:class:`~orbitdata.sim.config.SimConfig`).
+        pilots: the built-in pilots' settings (:class:`~orbitdata.fly.pilots.config.PilotsConfig`).
+    """
+
     dataset: DatasetConfig = field(default_factory=DatasetConfig)
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     sim: SimConfig = field(default_factory=SimConfig)

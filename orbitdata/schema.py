@@ -1,7 +1,10 @@
-"""The dataset contract in one place: schema version, column names, Arrow schemas, paths.
+"""The dataset contract in one place: schema version, columns (type, unit, meaning), paths.
 
 Nothing else in the package spells a column name as a bare string: import the constants
-from here. The layout is a Hugging Face dataset repository (see ``shared/DESIGN.md``)::
+from here. Each column is written once, as a :class:`Field`; the Arrow schemas, the Hugging Face
+features and the card's column tables are derived from those. The state layout and rotation
+maths are in :mod:`orbitdata.state`, the frame codecs in :mod:`orbitdata.codecs` and the typed
+``meta/info.json`` in :mod:`orbitdata.info`. The layout is a Hugging Face dataset repository (see ``shared/DESIGN.md``)::
 
     README.md                          dataset card (YAML header + datasheet)
     data/{split}-{i:05d}-of-{n:05d}.parquet       one row per frame
@@ -20,16 +23,17 @@ Frame semantics (row ``t`` of an episode of length ``L``):
 
 from __future__ import annotations
 
+import functools
 import json
 import re
-
-import pyarrow as pa
+from dataclasses import dataclass
 
 SCHEMA_VERSION = "1.0"
 FPS = 25
 DT = 1.0 / FPS  # seconds per control step
 STATE_DIM = 16
 ACTION_DIM = 8
+ACTION_NAMES = tuple(f"thruster_{i}" for i in range(ACTION_DIM))  # normalised thrust of each
 DEPTH_LOW_SIDE = 16
 DEPTH_LOW_DIM = DEPTH_LOW_SIDE * DEPTH_LOW_SIDE
 SPLITS = ("train", "test")
@@ -37,23 +41,8 @@ LEVELS = ("expert", "risky", "exploratory")
 OUTCOMES = ("success", "collision", "timeout", "out_of_fuel")
 SHAPES = ("sphere", "ellipsoid", "box", "capsule", "cylinder")
 
-# Names of the 16 state entries, in order (the upstream convention).
-STATE_NAMES = (
-    "p_x", "p_y", "p_z",
-    "v_x", "v_y", "v_z",
-    "r_00", "r_01", "r_10", "r_11", "r_20", "r_21",
-    "w_x", "w_y", "w_z",
-    "fuel",
-)
-STATE_SLICES = {
-    "p": slice(0, 3),  # metres, world frame, relative to the start
-    "v": slice(3, 6),  # m/s, body frame
-    "r": slice(6, 12),  # rot6d: first two columns of R (body->world), row-major
-    "w": slice(12, 15),  # rad/s, body frame
-    "fuel": slice(15, 16),  # ratio in [0, 1]
-}
 
-# ---- steps table -------------------------------------------------------------------------
+# ---- steps table: column names ------------------------------------------------------
 EPISODE_INDEX = "episode_index"
 FRAME_INDEX = "frame_index"
 TIMESTAMP = "timestamp"
@@ -67,28 +56,9 @@ SUCCESS = "success"
 IS_LAST = "is_last"
 MIN_CLEARANCE = "min_clearance"
 
-# Hugging Face's Image feature is stored as this plain struct.
-IMAGE_STRUCT = pa.struct([("bytes", pa.binary()), ("path", pa.string())])
-
-STEP_SCHEMA = pa.schema(
-    [
-        (EPISODE_INDEX, pa.int32()),
-        (FRAME_INDEX, pa.int32()),
-        (TIMESTAMP, pa.float32()),
-        (IMAGE, IMAGE_STRUCT),
-        (DEPTH, IMAGE_STRUCT),
-        (DEPTH_LOW, pa.list_(pa.float32(), DEPTH_LOW_DIM)),
-        (STATE, pa.list_(pa.float32(), STATE_DIM)),
-        (ACTION, pa.list_(pa.float32(), ACTION_DIM)),
-        (COLLISION, pa.bool_()),
-        (SUCCESS, pa.bool_()),
-        (IS_LAST, pa.bool_()),
-        (MIN_CLEARANCE, pa.float32()),
-    ]
-)
 IMAGE_COLUMNS = (IMAGE, DEPTH)
 
-# ---- episodes table ----------------------------------------------------------------------
+# ---- episodes table: column names ---------------------------------------------------
 SPLIT = "split"
 LEVEL = "level"
 SEED = "seed"
@@ -105,53 +75,6 @@ PLANNER = "planner"
 DATA_FILE = "data_file"
 ROW_START = "row_start"
 ROW_END = "row_end"
-
-VEC3 = pa.list_(pa.float32(), 3)
-OBSTACLE_STRUCT = pa.struct(
-    [
-        ("shape", pa.string()),
-        ("center", VEC3),  # metres, world frame relative to the start
-        ("size", VEC3),  # MuJoCo geom size: radius / half-extents / (radius, half-length, 0)
-        ("quat", pa.list_(pa.float32(), 4)),  # (w, x, y, z), body->world
-        ("rgba", pa.list_(pa.float32(), 4)),
-    ]
-)
-LIGHTING_STRUCT = pa.struct(
-    [
-        ("sun_direction", VEC3),  # unit vector the light travels along, world frame
-        ("sun_intensity", pa.float32()),
-        ("ambient", pa.float32()),
-    ]
-)
-PLANNER_STRUCT = pa.struct(
-    [
-        ("solved", pa.bool_()),  # False: the expert fell back to direct flight
-        ("iterations", pa.int32()),
-        ("path_length", pa.float32()),  # metres, after shortening
-    ]
-)
-
-EPISODE_SCHEMA = pa.schema(
-    [
-        (EPISODE_INDEX, pa.int32()),
-        (SPLIT, pa.string()),
-        (LEVEL, pa.string()),
-        (SEED, pa.int64()),
-        (LENGTH, pa.int32()),
-        (OUTCOME, pa.string()),
-        (N_OBSTACLES, pa.int32()),
-        (OBSTACLES, pa.list_(OBSTACLE_STRUCT)),
-        (GOAL, VEC3),
-        (GOAL_RADIUS, pa.float32()),
-        (INITIAL_VELOCITY, VEC3),
-        (INITIAL_QUAT, pa.list_(pa.float32(), 4)),
-        (LIGHTING, LIGHTING_STRUCT),
-        (PLANNER, PLANNER_STRUCT),
-        (DATA_FILE, pa.string()),
-        (ROW_START, pa.int64()),
-        (ROW_END, pa.int64()),
-    ]
-)
 
 # ---- paths --------------------------------------------------------------------------------
 DATA_DIR = "data"
@@ -171,69 +94,147 @@ def shard_path(kind: str, split: str, index: int, count: int) -> str:
     return SHARD_PATTERN.format(kind=kind, split=split, index=index, count=count)
 
 
+# ---- fields: name, Arrow type, unit and meaning, once ----------------------------------
+@dataclass(frozen=True)
+class Field:
+    """One column: its Arrow type, unit ("" when it has none) and meaning (the card's column table)."""
+
+    name: str
+    type: "pyarrow.DataType"
+    unit: str
+    description: str
+
+
+# ---- the Arrow half: types, fields with unit and meaning, schemas ----------------------
+# Built on first use: pyarrow takes ~0.2 s to import, and `orbitdata --help` or a config needs none
+# of it. ``schema.STEP_SCHEMA`` etc. read as plain module attributes (see ``__getattr__``).
+ARROW_NAMES = ("IMAGE_STRUCT", "VEC3", "QUAT", "OBSTACLE_STRUCT", "LIGHTING_STRUCT", "PLANNER_STRUCT", "STEP_FIELDS",
+               "EPISODE_FIELDS", "STEP_SCHEMA", "EPISODE_SCHEMA", "FIELDS")
+
+
+@functools.cache
+def _arrow() -> dict:
+    import pyarrow as pa
+
+    # Hugging Face's Image feature is stored as this plain struct.
+    IMAGE_STRUCT = pa.struct([("bytes", pa.binary()), ("path", pa.string())])
+    VEC3 = pa.list_(pa.float32(), 3)
+    QUAT = pa.list_(pa.float32(), 4)
+    OBSTACLE_STRUCT = pa.struct(
+        [
+            ("shape", pa.string()),
+            ("center", VEC3),  # metres, world frame relative to the start
+            ("size", VEC3),  # metres, MuJoCo geom size: radius / half-extents / (radius, half-length, 0)
+            ("quat", QUAT),  # (w, x, y, z), body->world
+            ("rgba", QUAT),  # colour, each in [0, 1]
+        ]
+    )
+    LIGHTING_STRUCT = pa.struct(
+        [
+            ("sun_direction", VEC3),  # unit vector the light travels along, world frame
+            ("sun_intensity", pa.float32()),  # MuJoCo diffuse, 0..1+
+            ("ambient", pa.float32()),  # MuJoCo ambient, 0..1
+        ]
+    )
+    PLANNER_STRUCT = pa.struct(
+        [
+            ("solved", pa.bool_()),  # False: the expert fell back to direct flight
+            ("iterations", pa.int32()),  # RRT* iterations run
+            ("path_length", pa.float32()),  # metres, after shortening
+        ]
+    )
+
+    STEP_FIELDS = (
+        Field(EPISODE_INDEX, pa.int32(), "", "unique across splits"),
+        Field(FRAME_INDEX, pa.int32(), "", "0..L-1 within the episode"),
+        Field(TIMESTAMP, pa.float32(), "s", f"frame_index x {DT:g} s"),
+        Field(IMAGE, IMAGE_STRUCT, "", "onboard RGB camera, JPEG, H x W x 3"),
+        Field(DEPTH, IMAGE_STRUCT, "mm", "z-depth along the optical axis, 16-bit PNG; 0 = no return within the "
+              "camera's [near, far]"),
+        Field(DEPTH_LOW, pa.list_(pa.float32(), DEPTH_LOW_DIM), "m", f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} area-pooled "
+              "depth, row-major (no return counts as the far plane)"),
+        Field(STATE, pa.list_(pa.float32(), STATE_DIM), "m, m/s, 1, rad/s, 1",
+              "[p(3) world position relative to the start, v(3) body-frame velocity, r(6) rot6d = first two columns "
+              "of R (body->world) row-major [R00,R01,R10,R11,R20,R21], w(3) body-frame angular velocity, fuel ratio]"),
+        Field(ACTION, pa.list_(pa.float32(), ACTION_DIM), "1", "normalised thrust of thrusters 0..7 in [0, 1], "
+              "applied from t to t+1; zeros on the last (terminal) frame"),
+        Field(COLLISION, pa.bool_(), "", "a contact happened during the step that ended at this frame"),
+        Field(SUCCESS, pa.bool_(), "", "this frame is inside the goal region"),
+        Field(IS_LAST, pa.bool_(), "", "last frame of the episode"),
+        Field(MIN_CLEARANCE, pa.float32(), "m", "hull to the nearest obstacle surface (0 in contact)"),
+    )
+
+    EPISODE_FIELDS = (
+        Field(EPISODE_INDEX, pa.int32(), "", "unique across splits"),
+        Field(SPLIT, pa.string(), "", f"one of {', '.join(SPLITS)}"),
+        Field(LEVEL, pa.string(), "", f"the pilot: {', '.join(LEVELS)}"),
+        Field(SEED, pa.int64(), "", "episode seed: the episode is a pure function of it and the config"),
+        Field(LENGTH, pa.int32(), "frames", "rows of the episode in the steps table"),
+        Field(OUTCOME, pa.string(), "", f"how it ended: {', '.join(OUTCOMES)}"),
+        Field(N_OBSTACLES, pa.int32(), "", "number of obstacles"),
+        Field(OBSTACLES, pa.list_(OBSTACLE_STRUCT), "m", "shape, center (world), size (MuJoCo geom size), "
+              "quat (w, x, y, z) and rgba of each obstacle"),
+        Field(GOAL, VEC3, "m", "centre of the goal region, world frame relative to the start"),
+        Field(GOAL_RADIUS, pa.float32(), "m", "radius of the goal region"),
+        Field(INITIAL_VELOCITY, VEC3, "m/s", "velocity at frame 0, world frame"),
+        Field(INITIAL_QUAT, QUAT, "", "attitude at frame 0, (w, x, y, z) body->world"),
+        Field(LIGHTING, LIGHTING_STRUCT, "", "sun_direction (unit, world), sun_intensity and ambient"),
+        Field(PLANNER, PLANNER_STRUCT, "", "the expert's RRT* result: solved, iterations, path_length (m); "
+              "zeros for other levels"),
+        Field(DATA_FILE, pa.string(), "", "the data shard that holds the episode's rows"),
+        Field(ROW_START, pa.int64(), "", "first row of the episode in data_file"),
+        Field(ROW_END, pa.int64(), "", "one past its last row"),
+    )
+
+    STEP_SCHEMA = pa.schema([(f.name, f.type) for f in STEP_FIELDS])
+    EPISODE_SCHEMA = pa.schema([(f.name, f.type) for f in EPISODE_FIELDS])
+    FIELDS = {"data": STEP_FIELDS, "episodes": EPISODE_FIELDS}
+    arrow = {name: value for name, value in locals().items() if name.isupper()}
+    assert set(arrow) == set(ARROW_NAMES), sorted(arrow)
+    return arrow
+
+
+def __getattr__(name: str):
+    if name in ARROW_NAMES:
+        return _arrow()[name]
+    raise AttributeError(f"module 'orbitdata.schema' has no attribute {name!r}")
+
+
+def column_width(name: str) -> int:
+    """Values per row of a steps column: its fixed list size, or 1."""
+    t = _arrow()["STEP_SCHEMA"].field(name).type
+    return getattr(t, "list_size", 1)
+
+
+def readable_schema(version) -> bool:
+    """Whether this code reads a dataset of schema ``version``: same major (minors only add)."""
+    return isinstance(version, str) and version.split(".")[0] == SCHEMA_VERSION.split(".")[0]
+
+
+def _hf_feature(t) -> dict:
+    """The `datasets` feature of an Arrow type (JSON form; key order as `datasets` writes it)."""
+    import pyarrow as pa
+
+    if t.equals(_arrow()["IMAGE_STRUCT"]):
+        return {"_type": "Image"}
+    if pa.types.is_fixed_size_list(t):
+        return {"feature": _hf_feature(t.value_type), "length": t.list_size, "_type": "List"}
+    if pa.types.is_list(t):
+        return {"feature": _hf_feature(t.value_type), "_type": "List"}
+    if pa.types.is_struct(t):
+        return {t.field(i).name: _hf_feature(t.field(i).type) for i in range(t.num_fields)}
+    return {"dtype": {"float": "float32", "double": "float64"}.get(str(t), str(t)), "_type": "Value"}
+
+
 def hf_features(kind: str) -> dict:
-    """The `datasets` feature spec for a table, as stored in Parquet metadata and the card."""
-    def seq(dtype: str, n: int) -> dict:
-        return {"feature": {"dtype": dtype, "_type": "Value"}, "length": n, "_type": "List"}
-
-    vec3 = seq("float32", 3)
-    if kind == "data":
-        return {
-            EPISODE_INDEX: {"dtype": "int32", "_type": "Value"},
-            FRAME_INDEX: {"dtype": "int32", "_type": "Value"},
-            TIMESTAMP: {"dtype": "float32", "_type": "Value"},
-            IMAGE: {"_type": "Image"},
-            DEPTH: {"_type": "Image"},
-            DEPTH_LOW: seq("float32", DEPTH_LOW_DIM),
-            STATE: seq("float32", STATE_DIM),
-            ACTION: seq("float32", ACTION_DIM),
-            COLLISION: {"dtype": "bool", "_type": "Value"},
-            SUCCESS: {"dtype": "bool", "_type": "Value"},
-            IS_LAST: {"dtype": "bool", "_type": "Value"},
-            MIN_CLEARANCE: {"dtype": "float32", "_type": "Value"},
-        }
-    if kind == "episodes":
-        value = lambda d: {"dtype": d, "_type": "Value"}  # noqa: E731
-        return {
-            EPISODE_INDEX: value("int32"),
-            SPLIT: value("string"),
-            LEVEL: value("string"),
-            SEED: value("int64"),
-            LENGTH: value("int32"),
-            OUTCOME: value("string"),
-            N_OBSTACLES: value("int32"),
-            OBSTACLES: {
-                "feature": {
-                    "shape": value("string"),
-                    "center": vec3,
-                    "size": vec3,
-                    "quat": seq("float32", 4),
-                    "rgba": seq("float32", 4),
-                },
-                "_type": "List",
-            },
-            GOAL: vec3,
-            GOAL_RADIUS: value("float32"),
-            INITIAL_VELOCITY: vec3,
-            INITIAL_QUAT: seq("float32", 4),
-            LIGHTING: {
-                "sun_direction": vec3,
-                "sun_intensity": value("float32"),
-                "ambient": value("float32"),
-            },
-            PLANNER: {
-                "solved": value("bool"),
-                "iterations": value("int32"),
-                "path_length": value("float32"),
-            },
-            DATA_FILE: value("string"),
-            ROW_START: value("int64"),
-            ROW_END: value("int64"),
-        }
-    raise ValueError(f"unknown table kind {kind!r}: expected 'data' or 'episodes'")
+    """The `datasets` feature spec of a table, derived from its Arrow schema (Parquet metadata, card)."""
+    fields = _arrow()["FIELDS"]
+    if kind not in fields:
+        raise ValueError(f"unknown table kind {kind!r}: expected 'data' or 'episodes'")
+    return {f.name: _hf_feature(f.type) for f in fields[kind]}
 
 
-def with_hf_metadata(schema: pa.Schema, kind: str) -> pa.Schema:
+def with_hf_metadata(schema, kind: str):
     """Attach the `datasets` feature metadata so Image columns decode with no custom code."""
     meta = {b"huggingface": json.dumps({"info": {"features": hf_features(kind)}}).encode()}
     return schema.with_metadata(meta)

@@ -12,12 +12,17 @@ import numpy as np
 STREAMS = {"scenario": 0, "pilot": 1, "planner": 2, "split": 3, "level": 4}
 
 
+def _fold(key: list[int]) -> int:
+    """A 63-bit seed from a key of non-negative integers (SeedSequence's hash of it)."""
+    hi, lo = np.random.SeedSequence(key).generate_state(2, dtype=np.uint32)
+    return int((int(hi) << 32 | int(lo)) & ((1 << 63) - 1))
+
+
 def episode_seed(root_seed: int, index: int) -> int:
     """A 63-bit seed for episode ``index`` of a dataset generated with ``root_seed``."""
     if root_seed < 0 or index < 0:
         raise ValueError(f"seeds and indices must be non-negative, got {root_seed}, {index}")
-    hi, lo = np.random.SeedSequence([root_seed, index]).generate_state(2, dtype=np.uint32)
-    return int((int(hi) << 32 | int(lo)) & ((1 << 63) - 1))
+    return _fold([root_seed, index])
 
 
 def rng(seed: int, stream: str) -> np.random.Generator:
@@ -27,6 +32,4 @@ def rng(seed: int, stream: str) -> np.random.Generator:
 
 def grid_seed(root_seed: int, n_obstacles: int, speed: float, episode: int) -> int:
     """Seed of evaluation episode ``episode`` in grid cell (n_obstacles, speed m/s)."""
-    key = [int(root_seed), int(n_obstacles), int(round(speed * 1000)), int(episode)]
-    hi, lo = np.random.SeedSequence(key).generate_state(2, dtype=np.uint32)
-    return int((int(hi) << 32 | int(lo)) & ((1 << 63) - 1))
+    return _fold([int(root_seed), int(n_obstacles), int(round(speed * 1000)), int(episode)])

@@ -42,20 +42,21 @@ class DatasetMeta:
 
 def read_dataset_meta(source: str | Path) -> DatasetMeta:
     """Info and stats of an orbitdata dataset; raises FileNotFoundError / ValueError with the fix."""
-    raw, stats = _read_meta(source)
-    image = raw["features"][S.IMAGE]["shape"]
-    camera = raw["config"]["sim"]["camera"]
+    from orbitdata.load import read_meta
+
+    info, stats = read_meta(source)
+    camera = info.config["sim"]["camera"]
     return DatasetMeta(
         source=str(source),
-        image_size=int(image[0]),
+        image_size=int(info.image_size),
         state_mean=tuple(float(x) for x in stats[S.STATE]["mean"]),
         state_std=tuple(float(x) for x in stats[S.STATE]["std"]),
         action_mean=tuple(float(x) for x in stats[S.ACTION]["mean"]),
         action_std=tuple(float(x) for x in stats[S.ACTION]["std"]),
         depth_max=float(np.max(stats[S.DEPTH_LOW]["max"])),
         fovy_deg=float(camera["fovy_deg"]),
-        root_seed=int(raw["root_seed"]),
-        episodes={split: int(c["episodes"]) for split, c in raw["counts"]["splits"].items()},
+        root_seed=int(info.root_seed),
+        episodes={split: int(c["episodes"]) for split, c in info.counts["splits"].items()},
     )
 
 
@@ -68,10 +69,3 @@ def episode_filter(levels: list[str] | None, outcomes: list[str] | None) -> dict
         chosen[S.OUTCOME] = list(outcomes)
     return chosen or None
 
-
-def _read_meta(source):  # MERGE: replaced by orbitdata.load.read_meta (issue 10)
-    import json
-    folder = Path(source)
-    if not (folder / S.INFO_PATH).is_file():
-        raise FileNotFoundError(f"{source}: no {S.INFO_PATH}; not an orbitdata dataset folder")
-    return json.loads((folder / S.INFO_PATH).read_text()), json.loads((folder / S.STATS_PATH).read_text())

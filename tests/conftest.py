@@ -18,10 +18,11 @@ os.environ.setdefault("TOKENIZERS_PARALLELISM", "false")
 @pytest.fixture(scope="session")
 def tiny_dataset_master(tmp_path_factory) -> Path:
     """A 6-episode, 64 px dataset generated once per session (do not modify it)."""
-    from orbitdata.dataset.generate import generate
+    from orbitdata.viz import overview_figure
+    from orbitdata.write.generate import generate
 
     out = tmp_path_factory.mktemp("tiny") / "orbit"
-    generate(out, tiny_config(), workers=1)
+    generate(out, tiny_config(), workers=1, figure=overview_figure)
     return out
 
 

@@ -7,7 +7,7 @@ from orbitdata.scenario.spec import Lighting, Obstacle, Scenario
 
 def pure_force_thrust(env, force_body) -> np.ndarray:
     """Thrusts (8,) giving exactly ``force_body`` (N) with zero torque."""
-    from orbitdata.pilots.allocation import ThrustAllocator
+    from orbitdata.fly.pilots.allocation import ThrustAllocator
 
     u = ThrustAllocator(env.wrench_matrix, 0.05).allocate(np.r_[force_body, 0.0, 0.0, 0.0])
     np.testing.assert_allclose(env.wrench_matrix @ u, np.r_[force_body, 0, 0, 0], atol=1e-9)

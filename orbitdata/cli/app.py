@@ -1,4 +1,4 @@
-"""Entry point: ``orbitdata COMMAND``. Each command lives in its own module."""
+"""Entry point: ``orbitdata COMMAND`` (also ``python -m orbitdata``). Each command lives in its own module."""
 
 from __future__ import annotations
 
@@ -14,17 +14,11 @@ app = typer.Typer(
 
 
 def _register() -> None:
-    from orbitdata.cli import fly, generate
+    # Each module imports only light things at the top (typer, configs, the pilot registry);
+    # what a command needs (MuJoCo, OMPL, torch, datasets) is imported when it runs.
+    from orbitdata.cli import fly, generate, inspect, push, validate
 
-    for module in (generate, fly):
-        module.register(app)
-    for optional in ("validate", "push", "inspect"):
-        try:
-            module = __import__(f"orbitdata.cli.{optional}", fromlist=["register"])
-        except ModuleNotFoundError as exc:
-            if exc.name != f"orbitdata.cli.{optional}":
-                raise
-            continue
+    for module in (generate, fly, validate, push, inspect):
         module.register(app)
 
 

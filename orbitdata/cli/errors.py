@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import sys
 
@@ -19,6 +20,15 @@ def fail(message: str, code: int = 1) -> None:
 def usage(message: str) -> None:
     """Bad flag values: exit 2 like every other usage error."""
     fail(message, code=2)
+
+
+@contextlib.contextmanager
+def usage_errors(*errors: type[Exception]):
+    """Inside: a library's verdict on flag values (a config's ValueError by default) is a usage error."""
+    try:
+        yield
+    except errors or (ValueError,) as exc:
+        usage(str(exc))
 
 
 def friendly(func):

@@ -2,75 +2,117 @@
 
 from __future__ import annotations
 
+import inspect
 import json
+from enum import Enum
 from pathlib import Path
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
-from rich.table import Table
 
-from orbitdata.cli.errors import friendly, usage
-from orbitdata.config import GenerationConfig
+from orbitdata.cli.errors import friendly, usage, usage_errors
+from orbitdata.fly.registry import ENTRY_POINT_GROUP, list_pilots
+from orbitdata.sim.config import CameraConfig
 
 
-def _numbers(text: str, kind, flag: str) -> list:
-    try:
-        values = [kind(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        usage(f"{flag} {text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5")
-    if not values:
-        usage(f"{flag} is empty: the grid needs at least one value, e.g. {flag} 1,3,5")
-    return values
+class VideoFormat(str, Enum):
+    mp4 = "mp4"
+    gif = "gif"
+
+
+def _pilot(name: str) -> str:
+    # Checked when parsed, against the live registry (a pilot may be registered after import).
+    if name not in list_pilots():
+        raise typer.BadParameter(f"{name!r} is not one of {', '.join(list_pilots())}")
+    return name
+
+
+def _numbers(kind, flag: str):
+    def parse(text: str) -> list:
+        try:
+            values = [kind(x) for x in text.split(",") if x.strip()]
+        except ValueError:
+            raise typer.BadParameter(f"{text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5") \
+                from None
+        if not values:
+            raise typer.BadParameter(f"empty: the grid needs at least one value, e.g. {flag} 1,3,5")
+        return values
+
+    return parse
+
+
+def _options(pairs: list[str]) -> dict[str, str]:
+    options = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip():
+            usage(f"--pilot-option {pair!r} must be KEY=VALUE, e.g. --pilot-option checkpoint=run/model.pt")
+        options[key.strip()] = value
+    return options
 
 
 def register(app: typer.Typer) -> None:
     @app.command()
     @friendly
     def fly(
-        pilot: str = typer.Option("expert", help="expert, risky or exploratory."),
-        obstacles: str = typer.Option("1,3,5", help="Obstacle counts, comma-separated."),
-        speeds: str = typer.Option("1,2", help="Initial speeds in m/s, comma-separated."),
-        episodes: int = typer.Option(20, help="Episodes per setting."),
-        seed: int = typer.Option(0, help="Root seed of the grid."),
+        pilot: str = typer.Option("expert", parser=_pilot, help=f"Who flies: {', '.join(list_pilots())}, or any "
+                                  f"pilot an installed package registers (entry points '{ENTRY_POINT_GROUP}')."),
+        obstacles: str = typer.Option("1,3,5", parser=_numbers(int, "--obstacles"),
+                                      help="Obstacle counts, comma-separated."),
+        speeds: str = typer.Option("1,2", parser=_numbers(float, "--speeds"),
+                                   help="Initial speeds in m/s, comma-separated."),
+        episodes: int = typer.Option(20, min=1, help="Episodes per setting."),
+        seed: int = typer.Option(0, min=0, help="Root seed of the grid."),
         json_out: Path = typer.Option(None, "--json", help="Write the table as JSON here."),
         video: Path = typer.Option(None, help="Write a video of each episode to this folder."),
-        video_format: str = typer.Option("mp4", help="mp4 or gif."),
-        image_size: int = typer.Option(None, help="Camera image size for videos [default: 224]."),
+        video_format: VideoFormat = typer.Option(VideoFormat.mp4, help="Video format."),
+        render: bool = typer.Option(None, "--render/--no-render", show_default=False,
+                                    help="Render the camera [default: when the pilot needs images or --video]."),
+        image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
+                                       help="Camera image size in pixels, a multiple of 16."),
         config: Path = typer.Option(None, help="TOML config (scenario/sim/pilots settings)."),
+        pilot_option: list[str] = typer.Option([], help="KEY=VALUE passed to the pilot's factory (repeatable)."),
     ):
         """Fly PILOT over the grid (obstacles x speeds) and print outcome counts per setting."""
-        from orbitdata.grid import check_grid, fly_grid, grid_report
-        from orbitdata.pilots import PILOTS
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+        from rich.table import Table
 
-        if pilot not in PILOTS:
-            usage(f"--pilot {pilot!r} is not one of {', '.join(PILOTS)}")
-        n_obst = _numbers(obstacles, int, "--obstacles")
-        v = _numbers(speeds, float, "--speeds")
-        if episodes < 1:
-            usage(f"--episodes {episodes} must be >= 1")
-        if seed < 0:
-            usage(f"--seed {seed} must be >= 0")
-        if video_format not in ("mp4", "gif"):
-            usage(f"--video-format {video_format!r} is not one of mp4, gif")
-        try:
-            check_grid(pilot, n_obst, v, episodes)
-        except ValueError as exc:
-            usage(str(exc))
-        cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
-        if image_size is not None:
-            if image_size < 16 or image_size % 16:
-                usage(f"--image-size {image_size} must be a positive multiple of 16")
-            import dataclasses
+        from orbitdata.config import GenerationConfig
+        from orbitdata.fly.grid import check_grid, fly_grid, grid_report
+        from orbitdata.fly.registry import pilot_factory
 
-            cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
-        total = len(n_obst) * len(v) * episodes
+        with usage_errors():
+            check_grid(obstacles, speeds, episodes)
+            cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
+            if image_size is not None:
+                import dataclasses
+
+                cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
+        options = _options(pilot_option)
+        factory = pilot_factory(pilot)
+        with usage_errors(TypeError):  # an option the pilot's factory does not take
+            try:
+                inspect.signature(factory).bind(cfg, **options)
+            except TypeError as exc:
+                raise TypeError(f"--pilot-option: pilot {pilot!r} {exc}") from None
+        recorder = None
+        if video is not None:
+            from orbitdata.viz.flight import FlightVideos
+
+            recorder = FlightVideos(video, f".{video_format.value}")
+        total = len(obstacles) * len(speeds) * episodes
         console = Console(stderr=True)
         with Progress(TextColumn(f"[bold]fly {pilot}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                       console=console) as bar:
             task = bar.add_task("fly", total=total)
-            cells = fly_grid(pilot, n_obst, v, episodes, seed, cfg, video, f".{video_format}",
-                             on_episode=lambda cell, outcome: bar.advance(task))
+
+            def on_episode(cell, k, result):
+                if recorder is not None:
+                    recorder.episode(cell, k, result)
+                bar.advance(task)
+
+            cells = fly_grid(factory, obstacles, speeds, episodes, seed, cfg, render=render,
+                             frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode, **options)
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")

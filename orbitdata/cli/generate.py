@@ -4,17 +4,26 @@ from __future__ import annotations
 
 import dataclasses
 import os
+from enum import Enum
 from pathlib import Path
 
 import typer
-from rich.console import Console
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from orbitdata.cli.errors import friendly, usage
-from orbitdata.config import GenerationConfig
+from orbitdata.cli.errors import friendly, usage_errors
+from orbitdata.config import DatasetConfig
+from orbitdata.sim.config import CameraConfig
+
+MB = 1_000_000
 
 
-def _progress_bar(console: Console) -> Progress:
+class Executor(str, Enum):
+    local = "local"
+    ray = "ray"
+
+
+def _progress_bar(console):
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
     return Progress(
         TextColumn("[bold]generate"),
         BarColumn(),
@@ -34,14 +43,18 @@ def register(app: typer.Typer) -> None:
     @friendly
     def generate(
         out: Path = typer.Argument(..., help="Output folder (a Hugging Face dataset layout)."),
-        episodes: int = typer.Option(None, help="Number of episodes [default: 8000]."),
-        test_fraction: float = typer.Option(None, help="Share of each level in the test split [default: 0.1]."),
-        image_size: int = typer.Option(None, help="Square image size in pixels, a multiple of 16 [default: 224]."),
-        seed: int = typer.Option(None, help="Root seed [default: 0]."),
-        workers: int = typer.Option(0, help="Worker processes; 0 = all cores."),
-        executor: str = typer.Option("local", help="'local' (process pool) or 'ray'."),
+        episodes: int = typer.Option(None, min=1, show_default=str(DatasetConfig.episodes),
+                                     help="Number of episodes."),
+        test_fraction: float = typer.Option(None, min=0.0, max=1.0, show_default=str(DatasetConfig.test_fraction),
+                                            help="Share of each level in the test split, below 1."),
+        image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
+                                       help="Square image size in pixels, a multiple of 16."),
+        seed: int = typer.Option(None, min=0, show_default=str(DatasetConfig.seed), help="Root seed."),
+        workers: int = typer.Option(0, min=0, help="Worker processes; 0 = all cores."),
+        executor: Executor = typer.Option(Executor.local, help="Process pool here, or Ray tasks."),
         ray_address: str = typer.Option(None, help="Ray cluster address (with --executor ray)."),
-        max_shard_size: int = typer.Option(None, help="Max data shard size in MB [default: 500]."),
+        max_shard_mb: int = typer.Option(None, min=1, show_default=str(DatasetConfig.max_shard_bytes // MB),
+                                         help="Max data shard size in MB."),
         config: Path = typer.Option(None, help="TOML file with any scenario/sim/pilots/dataset setting."),
         overwrite: bool = typer.Option(False, help="Replace a dataset generated with a different config."),
         repo_id: str = typer.Option(None, help="Repo id to show in the card's loading snippet."),
@@ -50,30 +63,21 @@ def register(app: typer.Typer) -> None:
 
         Interrupted runs resume: run the same command again.
         """
-        from orbitdata.dataset.generate import generate as run
+        from rich.console import Console
 
-        cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
-        dataset = {}
-        for flag, key, value, ok in (
-            ("--episodes", "episodes", episodes, lambda v: v >= 1),
-            ("--test-fraction", "test_fraction", test_fraction, lambda v: 0 <= v < 1),
-            ("--seed", "seed", seed, lambda v: v >= 0),
-            ("--max-shard-size", "max_shard_bytes", max_shard_size, lambda v: v >= 1),
-        ):
-            if value is not None:
-                if not ok(value):
-                    usage(f"{flag} {value} is out of range; see `orbitdata generate --help`")
-                dataset[key] = value * 1_000_000 if key == "max_shard_bytes" else value
-        if dataset:
-            cfg = cfg.replace(dataset=dataset)
-        if image_size is not None:
-            if image_size < 16 or image_size % 16:
-                usage(f"--image-size {image_size} must be a positive multiple of 16 (e.g. 64, 128, 224)")
-            cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
-        if executor not in ("local", "ray"):
-            usage(f"--executor {executor!r} is not one of 'local', 'ray'")
-        if workers < 0:
-            usage(f"--workers {workers} must be >= 0 (0 = all cores)")
+        from orbitdata.config import GenerationConfig
+        from orbitdata.viz import overview_figure
+        from orbitdata.write.generate import generate as run
+
+        with usage_errors():
+            cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
+            flags = {"episodes": episodes, "test_fraction": test_fraction, "seed": seed,
+                     "max_shard_bytes": None if max_shard_mb is None else max_shard_mb * MB}
+            dataset = {key: value for key, value in flags.items() if value is not None}
+            if dataset:
+                cfg = cfg.replace(dataset=dataset)
+            if image_size is not None:
+                cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
         workers = workers or os.cpu_count() or 1
         out = out.expanduser()
         if out.exists() and not os.access(out, os.W_OK):
@@ -96,24 +100,26 @@ def register(app: typer.Typer) -> None:
                               f"{fps:.0f} frames/s, ETA {eta:.0f} s", highlight=False)
 
         with bar:
-            info = run(out, cfg, workers=workers, executor=executor, ray_address=ray_address,
-                       overwrite=overwrite, progress=report, repo_id=repo_id)
+            info = run(out, cfg, workers=workers, executor=executor.value, ray_address=ray_address,
+                       overwrite=overwrite, progress=report, repo_id=repo_id, figure=overview_figure)
             bar.update(task, completed=cfg.dataset.episodes)
-        c = info["counts"]
-        typer.echo(f"wrote {c['episodes']} episodes ({c['frames']} frames) to {out}")
+        typer.echo(f"wrote {info.counts['episodes']} episodes ({info.counts['frames']} frames) to {out}")
 
     @app.command()
     @friendly
     def shard(
         folder: Path = typer.Argument(..., help="A generated dataset folder (parts or shards)."),
-        max_shard_size: int = typer.Option(None, help="Max data shard size in MB [default: the dataset's]."),
+        max_shard_mb: int = typer.Option(None, min=1, help="Max data shard size in MB [default: the dataset's]."),
     ):
         """Compact part files, or re-shard a dataset, into data/ and episodes/ shards with meta/ and the card."""
-        from orbitdata.dataset.generate import shard as run
+        from orbitdata import schema as S
+        from orbitdata.load.source import local_folder
+        from orbitdata.viz import overview_figure
+        from orbitdata.write.finalize import finalize
 
-        if max_shard_size is not None and max_shard_size < 1:
-            usage(f"--max-shard-size {max_shard_size} must be >= 1 (MB)")
-        if not folder.is_dir():
-            raise FileNotFoundError(f"{folder} is not a folder; pass a dataset made by `orbitdata generate`")
-        info = run(folder, max_shard_bytes=None if max_shard_size is None else max_shard_size * 1_000_000)
-        typer.echo(f"sharded {info['counts']['episodes']} episodes into {len(info['files']) - 2} files in {folder}")
+        with usage_errors(FileNotFoundError, NotADirectoryError):
+            folder = local_folder(folder, repo_ok=False)
+        info = finalize(folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
+                        figure=overview_figure)
+        shards = [rel for rel in info.files if S.SHARD_RE.match(rel)]
+        typer.echo(f"sharded {info.counts['episodes']} episodes into {len(shards)} files in {folder}")

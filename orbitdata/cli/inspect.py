@@ -7,23 +7,19 @@ from pathlib import Path
 
 import typer
 from rich.console import Console
+from rich.filesize import decimal
 from rich.markup import escape
 from rich.table import Table
 from rich.text import Text
 
-from orbitdata.cli.errors import fail, friendly, usage
+from orbitdata.cli.errors import fail, friendly, usage, usage_errors
 from orbitdata.schema import FPS, LEVELS, OUTCOMES, SPLITS
 
 SPARK = " ▁▂▃▄▅▆▇█"
 
 
 def _bytes(n: int | None) -> str:
-    if n is None:
-        return "-"
-    for unit in ("B", "KB", "MB", "GB", "TB"):
-        if n < 1000 or unit == "TB":
-            return f"{n} B" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1000
+    return "-" if n is None else decimal(n)
 
 
 def _spark(counts: list[int]) -> str:
@@ -133,7 +129,7 @@ def register(app: typer.Typer) -> None:
 
         A repo id downloads only meta/info.json and the episodes shards (no frames).
         """
-        from orbitdata.dataset.summary import summarize
+        from orbitdata.load.summary import summarize
 
         summary = summarize(source)
         if as_json:
@@ -147,23 +143,21 @@ def register(app: typer.Typer) -> None:
         folder: Path = typer.Argument(..., help="A dataset folder made by `orbitdata generate`."),
         episode: int = typer.Option(None, "--episode", "-e", help="Episode index (episode_index, unique across splits)."),
         out: Path = typer.Option(..., "--out", "-o", help="FILE.mp4 or FILE.gif (a video) or FILE.png (a contact sheet)."),
-        fps: float = typer.Option(float(FPS), help="Video frame rate; the data is 25 fps (real time)."),
+        fps: float = typer.Option(float(FPS), help=f"Video frame rate; the data is {FPS} fps (real time)."),
     ):
         """Render one episode: camera and depth, top and side views of the path, speed, clearance, thrust, fuel.
 
         Needs the plotting extra: pip install 'orbitdata[viz]'.
         """
-        from orbitdata.viz.episode import EpisodeNotFound, index_range
+        from orbitdata.load.episodes import EpisodeNotFound, index_range
+        from orbitdata.load.source import dataset_folder
         from orbitdata.viz.show import check_format
 
-        try:
+        with usage_errors():
             check_format(out)
-        except ValueError as exc:
-            usage(str(exc))
-        if not fps > 0:
-            usage(f"--fps {fps} must be positive")
-        if not folder.is_dir():
-            raise FileNotFoundError(f"{folder} is not a folder; pass a dataset made by `orbitdata generate`")
+            if not fps > 0:
+                raise ValueError(f"--fps {fps} must be positive")
+        folder = dataset_folder(folder)
         if episode is None:
             usage(f"pass --episode N: {folder} holds {index_range(folder)}")
         try:

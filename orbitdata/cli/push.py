@@ -2,22 +2,13 @@
 
 from __future__ import annotations
 
-import re
 from pathlib import Path
 
 import typer
+from rich.filesize import decimal as _size
 
-from orbitdata.cli.errors import fail, friendly, usage
-
-REPO_ID = re.compile(r"^(?:[A-Za-z0-9][\w.-]*/)?[A-Za-z0-9][\w.-]*$")
-
-
-def _size(n: int) -> str:
-    for unit in ("B", "KB", "MB", "GB", "TB"):
-        if n < 1000 or unit == "TB":
-            return f"{n} {unit}" if unit == "B" else f"{n:.1f} {unit}"
-        n /= 1000
-    return f"{n:.1f} TB"
+from orbitdata.cli.errors import fail, friendly, usage_errors
+from orbitdata.publish.hub import PushOptions
 
 
 def register(app: typer.Typer) -> None:
@@ -28,7 +19,7 @@ def register(app: typer.Typer) -> None:
         repo_id: str = typer.Argument(..., help="Hub dataset repo, e.g. user/orbit_planner."),
         private: bool = typer.Option(False, "--private", help="Create the repo private."),
         revision: str = typer.Option(None, "--revision", "--branch", help="Branch to push to (created if missing)."),
-        message: str = typer.Option("Upload Orbit-Planner dataset (orbitdata)", help="Commit message."),
+        message: str = typer.Option(PushOptions.message, help="Commit message."),
         dry_run: bool = typer.Option(False, "--dry-run", help="List the files and the card; upload nothing."),
         force: bool = typer.Option(False, "--force", help="Push even if validation finds problems."),
     ):
@@ -38,17 +29,14 @@ def register(app: typer.Typer) -> None:
         The token comes from HF_TOKEN or `hf auth login`; it is never printed. Run the same
         command again to resume an interrupted push: files already on the Hub are skipped.
         """
-        from orbitdata.publish import PushOptions, PushRefused, preview, push as run
+        from orbitdata.load.source import check_repo_id, dataset_folder
+        from orbitdata.publish import PushRefused, preview, push as run
         from orbitdata.validate import ValidateOptions, validate
 
-        folder = folder.expanduser()
-        if not folder.is_dir():
-            usage(f"{folder} is not a dataset folder; pass the folder made by `orbitdata generate`")
-        if not REPO_ID.match(repo_id) or "--" in repo_id or ".." in repo_id:
-            usage(f"REPO_ID {repo_id!r} is not a Hub repo id; expected NAMESPACE/NAME, e.g. user/orbit_planner")
-        if revision is not None and not revision.strip():
-            usage("--revision needs a branch name, e.g. --revision v1")
-        options = PushOptions(private=private, revision=revision, message=message, force=force)
+        with usage_errors(ValueError, FileNotFoundError, NotADirectoryError):
+            folder = dataset_folder(folder.expanduser())
+            check_repo_id(repo_id)
+            options = PushOptions(private=private, revision=revision, message=message, force=force)
 
         report = validate(folder, ValidateOptions(quick=True))
         verdict = "valid" if report.ok else f"INVALID ({', '.join(report.failed())})"

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import typer
 
-from orbitdata.cli.errors import friendly, usage
+from orbitdata.cli.errors import friendly, usage_errors
+from orbitdata.validate.report import DEFAULT_CAP
 
 
 def _progress():
@@ -33,9 +34,9 @@ def register(app: typer.Typer) -> None:
     def validate(
         folder: Path = typer.Argument(..., help="Dataset folder, or a downloaded Hub snapshot."),
         quick: bool = typer.Option(False, "--quick", help="Structure, integrity, schema and counts only (no rows)."),
-        workers: int = typer.Option(0, help="Worker processes; 0 = all cores (fewer for small datasets)."),
+        workers: int = typer.Option(0, min=0, help="Worker processes; 0 = all cores (fewer for small datasets)."),
         json_out: Path = typer.Option(None, "--json", help="Also write a machine-readable report here."),
-        max_per_check: int = typer.Option(20, help="Problems listed per check; the rest are counted."),
+        max_per_check: int = typer.Option(DEFAULT_CAP, min=1, help="Problems listed per check; the rest are counted."),
     ):
         """Check a dataset against the contract and report every problem, grouped by check.
 
@@ -43,19 +44,13 @@ def register(app: typer.Typer) -> None:
         and the episodes table, and hashes every file. Exit code: 0 clean, 1 problems found,
         2 usage error.
         """
+        from orbitdata.load.source import local_folder
         from orbitdata.validate import ValidateOptions, validate as run
 
-        folder = folder.expanduser()
-        if not folder.exists():
-            usage(f"{folder} does not exist; pass a dataset folder (the one holding meta/info.json)")
-        if not folder.is_dir():
-            usage(f"{folder} is not a folder; pass the dataset folder (the one holding meta/info.json)")
-        if workers < 0:
-            usage(f"--workers {workers} must be >= 0 (0 = all cores)")
-        if max_per_check < 1:
-            usage(f"--max-per-check {max_per_check} must be >= 1")
-        if json_out is not None and not json_out.expanduser().parent.is_dir():
-            usage(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
+        with usage_errors(FileNotFoundError, NotADirectoryError):
+            folder = local_folder(folder.expanduser(), repo_ok=False)
+            if json_out is not None and not json_out.expanduser().parent.is_dir():
+                raise FileNotFoundError(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
         options = ValidateOptions(quick=quick, workers=workers, max_per_check=max_per_check)
         bar, update = _progress()
         if bar is not None:

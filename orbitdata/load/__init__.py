@@ -16,38 +16,52 @@ keyed by the dataset's column names::
 Batch with ``DataLoader(..., collate_fn=collate_windows)``: a map-style batch is then decoded
 in place rather than stacked (``default_collate`` works too, one copy slower).
 
-Pipeline: ``source`` (resolve, check the schema version, load tables) -> ``select``
-(episodes filter) -> ``index`` (window starts) -> ``decode`` (Arrow rows to tensors) ->
-``windows`` (map-style) or ``streaming`` (iterable) -> ``collate`` (batches).
+Pipeline: ``source`` (folder or Hub repo, meta/info.json and its schema version) -> ``tables``
+(load the split) -> ``select`` (episodes filter) -> ``index`` (window starts) -> ``decode``
+(Arrow rows to tensors) -> ``windows`` (map-style) or ``streaming`` (iterable) -> ``collate``.
+
+The same reader layer opens a dataset for everything else: :func:`read_meta` (info and the
+normalisation stats), ``episodes`` (one episode, its rows read by row group: ``rows``) and
+``summary`` (what ``orbitdata info`` shows). Only ``load_windows`` and the window datasets need
+torch and ``datasets``; they import on first use.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
-
-from orbitdata import schema as S
-from orbitdata.load.collate import collate_windows
+from orbitdata import lazy_getattr
+from orbitdata.info import Info
 from orbitdata.load.config import IS_PAD, WindowConfig
-from orbitdata.load.index import check_lengths, check_windows
-from orbitdata.load.select import EpisodeFilter, select_episodes
-from orbitdata.load.source import check_schema_version, load_episode_table, load_steps, read_info
-from orbitdata.load.streaming import StreamingWindowDataset
-from orbitdata.load.windows import WindowDataset
+from orbitdata.load.source import HubUnavailable, dataset_folder, is_repo_id, read_info, read_meta
 
-__all__ = ["load_windows", "WindowDataset", "StreamingWindowDataset", "WindowConfig", "collate_windows", "IS_PAD",
-           "EpisodeFilter"]
+if TYPE_CHECKING:
+    from orbitdata.load.select import EpisodeFilter
+    from orbitdata.load.streaming import StreamingWindowDataset
+    from orbitdata.load.windows import WindowDataset
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("WindowDataset",), "orbitdata.load.windows"),
+    **dict.fromkeys(("StreamingWindowDataset",), "orbitdata.load.streaming"),
+    **dict.fromkeys(("collate_windows",), "orbitdata.load.collate"),
+    **dict.fromkeys(("EpisodeFilter",), "orbitdata.load.select"),
+    **dict.fromkeys(("Episode", "load_episode", "read_episodes"), "orbitdata.load.episodes"),
+}
+
+__getattr__ = lazy_getattr(__name__, _LAZY)
+__all__ = ["load_windows", "read_meta", "read_info", "Info", "HubUnavailable", "dataset_folder", "is_repo_id",
+           "WindowConfig", "IS_PAD", *_LAZY]
 
 
 def load_windows(
     source: str | Path,
     split: str = "train",
-    context: int = 8,
-    horizon: int = 12,
-    stride: int = 1,
-    pad: bool = False,
-    image_size: int | None = None,
+    context: int = WindowConfig.context,
+    horizon: int = WindowConfig.horizon,
+    stride: int = WindowConfig.stride,
+    pad: bool = WindowConfig.pad,
+    image_size: int | None = WindowConfig.image_size,
     columns: list[str] | tuple[str, ...] | None = None,
     episodes: EpisodeFilter = None,
     streaming: bool = False,
@@ -79,12 +93,24 @@ def load_windows(
         ValueError: unknown schema version, missing column, an episodes filter that selects
             nothing, a window longer than every selected episode, inconsistent tables.
     """
+    import numpy as np
+
+    from orbitdata import schema as S
+    from orbitdata.load.index import check_lengths, check_windows
+    from orbitdata.load.select import select_episodes
+    from orbitdata.load.streaming import StreamingWindowDataset
+    from orbitdata.load.tables import load_episode_table, load_steps
+    from orbitdata.load.windows import WindowDataset
+
     if not streaming and (shuffle_buffer or seed):
         raise ValueError("shuffle_buffer/seed are for streaming=True; "
                          "shuffle a map-style dataset with ds.sampler(seed=...)")
     config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
                           columns=None if columns is None else tuple(columns))
-    check_schema_version(read_info(source, load_dataset_kwargs), source)
+    try:  # checks the schema version before anything is read
+        read_info(source, load_dataset_kwargs.get("revision"), load_dataset_kwargs.get("token"))
+    except HubUnavailable:
+        pass  # offline, private or gated: load_dataset says more (or reads its own cache)
     where = f"split {split!r} of {source}"
     table = load_episode_table(source, split, load_dataset_kwargs)
     selected = select_episodes(table, episodes, split)  # (E,) sorted episode_index

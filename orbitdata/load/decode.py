@@ -21,7 +21,7 @@ import pyarrow as pa
 import torch
 
 from orbitdata import schema as S
-from orbitdata.dataset.encode import MM_PER_M
+from orbitdata.codecs import MM_PER_M
 from orbitdata.load.config import IS_PAD, WindowConfig
 from orbitdata.load.memory import empty
 

@@ -1,97 +1,149 @@
-"""Where windows come from: a local dataset folder or a Hub repo id, read through ``load_dataset``.
+"""Where a dataset is: a local folder or a Hugging Face Hub repo id, and its ``meta/`` files.
 
-Before anything is read, the schema version in ``meta/info.json`` is checked: a local folder
-must have one; a Hub repo is checked when the file can be fetched (online, or in the Hub cache).
+The one place that decides what a source names (:func:`is_repo_id`, by ``huggingface_hub``'s
+own repo-id rule), says that a folder is not a dataset (:func:`local_folder`,
+:func:`dataset_folder`), fetches Hub files with errors that say what to do (:func:`hub_file`)
+and reads ``meta/info.json`` (checking its schema version) and ``meta/stats.json``
+(:func:`read_meta`). The loader, ``orbitdata info``/``show``/``push`` and ``generate`` all use it.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
-import pyarrow as pa
+from orbitdata import schema as S
+from orbitdata.info import Info
 
-from orbitdata import __version__, schema as S
-
-EPISODES_CONFIG = "episodes"  # the card's config name for the episodes table
-SUPPORTED_MAJOR = S.SCHEMA_VERSION.split(".")[0]  # minor versions only add, so they stay readable
+REPO_ID_HINT = "a Hub repo id like 'user/orbit_planner'"
 
 
-def local_folder(source: str | Path) -> Path | None:
-    """The dataset folder if ``source`` names one, None for a Hub repo id; raises for a missing path."""
-    path = Path(source).expanduser()
-    if path.exists():
-        if not path.is_dir():
-            raise NotADirectoryError(f"{source} is a file; give the dataset folder (the one with data/ and meta/)")
-        return path
-    text = str(source)
-    if isinstance(source, Path) or text.startswith((".", "/", "~")) or text.count("/") != 1:
-        raise FileNotFoundError(f"no dataset folder at {source}; give a local folder or a Hub repo id like 'user/name'")
-    return None
+class HubUnavailable(RuntimeError):
+    """A file of a Hub dataset repo could not be fetched; the message says why and what to do."""
 
 
-def read_info(source: str | Path, load_kwargs: dict) -> dict | None:
-    """``meta/info.json`` of the source; None when a Hub repo's file cannot be fetched."""
-    folder = local_folder(source)
-    if folder is not None:
-        path = folder / S.INFO_PATH
-        if not path.is_file():
-            raise FileNotFoundError(
-                f"{path} is missing: {folder} is not a complete orbitdata dataset "
-                "(finish it with `orbitdata generate`, or check it with `orbitdata validate`)"
-            )
-        try:
-            return json.loads(path.read_text())
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{path} is not valid JSON ({err}); run `orbitdata validate`") from None
+def check_repo_id(repo_id: str) -> str:
+    """``repo_id`` if the Hub accepts it (``namespace/name`` or ``name``), else ValueError saying why."""
+    from huggingface_hub.errors import HFValidationError
+    from huggingface_hub.utils import validate_repo_id
+
     try:
-        from huggingface_hub import hf_hub_download
-
-        path = hf_hub_download(
-            repo_id=str(source), filename=S.INFO_PATH, repo_type="dataset",
-            revision=load_kwargs.get("revision"), token=load_kwargs.get("token"),
-        )
-        return json.loads(Path(path).read_text())
-    except Exception:  # offline, private, or not an orbitdata repo: load_dataset will say more
-        return None
+        validate_repo_id(repo_id)
+    except HFValidationError as exc:
+        raise ValueError(f"{repo_id!r} is not a Hub repo id ({str(exc).splitlines()[0]}); expected NAMESPACE/NAME, "
+                         "e.g. user/orbit_planner") from None
+    return repo_id
 
 
-def check_schema_version(info: dict | None, source: str | Path) -> None:
-    """Raise unless the dataset's schema major version is the one this code reads."""
-    if info is None:
-        return
-    version = info.get("schema_version")
-    if version is None:
-        raise ValueError(f"{source}: {S.INFO_PATH} has no schema_version; it was not written by orbitdata")
-    if str(version).split(".")[0] != SUPPORTED_MAJOR:
-        raise ValueError(
-            f"{source} has schema version {version!r}, but orbitdata {__version__} reads schema "
-            f"{SUPPORTED_MAJOR}.x; install the orbitdata release that matches the dataset"
-        )
+def is_repo_id(source: str | Path) -> bool:
+    """True for a string ``namespace/name`` that the Hub accepts and that is not a local path."""
+    if isinstance(source, Path):
+        return False
+    text = str(source)
+    if text.startswith((".", "/", "~")) or text.count("/") != 1 or Path(text).exists():
+        return False
+    try:
+        check_repo_id(text)
+    except ValueError:
+        return False
+    return True
 
 
-def load_steps(source: str | Path, split: str, streaming: bool, load_kwargs: dict, columns=None):
-    """The steps table of one split: a memory-mapped ``Dataset``, or an ``IterableDataset`` in Arrow format."""
-    from datasets import load_dataset
+def local_folder(source: str | Path, repo_ok: bool = True) -> Path | None:
+    """The folder ``source`` names, or None for a Hub repo id (when ``repo_ok``); raises if it is neither."""
+    path = Path(source).expanduser()
+    if path.is_dir():
+        return path
+    if path.exists():
+        raise NotADirectoryError(f"{source} is a file, not a dataset folder: give the folder that holds "
+                                 f"{S.INFO_PATH}")
+    if is_repo_id(source):
+        if repo_ok:
+            return None
+        raise FileNotFoundError(f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
+                                f"first (`hf download {source} --repo-type dataset --local-dir DIR`)")
+    raise FileNotFoundError(f"no dataset folder at {source}: give a folder made by `orbitdata generate`"
+                            + (f", or {REPO_ID_HINT}" if repo_ok else ""))
 
-    kwargs = dict(load_kwargs)
-    if local_folder(source) is not None and "data_files" not in kwargs and "data_dir" not in kwargs:
-        # Named explicitly, the files' mtimes enter the cache key; through the card's configs
-        # they do not, and a rewritten dataset would be read from a stale Arrow cache.
-        kwargs["data_files"] = {split: f"{S.DATA_DIR}/{split}-*.parquet"}
-    if streaming and columns is not None:
-        kwargs["columns"] = list(columns)  # Parquet reads only these columns
-    steps = load_dataset(str(source), split=split, streaming=streaming, **kwargs)
-    return steps.with_format("arrow") if streaming else steps
+
+def dataset_folder(source: str | Path) -> Path:
+    """A local, finished dataset folder (it holds meta/info.json); raises saying what is wrong."""
+    folder = local_folder(source, repo_ok=False)
+    if not (folder / S.INFO_PATH).is_file():
+        raise FileNotFoundError(f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset "
+                                "(if a `generate` run into it was interrupted, run the same command again)")
+    return folder
 
 
-def load_episode_table(source: str | Path, split: str, load_kwargs: dict) -> pa.Table:
-    """The episodes config of one split as an Arrow table (small: one row per episode)."""
-    from datasets import load_dataset
+def _offline() -> bool:
+    from huggingface_hub import constants
 
-    kwargs = {k: v for k, v in load_kwargs.items() if k not in ("columns", "streaming", "name")}
-    episodes = load_dataset(str(source), EPISODES_CONFIG, split=split, streaming=True, **kwargs)
-    batches = list(episodes.with_format("arrow").iter(batch_size=100_000))
-    if not batches:
-        raise ValueError(f"{source}: split {split!r} has no episodes")
-    return pa.concat_tables(batches)
+    env = os.environ.get("HF_HUB_OFFLINE", "").strip().lower() in ("1", "true", "yes", "on")
+    return bool(constants.HF_HUB_OFFLINE) or env
+
+
+def hub_file(repo_id: str, filename: str, revision: str | None = None, token=None) -> Path:
+    """Download one file of a dataset repo (or take it from the local cache)."""
+    from huggingface_hub import hf_hub_download
+    from huggingface_hub.errors import (EntryNotFoundError, GatedRepoError, RepositoryNotFoundError,
+                                        RevisionNotFoundError)
+
+    try:
+        return Path(hf_hub_download(repo_id, filename, repo_type="dataset", revision=revision, token=token))
+    except Exception as exc:  # the client raises many types; every one means "not available"
+        if _offline():
+            why = ("offline mode is on (HF_HUB_OFFLINE=1) and the file is not in the local cache; "
+                   "unset HF_HUB_OFFLINE to download it, or pass a local dataset folder")
+        elif isinstance(exc, (RepositoryNotFoundError, GatedRepoError)):
+            why = ("there is no such dataset repo, or it is private or gated: check the id, "
+                   "or log in with `hf auth login`")
+        elif isinstance(exc, RevisionNotFoundError):
+            why = f"the repo has no revision {revision!r}"
+        elif isinstance(exc, EntryNotFoundError):
+            why = "the repo has no such file: was it pushed with `orbitdata push`?"
+        else:
+            first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            why = f"{first}; check your connection and the repo id, or pass a local dataset folder"
+        raise HubUnavailable(f"cannot fetch {filename} of dataset repo {repo_id!r} from the Hugging Face Hub: "
+                             f"{why}") from None
+
+
+def meta_file(source: str | Path, rel: str, revision: str | None = None, token=None) -> Path:
+    """Local path of ``rel`` (e.g. meta/stats.json) of a dataset folder or Hub repo; raises if absent."""
+    folder = local_folder(source)
+    if folder is None:
+        return hub_file(str(source), rel, revision, token)
+    path = folder / rel
+    if not path.is_file():
+        if rel == S.INFO_PATH:
+            dataset_folder(folder)  # raises the "not a finished dataset" error
+        raise FileNotFoundError(f"{path} is missing: regenerate meta with `orbitdata shard {folder}`, or check "
+                                f"the dataset with `orbitdata validate {folder}`")
+    return path
+
+
+def _json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise ValueError(f"{path} is not valid JSON ({err}); run `orbitdata validate` on the dataset") from None
+
+
+def read_info(source: str | Path, revision: str | None = None, token=None) -> Info:
+    """``meta/info.json`` of a dataset folder or Hub repo, typed; raises for an unreadable schema version."""
+    path = meta_file(source, S.INFO_PATH, revision, token)
+    where = str(path) if local_folder(source) is not None else f"{source}: {S.INFO_PATH}"
+    return Info.from_dict(_json(path), where=where)
+
+
+def read_meta(source: str | Path, revision: str | None = None, token=None) -> tuple[Info, dict]:
+    """(info, stats) of a dataset folder or Hub repo id.
+
+    ``stats`` is ``meta/stats.json``: feature name -> ``{"mean", "std", "min", "max", "q01",
+    "q99": lists of floats (one per value of the feature), "count", "q_count": ints}``, over
+    the train split (RGB channels in [0, 1]): what training normalises with.
+    """
+    info = read_info(source, revision, token)
+    stats = _json(meta_file(source, S.STATS_PATH, revision, token))
+    return info, stats

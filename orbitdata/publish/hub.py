@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from orbitdata import schema as S
-from orbitdata.dataset.meta import sha256_file
+from orbitdata.info import sha256_file
 from orbitdata.publish.plan import UploadFile, UploadPlan, batches, plan_upload
 
 LOGIN_HINT = "run `hf auth login` or set HF_TOKEN to a token with write access"
@@ -86,6 +86,7 @@ class PushResult:
 
 
 def _git_blob_id(path: Path) -> str:
+    """The id git (and the Hub's tree listing) gives a small file: sha1 of "blob <size>\\0" + bytes."""
     data = path.read_bytes()
     return hashlib.sha1(b"blob %d\0" % len(data) + data).hexdigest()
 
@@ -103,7 +104,7 @@ def _unchanged(f: UploadFile, root: Path, remote) -> bool:
 @contextlib.contextmanager
 def hub_errors(repo_id: str, endpoint: str) -> Iterator[None]:
     """Turn client exceptions into one-line HubErrors that say what to do (never the token)."""
-    import httpx2 as httpx
+    from httpx2 import TransportError  # huggingface_hub's HTTP client (declared in pyproject.toml)
     from huggingface_hub.errors import HfHubHTTPError, LocalTokenNotFoundError, OfflineModeIsEnabled
 
     try:
@@ -126,7 +127,7 @@ def hub_errors(repo_id: str, endpoint: str) -> Iterator[None]:
                            "see it") from None
         raise HubError(f"the Hub refused the push (HTTP {status}){detail}; run the same command again to resume")\
             from None
-    except httpx.TransportError as exc:
+    except TransportError as exc:
         raise HubError(f"cannot reach the Hub at {endpoint} ({type(exc).__name__}): check the network connection "
                        "(and HF_ENDPOINT), then run the same command again to resume") from None
 

@@ -8,11 +8,11 @@ never advertises a complete dataset it does not hold (as ``generate`` writes inf
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from orbitdata import schema as S
+from orbitdata.load.source import dataset_folder, read_info
 
 LAST = (S.CARD_PATH, S.INFO_PATH)  # the final commit, in this order
 
@@ -36,13 +36,9 @@ class UploadPlan:
 
 def plan_upload(root: Path) -> UploadPlan:
     """Every file of the dataset in ``root``, in upload order."""
-    root = Path(root)
+    root = dataset_folder(root)
     info_path = root / S.INFO_PATH
-    if not info_path.exists():
-        raise FileNotFoundError(f"{root} has no {S.INFO_PATH}: it is not a complete orbitdata dataset "
-                                "(run `orbitdata generate` to finish it)")
-    info = json.loads(info_path.read_text())
-    listed = info.get("files") or {}
+    listed = read_info(root).files
     missing = [rel for rel in listed if not (root / rel).is_file()]
     if missing:
         raise FileNotFoundError(f"{root}: {len(missing)} file(s) listed in {S.INFO_PATH} are missing, e.g. "
@@ -53,8 +49,7 @@ def plan_upload(root: Path) -> UploadPlan:
         rank = {S.DATA_DIR: 0, S.EPISODES_DIR: 1}.get(folder, 2)
         return (rank if rel not in LAST else 3 + LAST.index(rel), rel)
 
-    files = [UploadFile(rel, (root / rel).stat().st_size, entry.get("sha256"))
-             for rel, entry in listed.items()]
+    files = [UploadFile(rel, (root / rel).stat().st_size, entry.sha256) for rel, entry in listed.items()]
     files.append(UploadFile(S.INFO_PATH, info_path.stat().st_size, None))
     return UploadPlan(root, tuple(sorted(files, key=lambda f: order(f.rel))))
 

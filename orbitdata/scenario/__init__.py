@@ -1,16 +1,16 @@
-"""Episode specifications: what the world looks like before anyone flies in it."""
+"""Episode specifications: what the world looks like before anyone flies in it.
 
-from orbitdata.scenario.config import ScenarioConfig
-from orbitdata.scenario.geometry import clearance, signed_distance
-from orbitdata.scenario.sampler import sample_scenario
-from orbitdata.scenario.spec import Lighting, Obstacle, Scenario
+Names import on first use, so that ``orbitdata.scenario.config`` (the settings) stays light.
+"""
 
-__all__ = [
-    "Lighting",
-    "Obstacle",
-    "Scenario",
-    "ScenarioConfig",
-    "clearance",
-    "sample_scenario",
-    "signed_distance",
-]
+from orbitdata import lazy_getattr
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("ScenarioConfig",), "orbitdata.scenario.config"),
+    **dict.fromkeys(("clearance", "signed_distance"), "orbitdata.scenario.geometry"),
+    **dict.fromkeys(("sample_scenario",), "orbitdata.scenario.sampler"),
+    **dict.fromkeys(("Lighting", "Obstacle", "Scenario"), "orbitdata.scenario.spec"),
+}
+
+__getattr__ = lazy_getattr(__name__, _LAZY)
+__all__ = sorted(_LAZY)

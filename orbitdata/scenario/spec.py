@@ -6,19 +6,9 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from orbitdata import schema as S
 from orbitdata.schema import SHAPES
-
-
-def quat_to_mat(quat) -> np.ndarray:
-    """(w, x, y, z) unit quaternion -> 3x3 rotation matrix (body -> world)."""
-    w, x, y, z = (float(q) for q in quat)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+from orbitdata.state import quat_to_matrix
 
 
 @dataclass(frozen=True)
@@ -45,7 +35,7 @@ class Obstacle:
 
     @property
     def rotation(self) -> np.ndarray:
-        return quat_to_mat(self.quat)
+        return quat_to_matrix(self.quat)
 
     @property
     def bounding_radius(self) -> float:
@@ -93,13 +83,14 @@ class Scenario:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Scenario":
+        """From :meth:`to_dict`, or from a row of the episodes table (same field names)."""
         return cls(
             obstacles=tuple(Obstacle(**{k: tuple(v) if isinstance(v, list) else v for k, v in o.items()})
-                            for o in d["obstacles"]),
-            goal=tuple(d["goal"]),
-            goal_radius=float(d["goal_radius"]),
-            initial_velocity=tuple(d["initial_velocity"]),
-            initial_quat=tuple(d["initial_quat"]),
-            lighting=Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in d["lighting"].items()}),
-            seed=int(d.get("seed", 0)),
+                            for o in d[S.OBSTACLES]),
+            goal=tuple(d[S.GOAL]),
+            goal_radius=float(d[S.GOAL_RADIUS]),
+            initial_velocity=tuple(d[S.INITIAL_VELOCITY]),
+            initial_quat=tuple(d[S.INITIAL_QUAT]),
+            lighting=Lighting(**{k: tuple(v) if isinstance(v, list) else v for k, v in d[S.LIGHTING].items()}),
+            seed=int(d.get(S.SEED, 0)),
         )

@@ -1,15 +1,18 @@
-"""The simulated world: a CubeSat in MuJoCo, its thrusters, fuel and onboard camera."""
+"""The simulated world: a CubeSat in MuJoCo, its thrusters, fuel and onboard camera.
 
-from orbitdata.sim.config import CameraConfig, CubeSatConfig, SimConfig
-from orbitdata.sim.env import CubeSatEnv, validate_action
-from orbitdata.sim.thrusters import thruster_layout, wrench_matrix
+Names import on first use, so that ``orbitdata.sim.config`` (the light settings) never loads
+MuJoCo::
 
-__all__ = [
-    "CameraConfig",
-    "CubeSatConfig",
-    "CubeSatEnv",
-    "SimConfig",
-    "thruster_layout",
-    "validate_action",
-    "wrench_matrix",
-]
+    from orbitdata.sim import CubeSatEnv, SimConfig
+"""
+
+from orbitdata import lazy_getattr
+
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("CameraConfig", "CubeSatConfig", "SimConfig"), "orbitdata.sim.config"),
+    **dict.fromkeys(("CubeSatEnv", "validate_action"), "orbitdata.sim.env"),
+    **dict.fromkeys(("thruster_layout", "wrench_matrix"), "orbitdata.sim.thrusters"),
+}
+
+__getattr__ = lazy_getattr(__name__, _LAZY)
+__all__ = sorted(_LAZY)

@@ -11,6 +11,7 @@ force/torque direction is achievable with thrusts >= 0.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 from orbitdata.schema import DT
@@ -36,6 +37,11 @@ class CubeSatConfig:
         dry_inertia = self.dry_mass * (2 * self.half_size) ** 2 / 6.0
         return self.dry_mass + fuel_kg, dry_inertia + 0.4 * fuel_kg * self.tank_radius**2
 
+    @property
+    def bounding_radius(self) -> float:
+        """m, radius of the hull's bounding sphere (the cube's half-diagonal)."""
+        return math.sqrt(3.0) * self.half_size
+
 
 @dataclass(frozen=True)
 class CameraConfig:
@@ -52,7 +58,8 @@ class SimConfig:
     """Simulation settings.
 
     Attributes:
-        dt: control period in seconds (25 Hz, the paper's rate).
+        dt: control period in seconds: 0.04 (25 Hz, the paper's rate), fixed by the schema
+            (timestamps, fps, the validator's kinematics), so any other value is refused.
         substeps: physics steps per control step (timestep = dt / substeps).
         max_steps: frames per episode at most (timeout at the last one).
         render: render RGB + depth each step (False for physics-only use).
@@ -68,6 +75,9 @@ class SimConfig:
     gl_backend: str | None = None
 
     def __post_init__(self) -> None:
+        if abs(self.dt - DT) > 1e-12:
+            raise ValueError(f"sim.dt must be {DT:g} s (the schema's {1 / DT:g} Hz: timestamps, fps and validation "
+                             f"follow it), got {self.dt}; change substeps for a finer physics step")
         if self.substeps < 1:
             raise ValueError(f"substeps must be >= 1, got {self.substeps}")
         if self.max_steps < 2:

@@ -14,7 +14,7 @@ Spec (Gymnasium-style, version ``CubeSat-v1``):
 * **Reward**: +1 on success, -1 on collision, 0 otherwise (the dataset does not use it).
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``contact_substep``,
   ``min_clearance`` (m, hull to nearest obstacle surface, 0 in contact), ``fuel_kg``,
-  ``mass``, ``thrust`` (effective normalised thrust after fuel limits), ``position_world``,
+  ``mass`` (kg), ``thrust`` (effective normalised thrust after fuel limits), ``position_world``,
   ``step``.
 * **Arguments**: :class:`~orbitdata.sim.config.SimConfig` (physics, camera, hardware) and
   :class:`~orbitdata.scenario.config.ScenarioConfig` (randomisation).
@@ -24,8 +24,6 @@ when it is empty (the last step is scaled to the fuel that was left).
 """
 
 from __future__ import annotations
-
-import math
 
 import mujoco
 import numpy as np
@@ -37,8 +35,8 @@ from orbitdata.schema import ACTION_DIM
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.mjcf import BODY, CAMERA, HULL, OBSTACLE_PREFIX, build_mjcf
 from orbitdata.sim.render import CameraRenderer, pool_depth
-from orbitdata.sim.state import make_state
 from orbitdata.sim.thrusters import wrench_matrix
+from orbitdata.state import make_state
 
 G0 = 9.80665  # m/s^2, standard gravity (defines specific impulse)
 
@@ -65,7 +63,7 @@ class CubeSatEnv:
         self.scenario_config = scenario
         self.wrench_matrix = wrench_matrix(sim.cubesat)  # (6, 8) body frame
         sat = sim.cubesat
-        self.body_radius = math.sqrt(3.0) * sat.half_size  # m, bounding sphere of the hull
+        self.body_radius = sat.bounding_radius  # m
         self._mdot_per_thrust = sat.max_thrust / (sat.isp * G0)  # kg/s per unit thrust
         self._renderer: CameraRenderer | None = None
         self.model: mujoco.MjModel | None = None

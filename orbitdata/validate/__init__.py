@@ -6,11 +6,16 @@
 
 The checks are listed in :mod:`orbitdata.validate.checks`; each module ``checks_*`` owns a
 group of them, :mod:`~orbitdata.validate.rowgroup` is the unit of parallel work and
-:mod:`~orbitdata.validate.runner` puts it together.
+:mod:`~orbitdata.validate.runner` puts it together. Names import on first use.
 """
 
-from orbitdata.validate.checks import CHECKS, Check
-from orbitdata.validate.report import Finding, Report
-from orbitdata.validate.runner import ValidateOptions, validate
+from orbitdata import lazy_getattr
 
-__all__ = ["CHECKS", "Check", "Finding", "Report", "ValidateOptions", "validate"]
+_LAZY = {  # name -> the module that defines it
+    **dict.fromkeys(("CHECKS", "Check"), "orbitdata.validate.checks"),
+    **dict.fromkeys(("Finding", "Report"), "orbitdata.validate.report"),
+    **dict.fromkeys(("ValidateOptions", "validate"), "orbitdata.validate.runner"),
+}
+
+__getattr__ = lazy_getattr(__name__, _LAZY)
+__all__ = sorted(_LAZY)

@@ -55,7 +55,7 @@ CHECKS: tuple[Check, ...] = (
     Check(SHA256, "integrity", "sha256 and size of every file match meta/info.json", True),
     Check(CORRUPT, "integrity", "Parquet footers (quick) and every data page (full) decode", True),
     Check(COLUMNS, "schema", "column names, types and fixed sizes match the schema", True),
-    Check(VERSION, "schema", "meta/info.json names a schema version this orbitdata knows", True),
+    Check(VERSION, "schema", "meta/info.json names a schema version this orbitdata reads (same major)", True),
     Check(TABLE, "episodes", "episodes table fields are valid (split, level, outcome, length, obstacles)", True),
     Check(DUPLICATES, "episodes", "every episode_index appears once", True),
     Check(LEAK, "episodes", "no episode or seed in both splits; rows live in their split's files", True),

@@ -6,9 +6,9 @@
   ``rtol = 1e-6`` (the file keeps 7 significant digits) plus ``1e-7`` of the feature's range
   (float64 summation order, and std's ``sqrt(E[x^2] - mean^2)`` when std is ~0). Image moments
   come from every ``image_stride``-th train frame; the stride is read off the recorded count
-  (the generator's ``IMAGE_STRIDE`` if it fits), so data written with another stride still check.
+  (the recipe's ``IMAGE_STRIDE`` if it fits), so data written with another stride still check.
 * q01 / q99 were taken from a sample (every ``stride``-th row, at most ``QUANTILE_ROWS`` rows;
-  images: every 97th pixel), whose size older datasets did not record. So instead of rebuilding
+  images: every ``PIXEL_STRIDE``-th pixel), whose size older datasets did not record. So instead of rebuilding
   that sample, the check counts the values below and at ``q`` in the *whole* train split (exact,
   O(width) memory) and asks the fraction to be ``p`` within ``5 sqrt(p (1 - p) / n) + 2 / n``,
   ``n`` the smallest sample the generator may have used: five standard errors of a sample
@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orbitdata import schema as S
-from orbitdata.dataset.stats import IMAGE_STRIDE, QUANTILE_ROWS, SCALAR_FEATURES, VECTOR_FEATURES
+from orbitdata.codecs import (IMAGE_STRIDE, PIXEL_STRIDE, QUANTILE_ROWS, QUANTILES, SCALAR_FEATURES, VECTOR_FEATURES,
+                              stats_width)
+from orbitdata.info import counts
+from orbitdata.state import STATE_NAMES
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
 
-QUANTILES = (("q01", 0.01), ("q99", 0.99))
-WIDTHS = {S.STATE: S.STATE_DIM, S.ACTION: S.ACTION_DIM, S.DEPTH_LOW: S.DEPTH_LOW_DIM, S.IMAGE: 3}
-IMAGE_PIXEL_STRIDE = 97  # the image sample stride of files without q_count
 RTOL, RANGE_TOL = 1e-6, 1e-7
 
 
@@ -42,29 +42,6 @@ def _diff(a, b, path: str, out: list[str]) -> None:
             _diff(a.get(key), b.get(key), f"{path}.{key}" if path else key, out)
     elif a != b:
         out.append(f"{path}: meta/info.json says {a}, the episodes table gives {b}")
-
-
-def counts(rows: list) -> dict:
-    """meta/info.json's ``counts`` from episodes-table rows: the definition in orbitdata.dataset.meta.
-
-    Re-stated here (a test keeps the two equal) because importing the generator's module loads
-    MuJoCo and its GL stack, some 300 MB a validation does not need.
-    """
-    def tally(mine: list) -> dict:
-        return {o: sum(1 for r in mine if r.outcome == o) for o in S.OUTCOMES}
-
-    out: dict = {"episodes": len(rows), "frames": sum(r.length for r in rows), "splits": {}}
-    for split in S.SPLITS:
-        mine = [r for r in rows if r.split == split]
-        if not mine:
-            continue
-        levels = {}
-        for level in S.LEVELS:
-            lv = [r for r in mine if r.level == level]
-            levels[level] = {"episodes": len(lv), "frames": sum(r.length for r in lv), "outcomes": tally(lv)}
-        out["splits"][split] = {"episodes": len(mine), "frames": sum(r.length for r in mine), "levels": levels,
-                                "outcomes": tally(mine)}
-    return out
 
 
 def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_rows: dict[str, int],
@@ -83,7 +60,8 @@ def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_
     if info is not None and episodes_complete:
         diffs: list[str] = []
         usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
-        _diff(info.get("counts"), counts(usable), "counts", diffs)
+        _diff(info.get("counts"), counts((r.split, r.level, r.outcome, r.length) for r in usable), "counts",
+              diffs)
         for d in diffs:
             sink.add(C.COUNTS, d, S.INFO_PATH)
     if card is None:
@@ -119,7 +97,7 @@ class StatsPlan:
     @classmethod
     def build(cls, train_rows: int, stats: dict | None, image_pixels: int | None) -> "StatsPlan":
         quantiles = {}
-        for name, width in ((n, WIDTHS.get(n, 1)) for n in (*VECTOR_FEATURES, *SCALAR_FEATURES, S.IMAGE)):
+        for name, width in ((n, stats_width(n)) for n in (*VECTOR_FEATURES, *SCALAR_FEATURES, S.IMAGE)):
             entry = (stats or {}).get(name)
             try:
                 qs = {q: np.asarray(entry[q], dtype=np.float64).reshape(width) for q, _ in QUANTILES}
@@ -225,7 +203,7 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
         if m is None or m.n == 0:
             continue
         width = len(m.sum)
-        names = S.STATE_NAMES if name == S.STATE else [str(i) for i in range(width)]
+        names = STATE_NAMES if name == S.STATE else [str(i) for i in range(width)]
         if entry.get("count") != m.n:
             sink.add(C.STATS, f"{name} count is {entry.get('count')}, the train split has {m.n} values", S.STATS_PATH)
         with np.errstate(invalid="ignore", over="ignore"):  # NaN/Inf in the data: values.finite says where
@@ -251,7 +229,7 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
             below, at_or_below = m.ranks[q]
             # The sample size is recorded (q_count) since it became bounded; older files
             # sampled every 97th image pixel and at most QUANTILE_ROWS rows.
-            sample = entry.get("q_count") or (m.n // IMAGE_PIXEL_STRIDE if name == S.IMAGE else sample_rows)
+            sample = entry.get("q_count") or (m.n // PIXEL_STRIDE if name == S.IMAGE else sample_rows)
             tol = quantile_tolerance(p, sample)
             bad = np.flatnonzero((below / m.n > p + tol) | (at_or_below / m.n < p - tol))
             for i in bad[:3]:

@@ -24,11 +24,11 @@ import numpy as np
 import pyarrow as pa
 
 from orbitdata import schema as S
+from orbitdata.codecs import MM_PER_M
 from orbitdata.validate import checks as C
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.report import Sink
 
-MM_PER_M = 1000.0
 DEPTH_MM_SLACK = 1.0
 DEPTH_LOW_TOL_M = 1e-3
 DEPTH_BATCH = 64  # depth images checked together: vectorised, ~6 MB at 224 px

@@ -6,7 +6,6 @@ for the sha256, so they are all part of ``--quick``.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from dataclasses import dataclass, field
@@ -17,10 +16,10 @@ import pyarrow.parquet as pq
 import yaml
 
 from orbitdata import schema as S
+from orbitdata.info import FileEntry
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
 
-KNOWN_SCHEMA_VERSIONS = (S.SCHEMA_VERSION,)
 # Written by Hub clients or git, never part of a dataset: a downloaded snapshot may carry them.
 TOLERATED_FILES = (".gitattributes", ".gitignore")
 TOLERATED_DIRS = (".git", ".cache", ".huggingface")
@@ -114,9 +113,9 @@ def load_card(root: Path, sink: Sink) -> dict | None:
 
 def check_version(info: dict, sink: Sink) -> None:
     version = info.get("schema_version")
-    if version not in KNOWN_SCHEMA_VERSIONS:
-        sink.add(C.VERSION, f"schema_version {version!r} is not one this orbitdata knows "
-                            f"({', '.join(KNOWN_SCHEMA_VERSIONS)}); checked against {S.SCHEMA_VERSION} anyway. "
+    if not S.readable_schema(version):
+        sink.add(C.VERSION, f"schema_version {version!r} is not one this orbitdata reads "
+                            f"({S.SCHEMA_VERSION.split('.')[0]}.x); checked against {S.SCHEMA_VERSION} anyway. "
                             "Upgrade orbitdata, or regenerate the dataset", S.INFO_PATH)
 
 
@@ -172,16 +171,11 @@ def _check_shard_sets(layout: Layout, sink: Sink) -> None:
 
 def sha256_task(root: str, rel: str) -> tuple[str, str | None, int, str | None]:
     """(rel, sha256, bytes, error): runs in a worker process."""
-    h = hashlib.sha256()
-    size = 0
     try:
-        with open(Path(root) / rel, "rb") as f:
-            for block in iter(lambda: f.read(1 << 22), b""):
-                h.update(block)
-                size += len(block)
+        entry = FileEntry.of(Path(root) / rel)
     except OSError as exc:
-        return rel, None, size, exc.strerror or str(exc)
-    return rel, h.hexdigest(), size, None
+        return rel, None, 0, exc.strerror or str(exc)
+    return rel, entry.sha256, entry.bytes, None
 
 
 def check_hash(info: dict, rel: str, digest: str | None, size: int, error: str | None, sink: Sink) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 import pyarrow as pa
 
 from orbitdata import schema as S
+from orbitdata.state import FUEL as FUEL_SLICE, POSITION, ROT6D, STATE_NAMES
 from orbitdata.validate import checks as C
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.kinematics import POSITION_TOL_M, ROTATION_TOL_RAD, residuals
@@ -26,7 +27,7 @@ from orbitdata.validate.report import Sink
 
 ROT6D_TOL = 1e-5
 START_TOL_M = 1e-6
-FUEL = S.STATE_SLICES["fuel"].start
+FUEL = FUEL_SLICE.start  # the fuel column: (N,), not (N, 1)
 
 
 def _first_bad(row: np.ndarray, names) -> str:
@@ -38,8 +39,8 @@ def check_finite(fr: Frames, depth_low: np.ndarray, rel: str, sink: Sink) -> Non
     """NaN, Inf (and nulls, which arrive as NaN) in every float column."""
     columns = (
         (S.TIMESTAMP, fr.timestamp[:, None], (S.TIMESTAMP,)),
-        (S.STATE, fr.state, S.STATE_NAMES),
-        (S.ACTION, fr.action, [f"thruster_{i}" for i in range(S.ACTION_DIM)]),
+        (S.STATE, fr.state, STATE_NAMES),
+        (S.ACTION, fr.action, S.ACTION_NAMES),
         (S.DEPTH_LOW, depth_low, [f"cell {i}" for i in range(S.DEPTH_LOW_DIM)]),
         (S.MIN_CLEARANCE, fr.clearance[:, None], (S.MIN_CLEARANCE,)),
     )
@@ -60,7 +61,7 @@ def check_values(fr: Frames, rel: str, sink: Sink) -> None:
         sink.add_rows(C.ACTION, terminal, lambda i: f"terminal frame has action {np.round(a[i], 4).tolist()}; "
                       "nothing is applied after the last frame, so it must be all zeros", rel, ep, frame)
 
-        r = fr.state[:, S.STATE_SLICES["r"]].reshape(-1, 3, 2)
+        r = fr.state[:, ROT6D].reshape(-1, 3, 2)
         err = np.stack([np.abs((r[:, :, 0] ** 2).sum(1) - 1), np.abs((r[:, :, 1] ** 2).sum(1) - 1),
                         np.abs((r[:, :, 0] * r[:, :, 1]).sum(1))], axis=1).max(axis=1)
         bad = np.flatnonzero(err > ROT6D_TOL)
@@ -71,7 +72,7 @@ def check_values(fr: Frames, rel: str, sink: Sink) -> None:
         bad = np.flatnonzero((fuel < 0) | (fuel > 1))
         sink.add_rows(C.FUEL, bad, lambda i: f"fuel ratio {fuel[i]:.6g} leaves [0, 1]", rel, ep, frame)
 
-        p = fr.state[:, S.STATE_SLICES["p"]]
+        p = fr.state[:, POSITION]
         bad = np.flatnonzero((frame == 0) & (np.abs(p) > START_TOL_M).any(axis=1))
         sink.add_rows(C.START, bad, lambda i: f"position at frame 0 is {np.round(p[i], 6).tolist()} m; states are "
                       "relative to the start, so it must be 0", rel, ep, frame)

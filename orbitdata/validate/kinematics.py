@@ -34,22 +34,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from orbitdata.sim.state import rot6d_to_matrix
+from orbitdata.state import ANGULAR_VELOCITY, POSITION, ROT6D, VELOCITY, rot6d_to_matrix, so3_exp
 
 POSITION_TOL_M = 5e-3
 ROTATION_TOL_RAD = 1e-3
-
-
-def _expm(rv: np.ndarray) -> np.ndarray:
-    """(N, 3) rotation vectors -> (N, 3, 3) rotation matrices (Rodrigues)."""
-    theta = np.linalg.norm(rv, axis=1)
-    k = rv / np.maximum(theta, 1e-300)[:, None]
-    K = np.zeros((len(rv), 3, 3))
-    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
-    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
-    s = np.sin(theta)[:, None, None]
-    c = (1.0 - np.cos(theta))[:, None, None]
-    return np.eye(3) + s * K + c * (K @ K)
 
 
 def _angle(A: np.ndarray, B: np.ndarray) -> np.ndarray:
@@ -69,15 +57,15 @@ def rotation_residual(R0, R1, w0, w1, dt: float, n: int) -> np.ndarray:
     dw = w1 - w0
     step = np.broadcast_to(np.eye(3), (len(w0), 3, 3)).copy()
     for k in range(1, n + 1):
-        step = step @ _expm(h * (w0 + (k / n) * dw))
+        step = step @ so3_exp(h * (w0 + (k / n) * dw))
     return _angle(R0 @ step, R1)
 
 
 def residuals(s0: np.ndarray, s1: np.ndarray, dt: float, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Position (m) and rotation (rad) residuals of steps s0 -> s1, states (N, 16) float64."""
-    R0, R1 = rot6d_to_matrix(s0[:, 6:12]), rot6d_to_matrix(s1[:, 6:12])
-    u0 = np.einsum("nij,nj->ni", R0, s0[:, 3:6])  # m/s, world frame
-    u1 = np.einsum("nij,nj->ni", R1, s1[:, 3:6])
-    pos = position_residual(s0[:, 0:3], s1[:, 0:3], u0, u1, dt, n)
-    rot = rotation_residual(R0, R1, s0[:, 12:15], s1[:, 12:15], dt, n)
+    R0, R1 = rot6d_to_matrix(s0[:, ROT6D]), rot6d_to_matrix(s1[:, ROT6D])
+    u0 = np.einsum("nij,nj->ni", R0, s0[:, VELOCITY])  # m/s, world frame
+    u1 = np.einsum("nij,nj->ni", R1, s1[:, VELOCITY])
+    pos = position_residual(s0[:, POSITION], s1[:, POSITION], u0, u1, dt, n)
+    rot = rotation_residual(R0, R1, s0[:, ANGULAR_VELOCITY], s1[:, ANGULAR_VELOCITY], dt, n)
     return pos, rot

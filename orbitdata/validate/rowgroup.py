@@ -15,7 +15,8 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.validate import checks as C
-from orbitdata.validate.checks_consistency import WIDTHS, Moments, StatsPlan
+from orbitdata.codecs import stats_width
+from orbitdata.validate.checks_consistency import Moments, StatsPlan
 from orbitdata.validate.checks_episodes import check_rows, check_transitions, runs
 from orbitdata.validate.checks_images import Camera, check_images
 from orbitdata.validate.checks_values import check_finite, check_steps, check_values
@@ -109,7 +110,7 @@ def _moments(fr: Frames, depth_low: np.ndarray, rgb: dict, plan: StatsPlan) -> d
                S.MIN_CLEARANCE: fr.clearance[:, None], S.TIMESTAMP: fr.timestamp[:, None]}
     out = {}
     for name, x in columns.items():
-        assert x.shape[1] == WIDTHS.get(name, 1), name
+        assert x.shape[1] == stats_width(name), name
         m = Moments()
         m.update(x, plan.quantiles.get(name))
         out[name] = m

@@ -23,6 +23,7 @@ from typing import Callable, Iterable, Iterator
 import pyarrow.parquet as pq
 
 from orbitdata import schema as S
+from orbitdata.load.source import local_folder
 from orbitdata.validate import checks as C
 from orbitdata.validate.checks_consistency import Moments, StatsPlan, check_counts, check_stats, merge_moments
 from orbitdata.validate.checks_episodes import (EpisodeRow, check_file_edges, check_row_ranges, check_runs,
@@ -109,12 +110,7 @@ def _sha_task(args: tuple[str, str]):
 def validate(root: str | Path, options: ValidateOptions = ValidateOptions(),
              progress: Progress | None = None) -> Report:
     """Check the dataset in ``root`` against the contract. Raises only if ``root`` is not a folder."""
-    root = Path(root).expanduser()
-    if not root.exists():
-        raise FileNotFoundError(f"{root} does not exist; pass a dataset folder made by `orbitdata generate` "
-                                "or downloaded from the Hub")
-    if not root.is_dir():
-        raise NotADirectoryError(f"{root} is not a folder; pass the dataset folder (the one holding meta/info.json)")
+    root = local_folder(root, repo_ok=False)
     start = time.monotonic()
     workers = options.workers or _auto_workers(root)
     sink = Sink(options.max_per_check)

@@ -13,7 +13,7 @@ from PIL import Image
 
 from orbitdata import schema as S
 from orbitdata.viz import plots as P
-from orbitdata.viz.episode import Episode
+from orbitdata.load.episodes import Episode
 from orbitdata.viz.topdown import PlaneMap, draw_numbered, paired_views
 
 

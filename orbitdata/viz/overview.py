@@ -1,8 +1,9 @@
 """``meta/overview.png``: what a dataset looks like at a glance, embedded in its card.
 
 Sample frames for every (level, outcome) that occurs, the outcome rates per level and the
-episode-length distribution. ``shard`` imports this module only when matplotlib (the ``viz``
-extra) is installed: importing it without matplotlib raises ImportError, on purpose.
+episode-length distribution. The writer draws it through :func:`orbitdata.viz.overview_figure`,
+which imports this module only when matplotlib (the ``viz`` extra) is installed: importing it
+without matplotlib raises ImportError, on purpose.
 
 It stays fast on big datasets: one typical episode per (level, outcome), chosen
 deterministically (the median length), and three of its frames, read row group by row group.
@@ -18,10 +19,10 @@ import pyarrow as pa
 from PIL import Image
 
 from orbitdata import schema as S
-from orbitdata.dataset.encode import decode_rgb
-from orbitdata.dataset.parts import atomic_write
+from orbitdata.codecs import decode_rgb
+from orbitdata.write.parts import atomic_write
 from orbitdata.viz import plots as P
-from orbitdata.viz.episode import read_cells, read_rows
+from orbitdata.load.rows import RowReader, read_rows
 
 P.require_matplotlib()  # fail at import, so that `shard` skips the figure without the extra
 
@@ -29,6 +30,9 @@ OUTCOME_COLOURS = {"success": "#5fd35f", "collision": "#ff5a5a", "timeout": "#ff
 THUMB_MIN, THUMB_MAX = 104, 200  # px
 GRID_X = 110  # px, left edge of the sample grid
 WIDTH = 1400
+# A depth_low cell counts as filled below this share of the far plane: a cell with no return
+# pools to the far plane itself, up to float32 rounding of the mean.
+FAR_SHARE = 0.999
 
 
 def sample_episodes(episodes: pa.Table) -> dict[tuple[str, str], dict]:
@@ -44,32 +48,33 @@ def sample_episodes(episodes: pa.Table) -> dict[tuple[str, str], dict]:
     return picks
 
 
-def frames_to_show(out: Path, pick: dict) -> list[int]:
+def frames_to_show(out: Path, pick: dict, far: float) -> list[int]:
     """Start, the frame where obstacles fill most of the view, and just before the end.
 
-    The fill comes from the 16x16 ``depth_low`` column, so no image is decoded to choose.
+    The fill is the share of the 16x16 ``depth_low`` cells nearer than the far plane ``far``
+    (metres; a cell with no return pools to it), so no image is decoded to choose.
     """
     length = pick[S.LENGTH]
     if length < 3:
         return list(range(length))
     rows = read_rows(Path(out) / pick[S.DATA_FILE], pick[S.ROW_START], pick[S.ROW_START] + length, [S.DEPTH_LOW])
     low = rows.column(S.DEPTH_LOW).combine_chunks().values.to_numpy().reshape(length, -1)  # (L, 256) metres
-    fill = (low > 0).mean(axis=1)
+    fill = (low < FAR_SHARE * far).mean(axis=1)  # (L,)
     end = max(2, int(round(0.9 * (length - 1))))
     first = max(1, min(length // 4, end - 1))  # not right after the start: that view barely differs
     middle = first + int(np.argmax(fill[first:end]))  # the first maximum: deterministic
     return sorted({0, middle, end})
 
 
-def sample_frames(out: Path, picks: dict) -> dict[tuple[str, str], list[tuple[int, np.ndarray]]]:
+def sample_frames(out: Path, picks: dict, far: float) -> dict[tuple[str, str], list[tuple[int, np.ndarray]]]:
     """(frame index, RGB) of each picked episode's frames to show, reading each data file once."""
     wanted: dict[str, list[tuple[tuple[str, str], int, int]]] = {}
     for key, r in picks.items():
-        for t in frames_to_show(out, r):
+        for t in frames_to_show(out, r, far):
             wanted.setdefault(r[S.DATA_FILE], []).append((key, t, r[S.ROW_START] + t))
     frames: dict = {key: [] for key in picks}
     for data_file, items in sorted(wanted.items()):
-        cells = read_cells(Path(out) / data_file, [row for _, _, row in items], S.IMAGE)
+        cells = RowReader(Path(out) / data_file, [S.IMAGE]).cells([row for _, _, row in items], S.IMAGE)
         for (key, t, _), cell in zip(items, cells):
             frames[key].append((t, decode_rgb(cell["bytes"])))
     return frames
@@ -81,11 +86,11 @@ def _levels_outcomes(episodes: pa.Table) -> tuple[list[str], list[str]]:
     return [lv for lv in S.LEVELS if lv in levels], [o for o in S.OUTCOMES if o in outcomes]
 
 
-def render_overview(out: Path, episodes: pa.Table) -> np.ndarray:
+def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
     """The overview figure as an (H, W, 3) uint8 RGB array."""
     levels, outcomes = _levels_outcomes(episodes)
     picks = sample_episodes(episodes)
-    frames = sample_frames(out, picks)
+    frames = sample_frames(out, picks, far)
     n = len(outcomes)  # columns; thumbnails grow when there are few of them
     width = max(WIDTH, GRID_X + n * (3 * THUMB_MIN + 36) + 20)
     thumb = min(THUMB_MAX, (width - GRID_X - 20 - n * 36) // (3 * n))
@@ -181,11 +186,11 @@ def _lengths(fig, ax, rows: list[dict], levels: list[str]) -> None:
     ax.yaxis.set_major_locator(MaxNLocator(integer=True))
 
 
-def write_overview(out: Path, episodes: pa.Table) -> Path:
+def write_overview(out: Path, episodes: pa.Table, far: float) -> Path:
     """Render the overview of the dataset in ``out`` to ``meta/overview.png``; returns the path."""
     if episodes.num_rows == 0:
         raise ValueError(f"{out} holds no episodes; there is nothing to draw an overview of")
-    image = render_overview(Path(out), episodes)
+    image = render_overview(Path(out), episodes, far)
     buf = io.BytesIO()
     Image.fromarray(image).save(buf, format="PNG", optimize=True)
     path = Path(out) / S.OVERVIEW_PATH

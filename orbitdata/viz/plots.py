@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from orbitdata.schema import DT
-from orbitdata.viz.episode import Episode
+from orbitdata.load.episodes import Episode
 
 INSTALL_HINT = "pip install 'orbitdata[viz]'"
 DPI = 100

@@ -12,13 +12,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from orbitdata import schema as S
+from orbitdata.codecs import decode_depth, decode_rgb
 from orbitdata.schema import FPS, OUTCOME
 from orbitdata.viz import plots as P
-from orbitdata.viz.episode import Episode, load_episode
+from orbitdata.load.episodes import Episode, load_episode
 from orbitdata.viz.topdown import PlaneMap, paired_views
-from orbitdata.viz.video import write_video
+from orbitdata.viz.video import FORMATS as VIDEO_FILE_FORMATS, write_video
 
-VIDEO_FORMATS = (".mp4", ".gif")
+VIDEO_FORMATS = VIDEO_FILE_FORMATS
 FORMATS = VIDEO_FORMATS + (".png",)
 TEXT = (230, 230, 238)  # RGB, the theme's text colour
 
@@ -41,9 +43,10 @@ class EpisodeVideo:
     def __init__(self, ep: Episode, scale: float = 1.0):
         self.ep = ep
         self.k = scale  # gifs use a smaller frame
-        self.rgb = ep.rgb()
-        self.depth = ep.depth()
-        self.colours = P.DepthColours(P.DepthColours.range_for(self.depth[:: max(1, len(ep) // 25)]))
+        # Frames stay encoded (a few KB each) and are decoded as the writer asks for them.
+        self.rgb_bytes, self.depth_bytes = ep.encoded(S.IMAGE), ep.encoded(S.DEPTH)
+        sample = [decode_depth(b) for b in self.depth_bytes[:: max(1, len(ep) // 25)]]
+        self.colours = P.DepthColours(P.DepthColours.range_for(sample))
         with P.theme():
             fig = P.figure(self.WIDTH, self.HEIGHT, scale)
             fig.text(0.5, 1 - 22 / self.HEIGHT, ep.title(), ha="center", va="center", fontsize=13, weight="bold")
@@ -52,7 +55,7 @@ class EpisodeVideo:
             cbar = P.add_axes(fig, 580, 70, 12, self.CAM)
             top = P.add_axes(fig, 690, 70, 265, 236)
             side = P.add_axes(fig, 1000, 70, 265, 236)
-            for ax, title in ((cam, f"onboard camera ({self.rgb[0].shape[1]} px RGB)"), (dep, "depth")):
+            for ax, title in ((cam, f"onboard camera ({sample[0].shape[1]} px RGB)"), (dep, "depth")):
                 ax.set_axis_off()
                 ax.set_title(title)
             self.colours.colorbar(fig, cbar)
@@ -92,9 +95,10 @@ class EpisodeVideo:
     def frame(self, t: int) -> np.ndarray:
         ep = self.ep
         img = self.background.copy()
-        self.boxes["camera"].paste(img, P.fit(self.rgb[t], self.boxes["camera"].size))
-        self.boxes["depth"].paste(img, P.fit(self.colours(self.depth[t]), self.boxes["depth"].size))
-        if not (self.depth[t] > 0).any():  # a black panel is confusing without a word
+        rgb, depth = decode_rgb(self.rgb_bytes[t]), decode_depth(self.depth_bytes[t])
+        self.boxes["camera"].paste(img, P.fit(rgb, self.boxes["camera"].size))
+        self.boxes["depth"].paste(img, P.fit(self.colours(depth), self.boxes["depth"].size))
+        if not (depth > 0).any():  # a black panel is confusing without a word
             P.note(img, self.boxes["depth"], P.NO_RETURN, self.k)
         last = t == len(ep) - 1
         for name, view in self.views.items():
@@ -123,8 +127,6 @@ class EpisodeVideo:
 def show_episode(root: Path, index: int, out: Path, fps: float = FPS) -> Path:
     """Render episode ``index`` of the dataset at ``root`` to ``out`` (.mp4, .gif or .png)."""
     suffix = check_format(out)
-    if not fps > 0:
-        raise ValueError(f"fps {fps} must be positive (the data is {FPS} frames per second)")
     ep = load_episode(root, index)
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -55,7 +55,6 @@ class PlaneMap:
         self.width, self.height = (size, size) if np.isscalar(size) else (int(size[0]), int(size[1]))
         if self.width < 8 or self.height < 8:
             raise ValueError(f"map size {self.width}x{self.height} px is too small; use at least 8x8")
-        self.size = self.width  # backwards compatible: the square maps of `orbitdata fly --video`
         self.axes = tuple(axes)
         self.scenario = scenario
         ax = list(self.axes)
@@ -143,8 +142,6 @@ class PlaneMap:
         cv2.arrowedLine(img, self.px(position), self.px(tip), HEADING, 2, cv2.LINE_AA, tipLength=0.3)
         return img
 
-
-TopDownMap = PlaneMap  # the name `orbitdata fly --video` uses; its default axes are the top-down view
 
 
 def paired_views(scenario: Scenario, top_size: tuple[int, int], side_size: tuple[int, int],

@@ -129,9 +129,9 @@ def _frame_latents(model: WorldModel, dataset: str, cfg: RolloutEvalConfig) -> t
 
 
 def _depth_mean(dataset: str) -> torch.Tensor:
-    from orbitmodel.data import _read_meta
+    from orbitdata.load import read_meta
 
-    _, stats = _read_meta(dataset)
+    _, stats = read_meta(dataset)
     return torch.tensor(stats[S.DEPTH_LOW]["mean"], dtype=torch.float32).view(S.DEPTH_LOW_SIDE, S.DEPTH_LOW_SIDE)
 
 

@@ -10,7 +10,8 @@ import torch
 from torch.utils.data import DataLoader
 
 from orbitdata import schema as S
-from orbitdata.dataset.shard import StorageSettings, write_shards
+from orbitdata.config import DatasetConfig
+from orbitdata.write.shard import write_shards
 from orbitdata.load import IS_PAD, StreamingWindowDataset, load_windows
 
 LIGHT = [S.IMAGE, S.STATE, S.ACTION, S.SUCCESS]  # no full-res depth: faster, same code paths
@@ -26,7 +27,7 @@ def sharded(tiny_dataset_master, tmp_path_factory):
     """The tiny dataset re-sharded to one episode per Parquet file (several shards per split)."""
     out = tmp_path_factory.mktemp("sharded") / "orbit"
     shutil.copytree(tiny_dataset_master, out)
-    write_shards(out, StorageSettings(max_shard_bytes=1, row_group_rows=64))
+    write_shards(out, DatasetConfig(max_shard_bytes=1, row_group_rows=64))
     assert len(list((out / S.DATA_DIR).glob("train-*.parquet"))) >= 4
     return out
 

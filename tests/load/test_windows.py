@@ -11,7 +11,7 @@ import torch
 from torch.utils.data import default_collate
 
 from orbitdata import schema as S
-from orbitdata.dataset.encode import decode_depth, decode_rgb
+from orbitdata.codecs import decode_depth, decode_rgb
 from orbitdata.load import IS_PAD, WindowDataset, collate_windows, load_windows
 from orbitdata.load.config import WindowConfig
 

@@ -121,7 +121,7 @@ def test_missing_dataset(tmp_path):
 def test_folder_that_is_not_a_dataset(tmp_path):
     (tmp_path / "plain").mkdir()
     _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
-                     "not an orbitdata dataset")
+                     "not a finished orbitdata dataset")
 
 
 def test_image_size_the_preset_cannot_take(tiny_dataset_master, tmp_path):

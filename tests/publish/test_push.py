@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -132,10 +131,11 @@ def test_push_to_a_branch(hub_client, tiny_dataset_master):
 
 
 def test_repush_of_a_resharded_dataset_removes_stale_shards(hub_client, tiny_dataset):
-    from orbitdata.dataset.generate import shard
+    from orbitdata.viz import overview_figure
+    from orbitdata.write.finalize import finalize
 
     push(tiny_dataset, REPO)
-    shard(tiny_dataset, max_shard_bytes=100_000)  # several smaller shards replace each split's one
+    finalize(tiny_dataset, max_shard_bytes=100_000, figure=overview_figure)  # several smaller shards replace each split's one
     result = push(tiny_dataset, REPO)
     assert result.deleted == [S.shard_path(S.DATA_DIR, "test", 0, 1), S.shard_path(S.DATA_DIR, "train", 0, 1)]
     assert hub_client.files(REPO) == dataset_files(tiny_dataset)
@@ -184,4 +184,3 @@ def test_usage_errors_exit_2(tiny_dataset_master, args):
 
 def test_missing_folder_exits_2(tmp_path):
     assert runner.invoke(app, ["push", str(tmp_path / "nope"), REPO]).exit_code == 2
-    shutil.rmtree(tmp_path)

@@ -17,7 +17,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from orbitdata import schema as S
-from orbitdata.dataset.meta import sha256_file
+from orbitdata.info import sha256_file
 
 TRAIN = S.shard_path(S.DATA_DIR, "train", 0, 1)
 TEST = S.shard_path(S.DATA_DIR, "test", 0, 1)

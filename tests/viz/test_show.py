@@ -12,7 +12,7 @@ from orbitdata import schema as S
 from orbitdata.cli.app import app
 from orbitdata.viz import plots as P
 from orbitdata.viz.contact_sheet import ContactSheet, key_frames
-from orbitdata.viz.episode import EpisodeNotFound, load_episode, read_episodes
+from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_episodes
 from orbitdata.viz.show import EpisodeVideo, show_episode
 from orbitdata.viz.topdown import PATH
 
@@ -99,6 +99,38 @@ def test_mp4_has_one_frame_per_step(tiny_dataset_master, shortest, tmp_path):
     assert n == len(load_episode(tiny_dataset_master, shortest))
 
 
+def test_an_mp4_from_orbitdata_show_is_h264_that_browsers_play(tiny_dataset_master, shortest, tmp_path):
+    imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg", reason="mp4 needs the viz extra")
+    out = tmp_path / "ep.mp4"
+    res = runner.invoke(app, ["show", str(tiny_dataset_master), "--episode", str(shortest), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    probe = imageio_ffmpeg.read_frames(str(out))  # ffmpeg's own reading of the stream header
+    meta = next(probe)
+    probe.close()
+    assert meta["codec"].startswith("h264"), meta["codec"]
+    assert meta["pix_fmt"].startswith("yuv420p"), meta["pix_fmt"]  # the pixel format browsers decode
+    assert meta["size"] == (1280, 720) and meta["fps"] == 25
+    assert out.read_bytes()[4:8] == b"ftyp"  # an MP4 container
+
+
+def test_videos_stream_frames_as_they_are_drawn(tmp_path):
+    """The writer pulls one frame at a time: the file grows while frames are still to come."""
+    from orbitdata.viz.video import write_video
+
+    rng = np.random.default_rng(0)
+    path, sizes = tmp_path / "v.gif", []
+
+    def frames():
+        for _ in range(60):
+            sizes.append(path.stat().st_size if path.exists() else 0)
+            yield rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)  # noise: ~6 KB a frame in the GIF
+
+    write_video(path, frames(), 25)
+    assert len(sizes) == 60 and 0 < sizes[30] < sizes[59] < path.stat().st_size, sizes  # written as it goes
+    with Image.open(path) as im:
+        assert im.n_frames == 60 and im.size == (96, 64)
+
+
 def test_gif_has_one_frame_per_step(tiny_dataset_master, shortest, tmp_path):
     out = show_episode(tiny_dataset_master, shortest, tmp_path / "ep.gif")
     with Image.open(out) as im:
@@ -164,7 +196,7 @@ def test_show_cli_errors(tiny_dataset_master, tmp_path, args, code, message):
 
 def test_show_cli_on_a_missing_folder(tmp_path):
     res = runner.invoke(app, ["show", str(tmp_path / "nope"), "--episode", "0", "--out", str(tmp_path / "x.png")])
-    assert res.exit_code == 1 and "is not a folder" in res.output
+    assert res.exit_code == 1 and "no dataset folder at" in res.output
 
 
 def test_without_matplotlib_the_error_says_how_to_install(tiny_dataset_master, tmp_path, monkeypatch):

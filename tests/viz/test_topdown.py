@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from orbitdata.scenario.spec import Obstacle, Scenario
-from orbitdata.viz.topdown import BG, GRID, PATH, PlaneMap, TopDownMap, paired_views
+from orbitdata.viz.topdown import BG, GRID, PlaneMap, paired_views
 
 
 def _scenario(*obstacles):
@@ -60,17 +60,6 @@ def test_top_and_side_share_one_scale():
     top, side = paired_views(_scenario(), (300, 200), (300, 120), _path())
     assert top.scale == side.scale
     assert top.axis_names == ("x", "y") and side.axis_names == ("x", "z")
-
-
-def test_the_fly_video_map_still_works():
-    path = _path()
-    view = TopDownMap(_scenario(), 128, path)
-    img = view.background()
-    assert img.shape == (128, 128, 3) and img.dtype == np.uint8
-    out = view.draw_path(img, path, path[-1])
-    assert out is img
-    u, v = view.polyline(path)[20]
-    assert np.abs(img[v, u].astype(int) - PATH).max() < 60
 
 
 def test_too_small_a_map_is_refused():

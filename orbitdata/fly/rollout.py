@@ -1,0 +1,104 @@
+"""Fly one episode: a pilot in the simulator, frame by frame, recording what happened.
+
+Both ``orbitdata fly`` (evaluation grid) and ``orbitdata generate`` (the dataset) use this
+loop, so the data and the success tables come from the same code. The pilot gets the
+:class:`~orbitdata.fly.pilot.Task` and each observation; only a privileged pilot also gets the
+scenario (the true obstacles).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from orbitdata.fly.pilot import Pilot, Task
+from orbitdata.scenario.spec import Scenario
+from orbitdata.schema import ACTION_DIM, DEPTH_LOW_SIDE, STATE_DIM
+from orbitdata.sim.env import CubeSatEnv
+
+# Called once per frame with (frame_index, rgb (H, W, 3) uint8, depth (H, W) float32 m,
+# depth_low (16, 16) float32 m) when the env renders.
+FrameSink = Callable[[int, np.ndarray, np.ndarray, np.ndarray], None]
+
+
+@dataclass
+class EpisodeResult:
+    """Low-dimensional record of one flown episode; row t follows the schema's semantics."""
+
+    scenario: Scenario
+    pilot: str  # the pilot's name (the level, for the dataset's pilots)
+    seed: int
+    outcome: str
+    states: np.ndarray  # (L, 16) float32
+    actions: np.ndarray  # (L, 8) float32, last row zeros (terminal frame)
+    collision: np.ndarray  # (L,) bool
+    success: np.ndarray  # (L,) bool
+    min_clearance: np.ndarray  # (L,) float32 metres
+    depth_low: np.ndarray | None = None  # (L, 16, 16) float32 metres when rendered
+    pilot_info: dict = field(default_factory=dict)
+
+    @property
+    def length(self) -> int:
+        return len(self.states)
+
+
+def fly_episode(
+    env: CubeSatEnv,
+    pilot: Pilot,
+    seed: int,
+    n_obstacles: int | None = None,
+    speed: float | None = None,
+    scenario: Scenario | None = None,
+    frame_sink: FrameSink | None = None,
+) -> EpisodeResult:
+    """Reset ``env`` with ``seed`` (or the given scenario), fly ``pilot`` until the episode ends."""
+    options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
+    if pilot.needs_images and not env.sim.render:
+        raise ValueError(f"pilot {pilot.name!r} needs camera images, but the env does not render: "
+                         "use SimConfig(render=True)")
+    obs, info = env.reset(seed=seed, options=options)
+    scn = env.scenario
+    task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)
+    if pilot.privileged:
+        pilot.reset(task, scenario=scn)
+    else:
+        pilot.reset(task)
+    max_frames = env.sim.max_steps
+    states = np.zeros((max_frames, STATE_DIM), np.float32)
+    actions = np.zeros((max_frames, ACTION_DIM), np.float32)
+    collision = np.zeros(max_frames, bool)
+    success = np.zeros(max_frames, bool)
+    clearance = np.zeros(max_frames, np.float32)
+    depth_low = np.zeros((max_frames, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE), np.float32) if env.sim.render else None
+    t = 0
+    while True:
+        states[t] = obs["state"]
+        clearance[t] = info["min_clearance"]
+        collision[t] = info["collision"]
+        success[t] = info["success"]
+        if depth_low is not None:
+            depth_low[t] = obs["depth_low"]
+        if frame_sink is not None and "image" in obs:
+            frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
+        if info["outcome"] is not None:
+            break
+        action = np.asarray(pilot.act(obs), dtype=np.float32)
+        actions[t] = action
+        obs, _, _, _, info = env.step(action.astype(np.float64))
+        t += 1
+    length = t + 1
+    return EpisodeResult(
+        scenario=env.scenario,
+        pilot=pilot.name,
+        seed=seed,
+        outcome=info["outcome"],
+        states=states[:length],
+        actions=actions[:length],
+        collision=collision[:length],
+        success=success[:length],
+        min_clearance=clearance[:length],
+        depth_low=None if depth_low is None else depth_low[:length],
+        pilot_info=pilot.metadata(),
+    )

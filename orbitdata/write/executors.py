@@ -1,0 +1,58 @@
+"""Where work units run: a local process pool (default) or a Ray cluster (``orbitdata[ray]``).
+
+Both yield ``UnitResult`` objects to the driver, which alone writes files; results may arrive
+in any order, and the output does not depend on it.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from typing import Iterator
+
+from orbitdata.write.plan import Unit
+from orbitdata.write.worker import UnitResult, run_unit_from_dict
+
+RAY_HINT = "the Ray executor needs the 'ray' extra: pip install 'orbitdata[ray]'"
+
+
+def run_local(config: dict, units: list[Unit], workers: int) -> Iterator[UnitResult]:
+    """Run units in ``workers`` spawned processes (in-process when workers == 1)."""
+    if workers <= 1:
+        for unit in units:
+            yield run_unit_from_dict(config, unit)
+        return
+    # spawn, not fork: a forked GL/EGL context is undefined behaviour.
+    ctx = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+        pending = set()
+        queue = list(units)
+        # Keep a bounded number of units in flight so results stream back steadily.
+        while queue or pending:
+            while queue and len(pending) < 2 * workers:
+                pending.add(pool.submit(run_unit_from_dict, config, queue.pop(0)))
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield fut.result()
+
+
+def run_ray(config: dict, units: list[Unit], address: str | None, workers: int) -> Iterator[UnitResult]:
+    """Run units as Ray tasks; results (Parquet bytes) come back through the object store."""
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError(RAY_HINT) from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        kwargs = {"address": address} if address else {"num_cpus": workers}
+        ray.init(include_dashboard=False, log_to_driver=False, **kwargs)
+    try:
+        task = ray.remote(num_cpus=1)(run_unit_from_dict)
+        pending = [task.remote(config, unit) for unit in units]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            for ref in done:
+                yield ray.get(ref)
+    finally:
+        if started_here:
+            ray.shutdown()

@@ -1,0 +1,134 @@
+"""``generate``: plan, fly and write a dataset, resumably; then :func:`~orbitdata.write.finalize.finalize` it."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from orbitdata import __version__, schema as S
+from orbitdata.config import GenerationConfig
+from orbitdata.info import Info
+from orbitdata.load.source import read_info
+from orbitdata.write import parts
+from orbitdata.write.executors import run_local, run_ray
+from orbitdata.write.finalize import Figure, finalize
+from orbitdata.write.plan import plan_units
+
+OWNED = (S.DATA_DIR, S.EPISODES_DIR, S.META_DIR, S.PARTS_DIR, S.CARD_PATH)
+
+
+class DatasetExists(RuntimeError):
+    """OUT holds a dataset (or other files) that this run would clobber."""
+
+
+@dataclass
+class Progress:
+    """What a progress callback receives after every finished unit."""
+
+    units_done: int
+    units_total: int
+    episodes_done: int  # including units finished by an earlier, interrupted run
+    episodes_new: int  # flown by this run (for rates)
+    episodes_total: int
+    frames_done: int
+    elapsed: float  # seconds since this run started
+
+
+def _manifest(config: GenerationConfig) -> dict:
+    return {"config": config.to_dict(), "schema_version": S.SCHEMA_VERSION, "codebase_version": __version__}
+
+
+def existing_config(out: Path) -> dict | None:
+    """The config of the generation in ``out``: its parts' manifest, else its meta/info.json."""
+    manifest = parts.read_manifest(out)
+    if manifest is not None:
+        return manifest["config"]
+    if (out / S.INFO_PATH).exists():
+        return read_info(out).config
+    return None
+
+
+def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool:
+    """Make OUT ready. Returns True if the dataset there is already complete."""
+    if out.exists() and not out.is_dir():
+        raise DatasetExists(f"{out} exists and is not a folder; choose another OUT")
+    existing = existing_config(out) if out.exists() else None
+    mine = json.loads(json.dumps(config.to_dict()))  # tuples -> lists, as stored
+    if existing is not None and existing != mine:
+        if not overwrite:
+            raise DatasetExists(
+                f"{out} holds a dataset generated with a different config; "
+                "pass --overwrite to replace it, or choose another OUT"
+            )
+        clear_output(out)
+    elif existing is None and out.exists() and any(out.iterdir()):
+        if not overwrite:
+            raise DatasetExists(f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite")
+        clear_output(out)
+    complete = (out / S.INFO_PATH).exists() and not parts.parts_dir(out).exists() and existing == mine
+    if not complete:
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+            parts.write_manifest(out, _manifest(config))
+        except OSError as exc:
+            raise PermissionError(
+                f"cannot write to {out} ({exc.strerror}); choose another OUT or fix its permissions"
+            ) from None
+    return complete
+
+
+def clear_output(out: Path) -> None:
+    """Remove what orbitdata writes in OUT (and nothing else)."""
+    for name in OWNED:
+        path = out / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        elif path.exists():
+            path.unlink()
+
+
+def generate(
+    out: Path,
+    config: GenerationConfig,
+    workers: int = 1,
+    executor: str = "local",
+    ray_address: str | None = None,
+    overwrite: bool = False,
+    progress: Callable[[Progress], None] | None = None,
+    repo_id: str | None = None,
+    figure: Figure | None = None,
+) -> Info:
+    """Generate (or resume) the dataset in ``out`` and finalize it. Returns its ``meta/info.json``.
+
+    ``figure``: draws ``meta/overview.png`` for the card (``orbitdata.viz.overview_figure``);
+    ``None``: no figure. ``repo_id``: the Hub repo the card's loading snippet names.
+    """
+    out = Path(out)
+    if executor not in ("local", "ray"):
+        raise ValueError(f"unknown executor {executor!r}; expected 'local' or 'ray'")
+    if prepare_output(out, config, overwrite):
+        return read_info(out)
+    parts.remove_temporaries(parts.parts_dir(out))
+    units = plan_units(config.dataset)
+    todo = [u for u in units if not parts.is_done(out, u.name)]
+    total_eps = config.dataset.episodes
+    done_eps = sum(len(u.episodes) for u in units if parts.is_done(out, u.name))
+    frames, new_eps, start = 0, 0, time.monotonic()
+    cfg = config.to_dict()
+    results = run_local(cfg, todo, workers) if executor == "local" else run_ray(cfg, todo, ray_address, workers)
+    by_index = {u.index: u for u in units}
+    finished = len(units) - len(todo)
+    for result in results:
+        unit = by_index[result.unit]
+        parts.write_unit(out, unit.name, result.steps, result.episodes)
+        finished += 1
+        done_eps += len(unit.episodes)
+        new_eps += len(unit.episodes)
+        frames += result.frames
+        if progress:
+            progress(Progress(finished, len(units), done_eps, new_eps, total_eps, frames, time.monotonic() - start))
+    return finalize(out, config, repo_id=repo_id, figure=figure)

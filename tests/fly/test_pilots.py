@@ -1,0 +1,79 @@
+"""The three pilot levels: PD reaches a goal, determinism, and what each level is for."""
+
+import hashlib
+
+import numpy as np
+import pytest
+
+from orbitdata.fly import make_pilot
+from orbitdata.fly.rollout import fly_episode
+from orbitdata.scenario.spec import Lighting, Obstacle, Scenario
+from orbitdata.sim import CubeSatEnv, SimConfig
+
+
+@pytest.fixture(scope="module")
+def env():
+    e = CubeSatEnv(SimConfig(render=False))
+    yield e
+    e.close()
+
+
+def _digest(result) -> str:
+    h = hashlib.sha256()
+    for arr in (result.states, result.actions, result.collision, result.success):
+        h.update(np.ascontiguousarray(arr).tobytes())
+    return h.hexdigest()
+
+
+@pytest.mark.parametrize("level", ["risky", "expert"])
+def test_pd_reaches_a_goal_in_free_space(env, level):
+    scn = Scenario(obstacles=(), goal=(6.0, 2.0, -1.0), initial_velocity=(0.5, -0.5, 0.0), lighting=Lighting())
+    result = fly_episode(env, make_pilot(level), seed=0, scenario=scn)
+    assert result.outcome == "success"
+    assert np.linalg.norm(result.states[-1, 0:3] - np.array(scn.goal)) <= scn.goal_radius
+    assert result.success[-1] and not result.collision.any()
+
+
+def test_expert_turns_the_camera_towards_travel(env):
+    # The goal is to the side of the initial camera axis (+x): the expert yaws towards it.
+    scn = Scenario(obstacles=(), goal=(0.0, 8.0, 0.0), initial_velocity=(0.0, 0.0, 0.0), lighting=Lighting())
+    result = fly_episode(env, make_pilot("expert"), seed=0, scenario=scn)
+    R = result.states[len(result.states) // 2, 6:12].reshape(3, 2)
+    camera_axis = R[:, 0]  # first column of R: body x in the world
+    assert camera_axis @ np.array([0.0, 1.0, 0.0]) > 0.8
+
+
+@pytest.mark.parametrize("level", ["expert", "risky", "exploratory"])
+def test_each_pilot_is_deterministic_for_a_seed(env, level):
+    a = fly_episode(env, make_pilot(level), seed=21, n_obstacles=3, speed=1.5)
+    b = fly_episode(env, make_pilot(level), seed=22, n_obstacles=3, speed=1.5)
+    c = fly_episode(env, make_pilot(level), seed=21, n_obstacles=3, speed=1.5)
+    assert _digest(a) == _digest(c) != _digest(b)
+    assert a.actions.min() >= 0 and a.actions.max() <= 1
+    np.testing.assert_array_equal(a.actions[-1], 0.0)  # terminal frame: nothing applied
+
+
+def test_expert_avoids_what_the_risky_pilot_hits(env):
+    wall = Obstacle("sphere", center=(5.0, 0.0, 0.0), size=(1.2, 0.0, 0.0))
+    scn = Scenario(obstacles=(wall,), goal=(10.0, 0.0, 0.0), initial_velocity=(2.0, 0.0, 0.0), lighting=Lighting())
+    assert fly_episode(env, make_pilot("risky"), seed=0, scenario=scn).outcome == "collision"
+    expert = fly_episode(env, make_pilot("expert"), seed=0, scenario=scn)
+    assert expert.outcome == "success"
+    assert expert.pilot_info["planner"]["solved"]
+    assert expert.min_clearance.min() > 0.1
+
+
+def test_exploratory_noise_is_strong_and_correlated(env):
+    explo = fly_episode(env, make_pilot("exploratory"), seed=3, n_obstacles=0, speed=1.0)
+    risky = fly_episode(env, make_pilot("risky"), seed=3, n_obstacles=0, speed=1.0)
+    a = explo.actions[:-1]
+    assert a.std() > 2 * risky.actions[:-1].std()
+    # Ornstein-Uhlenbeck with tau = 0.6 s at 25 Hz: lag-1 autocorrelation near exp(-0.04/0.6).
+    x = a - a.mean(0)
+    lag1 = (x[1:] * x[:-1]).sum() / (x * x).sum()
+    assert lag1 > 0.6
+
+
+def test_unknown_level_is_rejected():
+    with pytest.raises(ValueError, match="unknown pilot"):
+        make_pilot("reckless")

@@ -1,0 +1,119 @@
+"""`orbitdata generate` / `shard` flags and errors."""
+
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from orbitdata.cli.app import app
+
+runner = CliRunner()
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--episodes", "0"], "--episodes"),
+        (["--test-fraction", "1.5"], "--test-fraction"),
+        (["--image-size", "100"], "multiple of 16"),
+        (["--executor", "dask"], "--executor"),
+        (["--workers", "-1"], "--workers"),
+        (["--seed", "-5"], "--seed"),
+        (["--max-shard-mb", "0"], "--max-shard-mb"),
+    ],
+)
+def test_bad_flags(tmp_path, args, message):
+    res = runner.invoke(app, ["generate", str(tmp_path / "out"), *args])
+    assert res.exit_code == 2, res.output
+    assert message in res.output and "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_config_file_errors(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[scenario]\nn_obstacles = [1, 5]\nbogus = 3\n")
+    res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(bad)])
+    assert res.exit_code == 2 and "bogus" in res.output and "unknown setting" in res.output
+    res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(tmp_path / "missing.toml")])
+    assert res.exit_code == 2 and "does not exist" in res.output
+
+
+def test_a_sim_dt_other_than_the_schemas_is_refused(tmp_path):
+    from orbitdata.sim.config import SimConfig
+
+    with pytest.raises(ValueError, match="sim.dt must be 0.04 s"):
+        SimConfig(dt=0.02)
+    assert SimConfig(dt=0.04).dt == 0.04  # written out in a TOML, 0.04 is the same number
+    toml = tmp_path / "fast.toml"
+    toml.write_text("[sim]\ndt = 0.02\n")
+    res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(toml)])
+    assert res.exit_code == 2 and "sim.dt must be 0.04 s" in res.output
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.fixture
+def unwritable_dir(tmp_path):
+    """A folder nobody may write into, root included (CI runs as root)."""
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    if os.geteuid() != 0:
+        folder.chmod(0o500)
+        yield folder
+        folder.chmod(0o700)
+    elif subprocess.run(["chattr", "+i", str(folder)], capture_output=True).returncode == 0:
+        yield folder  # immutable: even root cannot create entries
+        subprocess.run(["chattr", "-i", str(folder)], check=True)
+    else:
+        yield Path("/sys")  # sysfs refuses new entries to everyone
+
+
+def test_unwritable_out(unwritable_dir):
+    out = unwritable_dir / "out"
+    res = runner.invoke(app, ["generate", str(out), "--episodes", "1", "--image-size", "32"])
+    assert res.exit_code == 1, res.output
+    assert f"cannot write to {out}" in res.output and "choose another OUT" in res.output
+    assert "Traceback" not in res.output
+    assert not out.exists()
+
+
+def test_out_that_is_a_file(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    res = runner.invoke(app, ["generate", str(f), "--episodes", "1", "--image-size", "32"])
+    assert res.exit_code == 1 and "not a folder" in res.output
+
+
+def test_config_clash_needs_overwrite(tiny_dataset):
+    args = ["generate", str(tiny_dataset), "--episodes", "3", "--image-size", "64", "--workers", "1"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 1 and "different config" in res.output and "--overwrite" in res.output
+    assert (tiny_dataset / "meta" / "info.json").exists()  # nothing was touched
+
+
+def test_non_dataset_folder_is_not_clobbered(tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("precious")
+    res = runner.invoke(app, ["generate", str(out), "--episodes", "1", "--image-size", "32"])
+    assert res.exit_code == 1 and "not empty" in res.output
+    assert (out / "thesis.tex").read_text() == "precious"
+
+
+def test_generate_from_toml_and_flags(tmp_path):
+    cfg = tmp_path / "small.toml"
+    cfg.write_text(
+        "[dataset]\nlevel_mix = [0.0, 1.0, 0.0]\n[scenario]\nn_obstacles = [5, 5]\n"
+        "[sim.camera]\nimage_size = 32\n"
+    )
+    out = tmp_path / "out"
+    res = runner.invoke(app, ["generate", str(out), "--config", str(cfg), "--episodes", "2", "--workers", "1",
+                              "--test-fraction", "0"])
+    assert res.exit_code == 0, res.output
+    import json
+
+    info = json.loads((out / "meta/info.json").read_text())
+    assert info["config"]["scenario"]["n_obstacles"] == [5, 5]
+    assert info["counts"]["splits"]["train"]["levels"]["risky"]["episodes"] == 2
+    assert "test" not in info["counts"]["splits"]
