@@ -32,10 +32,11 @@ def presets() -> None:
 
 
 def _register() -> None:
-    from orbitmodel.cli import evaluate, train
+    from orbitmodel.cli import evaluate, policy, train
 
     train.register(app)
     evaluate.register(eval_app)
+    policy.register(app, eval_app)
 
 
 _register()

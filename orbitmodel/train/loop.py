@@ -38,6 +38,9 @@ class Job(Protocol):
 
     def inputs(self, batch: dict[str, torch.Tensor], step: int, device: torch.device) -> dict: ...
 
+    # Optional: ``after_step(step)`` is called after each optimiser step (1-based), e.g. to update
+    # EMA weights kept inside ``saved`` (so that checkpoints and resume carry them).
+
 
 @dataclass(frozen=True)
 class LoopSettings:
@@ -184,6 +187,7 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
     params = [p for p in job.module.parameters() if p.requires_grad]
     optimizer = _optimizer(params, s)
     torch.manual_seed(s.seed + rank)
+    after_step = getattr(job, "after_step", None)
     step = 0
     if resume:
         ckpt = run.latest_checkpoint()
@@ -231,6 +235,8 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
                 grad_norm = torch.nn.utils.clip_grad_norm_(params, s.grad_clip)
                 optimizer.step()
                 step += 1
+                if after_step is not None:
+                    after_step(step)
                 windows += len(batch[next(iter(batch))]) * world
                 for k, v in {"loss": loss.detach(), **parts, "grad_norm": grad_norm}.items():
                     sums[k] = sums.get(k, 0.0) + float(v)

@@ -1,0 +1,30 @@
+"""Diffusion Policy (Chi et al. 2023), the baseline flown beside the learned planner.
+
+    orbitmodel train-policy DATASET --policy diffusion --preset cpu --out RUN
+    orbitmodel eval policy RUN DATASET          # action MSE on held-out expert windows
+    pilot = load_policy_pilot(RUN)              # an orbitdata pilot: reset(task), act(obs)
+
+Modules: ``config`` (presets), ``unet`` (ConditionalUnet1D, FiLM), ``encoder`` (observations),
+``policy`` (DDPM training, DDIM sampling, EMA), ``train``, ``pilot``, ``evaluate``.
+Heavy imports (torch, diffusers) happen when a name is first used.
+"""
+
+from __future__ import annotations
+
+_EXPORTS = {
+    "PolicyConfig": "config", "PolicyTrainConfig": "config", "PolicyPreset": "config",
+    "POLICY_PRESETS": "config", "get_policy_preset": "config",
+    "ConditionalUnet1D": "unet", "DiffusionPolicy": "policy",
+    "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "train",
+    "DiffusionPilot": "pilot", "load_policy_pilot": "pilot",
+    "evaluate_policy": "evaluate", "ActionMSE": "evaluate",
+}
+__all__ = list(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name not in _EXPORTS:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from importlib import import_module
+
+    return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)

@@ -1,0 +1,195 @@
+"""Typed configs of the Diffusion Policy baseline and its named presets.
+
+The reference is Chi et al., *Diffusion Policy* (RSS 2023), code ``real-stanford/diffusion_policy``
+(names in brackets below are its config keys). Its published sizes need a GPU for days
+(``down_dims [512, 1024, 2048]`` and a ResNet18 per camera, ~280M parameters); ``cpu`` keeps
+the design (2 observations, 16 predicted actions, 8 executed, FiLM U-Net, DDPM 100 training
+steps, DDIM 10 inference steps, EMA) at ``down_dims (64, 128, 256)`` with a 4-layer CNN on the
+64 px image, so that it trains on a 2-core machine within an hour; ``tiny`` is for tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from typing import Callable
+
+from orbitdata.schema import ACTION_DIM, STATE_DIM
+
+GOAL_DIM = 3  # the goal in the body frame, metres
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    """Sizes and diffusion settings of the policy.
+
+    Args:
+        image_size: square RGB input in pixels (the dataset's; no resizing).
+        n_obs_steps: observations the policy is conditioned on (frames t-1, t) [n_obs_steps].
+        horizon: actions predicted per sample, for frames t-1 .. t+14 [horizon].
+        n_action_steps: actions executed from a sample, for frames t .. t+7 [n_action_steps].
+        cnn_channels: widths of the image encoder's stride-2 3x3 convolutions.
+        image_features: the image encoder's output width per observation.
+        n_groups: GroupNorm groups in the CNN and the U-Net [n_groups] (GroupNorm, not
+            BatchNorm: the reference notes that EMA destroys performance with BatchNorm).
+        down_dims: channel widths of the U-Net's levels [down_dims].
+        step_embed: width of the diffusion-step embedding [diffusion_step_embed_dim].
+        kernel_size: temporal kernel of the U-Net's convolutions [kernel_size].
+        train_timesteps: DDPM noise levels in training [num_train_timesteps].
+        inference_steps: DDIM denoising steps when acting [num_inference_steps].
+        beta_schedule: the noise schedule's name in ``diffusers`` [beta_schedule].
+        clip_sample: clip the predicted clean sample to [-1, 1] at each step [clip_sample].
+    """
+
+    image_size: int = 64
+    n_obs_steps: int = 2
+    horizon: int = 16
+    n_action_steps: int = 8
+    cnn_channels: tuple[int, ...] = (32, 64, 128, 256)
+    image_features: int = 64
+    n_groups: int = 8
+    down_dims: tuple[int, ...] = (64, 128, 256)
+    step_embed: int = 64
+    kernel_size: int = 5
+    train_timesteps: int = 100
+    inference_steps: int = 10
+    beta_schedule: str = "squaredcos_cap_v2"
+    clip_sample: bool = True
+    state_dim: int = STATE_DIM
+    action_dim: int = ACTION_DIM
+
+    def __post_init__(self):
+        levels = 2 ** (len(self.down_dims) - 1)
+        if self.horizon % levels:
+            raise ValueError(f"horizon={self.horizon} must be divisible by {levels}: the U-Net halves it "
+                             f"{len(self.down_dims) - 1} times (down_dims={self.down_dims})")
+        if self.n_obs_steps < 1:
+            raise ValueError(f"n_obs_steps={self.n_obs_steps}: condition on at least one observation")
+        if not 1 <= self.n_action_steps <= self.horizon - self.n_obs_steps + 1:
+            raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon - n_obs_steps + 1 = "
+                             f"{self.horizon - self.n_obs_steps + 1}]: executed actions start at the current frame")
+        if not 1 <= self.inference_steps <= self.train_timesteps:
+            raise ValueError(f"inference_steps={self.inference_steps} must be in [1, train_timesteps="
+                             f"{self.train_timesteps}]")
+        side = 2 ** len(self.cnn_channels)
+        if self.image_size % side:
+            raise ValueError(f"image_size={self.image_size} must be divisible by {side} "
+                             f"({len(self.cnn_channels)} stride-2 convolutions)")
+        for name in ("cnn_channels", "down_dims"):
+            bad = [c for c in getattr(self, name) if c % self.n_groups]
+            if bad:
+                raise ValueError(f"{name}={getattr(self, name)}: {bad} not divisible by n_groups={self.n_groups}")
+        object.__setattr__(self, "cnn_channels", tuple(self.cnn_channels))
+        object.__setattr__(self, "down_dims", tuple(self.down_dims))
+
+    @property
+    def window(self) -> int:
+        """Frames per training window: the observations then the rest of the action horizon."""
+        return self.horizon
+
+    @property
+    def action_start(self) -> int:
+        """Index in a sample of the first executed action: the current frame t."""
+        return self.n_obs_steps - 1
+
+
+@dataclass(frozen=True)
+class PolicyTrainConfig:
+    """How the policy trains (reference: AdamW 1e-4, betas (0.95, 0.999), wd 1e-6, cosine
+    with 500 warm-up steps, batch 64 for images, EMA power 0.75 up to 0.9999).
+
+    Args:
+        window_stride: frames between the starts of two training windows of an episode.
+        batch_size: windows per step (per process under DDP).
+        lr, min_lr, weight_decay, betas: AdamW; cosine decay from lr to min_lr.
+        epochs, max_steps: the run ends at whichever comes first (max_steps 0 = no bound).
+        warmup: linear warm-up, as a fraction of the run's steps.
+        grad_clip: global gradient-norm clip.
+        ema_power, ema_max: EMA decay after k optimiser steps is min(ema_max, 1 - k^-power).
+        shift: random-shift augmentation, pixels (pad by replication, crop back); 0 = none.
+            The reference crops randomly (84 -> 76); at 64 px a +-4 px shift plays that role.
+        num_workers: DataLoader worker processes.
+        log_every, save_every: steps between metric lines and between checkpoints.
+        seed: data order, noise draws, augmentation and initialisation.
+    """
+
+    window_stride: int = 1
+    batch_size: int = 64
+    lr: float = 1e-4
+    min_lr: float = 0.0
+    weight_decay: float = 1e-6
+    betas: tuple[float, float] = (0.95, 0.999)
+    epochs: int = 100
+    max_steps: int = 0
+    warmup: float = 0.05
+    grad_clip: float = 10.0
+    ema_power: float = 0.75
+    ema_max: float = 0.9999
+    shift: int = 4
+    num_workers: int = 4
+    log_every: int = 10
+    save_every: int = 500
+    seed: int = 42
+
+    def __post_init__(self):
+        if self.window_stride < 1:
+            raise ValueError(f"window_stride={self.window_stride}: use 1 or more frames")
+        if self.batch_size < 1:
+            raise ValueError(f"batch_size={self.batch_size}: use at least 1 window per step")
+        if self.epochs < 1 or self.max_steps < 0:
+            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}: give epochs >= 1 and max_steps >= 0")
+        if not 0 <= self.warmup < 1:
+            raise ValueError(f"warmup={self.warmup} is a fraction of the run in [0, 1)")
+        if not 0 <= self.ema_max < 1 or self.ema_power <= 0:
+            raise ValueError(f"ema_max={self.ema_max}, ema_power={self.ema_power}: need 0 <= ema_max < 1, power > 0")
+        if self.shift < 0:
+            raise ValueError(f"shift={self.shift}: give a non-negative number of pixels")
+        object.__setattr__(self, "betas", tuple(self.betas))
+
+
+@dataclass(frozen=True)
+class PolicyPreset:
+    """A policy size and the training recipe that goes with it."""
+
+    name: str
+    description: str
+    model: PolicyConfig
+    train: PolicyTrainConfig = field(default_factory=PolicyTrainConfig)
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "PolicyPreset":
+        model = {k: tuple(v) if isinstance(v, list) else v for k, v in d["model"].items()}
+        train = {k: tuple(v) if isinstance(v, list) else v for k, v in d["train"].items()}
+        return cls(name=d["name"], description=d["description"], model=PolicyConfig(**model),
+                   train=PolicyTrainConfig(**train))
+
+    def with_train(self, **changes) -> "PolicyPreset":
+        """The preset with some training settings replaced (None values are ignored)."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return replace(self, train=replace(self.train, **changes))
+
+
+def _cpu() -> PolicyPreset:
+    train = PolicyTrainConfig(batch_size=64, lr=1e-4, epochs=100, max_steps=6000, warmup=0.05, num_workers=0,
+                              log_every=20, save_every=250)
+    return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
+                        "(64, 128, 256), DDPM 100 / DDIM 10; < 60 min", PolicyConfig(), train)
+
+
+def _tiny() -> PolicyPreset:
+    model = PolicyConfig(cnn_channels=(8, 8, 8, 8), image_features=8, n_groups=4, down_dims=(8, 16),
+                         step_embed=8, kernel_size=3, inference_steps=4)
+    train = PolicyTrainConfig(window_stride=4, batch_size=4, lr=1e-3, epochs=2, warmup=0.1, shift=2,
+                              num_workers=0, log_every=1, save_every=2, seed=0)
+    return PolicyPreset("tiny", "a few thousand parameters, for tests", model, train)
+
+
+POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {"cpu": _cpu, "tiny": _tiny}
+
+
+def get_policy_preset(name: str) -> PolicyPreset:
+    if name not in POLICY_PRESETS:
+        raise ValueError(f"unknown policy preset {name!r}; choose one of {', '.join(POLICY_PRESETS)}")
+    return POLICY_PRESETS[name]()

@@ -1,0 +1,100 @@
+"""Open-loop check of a trained policy: action MSE on held-out windows, beside the mean action.
+
+For each window of the held-out split (expert episodes by default), the policy samples 16
+actions from the window's first 2 observations; the 8 it would execute (frames t .. t+7) are
+compared with the recorded ones, over real, non-terminal frames. The baseline predicts, for
+every frame, the mean action of the training episodes of the same levels. A policy that
+learnt something sits well below it; flying it (``orbitmodel eval closed-loop``) is the real
+test.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow.compute as pc
+import torch
+from torch.utils.data import DataLoader
+
+from orbitdata import schema as S
+from orbitdata.load import IS_PAD, collate_windows, load_windows
+from orbitdata.load.select import select_episodes
+from orbitdata.load.source import load_episode_table, load_steps
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.train import COLUMNS, DEFAULT_LEVELS, episode_goals
+from orbitmodel.data import episode_filter, read_dataset_meta
+from orbitmodel.train.checkpoint import RunError
+
+
+@dataclass(frozen=True)
+class ActionMSE:
+    """Mean squared error of executed actions (thrust units squared) over ``frames`` frames."""
+
+    split: str
+    levels: tuple[str, ...]
+    windows: int
+    frames: int
+    policy: float
+    mean_action: float  # baseline: always predict the training mean action
+
+    @property
+    def ratio(self) -> float:
+        """policy / mean-action MSE: below 1 the policy beats the constant prediction."""
+        return self.policy / self.mean_action if self.mean_action > 0 else float("nan")
+
+    def to_dict(self) -> dict:
+        return {**asdict(self), "levels": list(self.levels), "ratio": self.ratio}
+
+
+def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=()) -> np.ndarray:
+    """(8,) mean thrust over the non-terminal frames of the chosen training episodes."""
+    chosen = select_episodes(load_episode_table(source, "train", {}), episode_filter(list(levels), list(outcomes)),
+                             "train")
+    table = load_steps(source, "train", False, {}).data.table.select([S.EPISODE_INDEX, S.ACTION, S.IS_LAST])
+    keep = pc.and_(pc.is_in(table.column(S.EPISODE_INDEX), value_set=pc.cast(chosen, table.column(S.EPISODE_INDEX).type)),
+                   pc.invert(table.column(S.IS_LAST)))
+    actions = table.filter(keep).column(S.ACTION).combine_chunks().flatten().to_numpy().reshape(-1, S.ACTION_DIM)
+    return actions.mean(axis=0)
+
+
+@torch.no_grad()
+def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
+                    stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
+                    device: str = "cpu", use_ema: bool = True) -> ActionMSE:
+    """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
+    start; the first ``max_windows`` when > 0), against predicting the mean training action."""
+    if stride < 1 or batch_size < 1 or max_windows < 0:
+        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}: "
+                         "give stride and batch size >= 1 and max_windows >= 0")
+    policy = DiffusionPolicy.from_pretrained(run, device)
+    c = policy.config
+    size = read_dataset_meta(dataset).image_size
+    if size != c.image_size:
+        raise RunError(f"{run} takes {c.image_size} px images but {dataset} holds {size} px")
+    windows = load_windows(dataset, split=split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
+                           stride=stride, pad=True, columns=[*COLUMNS, S.IS_LAST],
+                           episodes=episode_filter(list(levels), list(outcomes)))
+    goals = episode_goals(dataset, split)
+    baseline = torch.as_tensor(mean_action(dataset, levels, outcomes), dtype=torch.float32)  # (8,)
+    n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
+    generator = torch.Generator().manual_seed(seed)
+    executed = slice(c.action_start, c.action_start + c.n_action_steps)
+    sq_policy = sq_mean = 0.0
+    frames = 0
+    To = c.n_obs_steps
+    batches = [list(range(first, min(first + batch_size, n))) for first in range(0, n, batch_size)]
+    for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
+        goal = goals[batch[S.EPISODE_INDEX][:, 0]]
+        sampled = policy.sample_actions(batch[S.IMAGE][:, :To], batch[S.STATE][:, :To], goal, generator,
+                                        use_ema).cpu()  # (B, H, 8)
+        truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
+        real = ~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])  # (B, 8 steps)
+        sq_policy += float(((sampled[:, executed] - truth) ** 2).mean(-1)[real].sum())
+        sq_mean += float(((baseline - truth) ** 2).mean(-1)[real].sum())
+        frames += int(real.sum())
+    if frames == 0:
+        raise ValueError(f"no real frames to compare in split {split!r} of {dataset}; use a smaller --stride")
+    return ActionMSE(split=split, levels=tuple(levels), windows=n, frames=frames, policy=sq_policy / frames,
+                     mean_action=sq_mean / frames)

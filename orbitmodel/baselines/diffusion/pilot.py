@@ -1,0 +1,98 @@
+"""The Diffusion Policy as an orbitdata pilot: it sees the camera and the state, and is told
+only the task (the goal), never the obstacles.
+
+Action chunking as in the reference: every ``n_action_steps`` (8) control steps the policy
+samples 16 actions from its last 2 observations and queues the 8 for frames t .. t+7. At the
+first step of an episode the one observation stands in for both (the reference's padding).
+
+    pilot = load_policy_pilot("runs/policy")
+    pilot.reset(task)                   # task.goal: metres, world frame relative to the start
+    thrust = pilot.act(obs)             # obs["image"] (H, W, 3) uint8, obs["state"] (16,)
+
+This is the only module that knows the ``orbitdata.fly`` interface.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from orbitdata.seeding import rng
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+
+try:  # MERGE (issue 10): with orbitdata.fly, subclass its Pilot so that make_pilot / fly_grid accept it
+    from orbitdata.fly.pilot import Pilot as _PilotBase
+except ImportError:  # before it: the same interface by duck typing
+    _PilotBase = object
+
+
+class DiffusionPilot(_PilotBase):
+    """Flies a trained :class:`DiffusionPolicy` (EMA weights unless ``use_ema=False``).
+
+    Every sampling draw comes from a generator seeded by the task's seed, so an episode is
+    reproducible.
+    """
+
+    name = "diffusion"
+    privileged = False
+    needs_images = True
+
+    def __init__(self, policy: DiffusionPolicy, use_ema: bool = True):
+        self.policy = policy.eval()
+        self.use_ema = use_ema
+        self._goal: torch.Tensor | None = None
+        self._history: deque = deque(maxlen=policy.config.n_obs_steps)
+        self._queue: deque = deque()
+        self._generator = torch.Generator()
+
+    def reset(self, task) -> None:
+        """Start an episode: keep the goal (metres, world frame relative to the start) and the seed."""
+        self._goal = torch.tensor(np.asarray(task.goal, dtype=np.float32).reshape(1, 3))
+        self._generator.manual_seed(int(rng(int(task.seed), "pilot").integers(2 ** 62)))
+        self._history.clear()
+        self._queue.clear()
+
+    def act(self, obs: dict) -> np.ndarray:
+        """(8,) thrusts in [0, 1] from obs["image"] (S, S, 3) uint8 and obs["state"] (16,)."""
+        if self._goal is None:
+            raise RuntimeError("call reset(task) before act(obs)")
+        c = self.policy.config
+        image, state = obs["image"], obs["state"]
+        if image.shape != (c.image_size, c.image_size, 3):
+            raise ValueError(f"pilot {self.name!r} was trained on {c.image_size} px RGB images but the camera gives "
+                             f"{image.shape}; fly it with a {c.image_size} px camera")
+        frame = (torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1),  # (3, S, S) uint8
+                 torch.as_tensor(state, dtype=torch.float32))  # (16,)
+        while len(self._history) < c.n_obs_steps - 1:  # first step: repeat the first observation
+            self._history.append(frame)
+        self._history.append(frame)
+        if not self._queue:
+            images = torch.stack([f[0] for f in self._history])[None]  # (1, To, 3, S, S)
+            states = torch.stack([f[1] for f in self._history])[None]  # (1, To, 16)
+            actions = self.policy.sample_actions(images, states, self._goal, self._generator, self.use_ema)[0]
+            start = c.action_start
+            self._queue.extend(actions[start:start + c.n_action_steps].cpu().numpy().astype(np.float32))
+        return self._queue.popleft()
+
+    def metadata(self) -> dict:
+        return {}
+
+
+def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True) -> DiffusionPilot:
+    """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``)."""
+    return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema)
+
+
+def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu") -> DiffusionPilot:
+    """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``."""
+    if run is None:
+        raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
+    pilot = load_policy_pilot(run, device)
+    size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
+    if size is not None and size != pilot.policy.config.image_size:
+        raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
+                         f"{size} px; pass --image-size {pilot.policy.config.image_size}")
+    return pilot

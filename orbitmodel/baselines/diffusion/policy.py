@@ -1,0 +1,190 @@
+"""Diffusion Policy (Chi et al. 2023): a denoiser of action sequences conditioned on observations.
+
+Training (DDPM, epsilon prediction)::
+
+    a_0   = minmax(actions)               (B, H, 8) in [-1, 1], frames t-1 .. t+14
+    k ~ U{0..K-1}, eps ~ N(0, I)          per window, from the step's seeded generator
+    a_k   = sqrt(abar_k) a_0 + sqrt(1 - abar_k) eps        DDPMScheduler.add_noise
+    loss  = || eps - UNet(a_k, k, ObsEncoder(o_{t-1}, o_t)) ||^2
+
+Acting: a ~ N(0, I), then ``inference_steps`` DDIM steps (deterministic, eta 0) with the EMA
+weights; the actions for frames t .. t+7 are executed. Both schedules come from ``diffusers``
+with the reference's settings (100 steps, squaredcos_cap_v2, clip_sample, epsilon).
+
+States and actions are normalised inside the module from the dataset's ``meta/stats.json``
+(states by mean/std, actions min-max to [-1, 1], the goal by the position's spread), so
+callers pass raw dataset values: images uint8, states (16,), the goal in metres, world frame
+relative to the start, and actions in [0, 1].
+"""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+from typing import Callable
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from orbitdata.schema import STATE_SLICES
+from orbitmodel.baselines.diffusion.config import PolicyConfig
+from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
+from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
+
+
+def goal_in_body(states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    """R^T (goal - p): states (..., 16), goal (..., 3) metres world frame -> (..., 3) metres body frame.
+
+    R's first two columns are the state's rot6d (row-major 3x2), re-orthonormalised by
+    Gram-Schmidt; the third is their cross product.
+    """
+    p = states[..., STATE_SLICES["p"]]
+    r6 = states[..., STATE_SLICES["r"]].unflatten(-1, (3, 2))  # (..., 3, 2)
+    x = F.normalize(r6[..., 0], dim=-1)
+    y = F.normalize(r6[..., 1] - (x * r6[..., 1]).sum(-1, keepdim=True) * x, dim=-1)
+    z = torch.linalg.cross(x, y)
+    d = goal - p  # (..., 3)
+    return torch.stack([(x * d).sum(-1), (y * d).sum(-1), (z * d).sum(-1)], dim=-1)
+
+
+def make_schedulers(config: PolicyConfig):
+    """(DDPMScheduler for training, DDIMScheduler set to ``inference_steps`` for acting)."""
+    from diffusers import DDIMScheduler, DDPMScheduler
+
+    ddpm = DDPMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
+                         variance_type="fixed_small", clip_sample=config.clip_sample, prediction_type="epsilon")
+    ddim = DDIMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
+                         clip_sample=config.clip_sample, set_alpha_to_one=True, steps_offset=0,
+                         prediction_type="epsilon")
+    ddim.set_timesteps(config.inference_steps)
+    return ddpm, ddim
+
+
+def denoise(scheduler, predict_noise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], sample: torch.Tensor,
+            generator: torch.Generator | None = None) -> torch.Tensor:
+    """Run ``scheduler``'s reverse process from ``sample`` (B, H, A): predict_noise(x, k (B,)) -> eps."""
+    for k in scheduler.timesteps:
+        eps = predict_noise(sample, k.expand(len(sample)).to(sample.device))
+        sample = scheduler.step(eps, k, sample, generator=generator).prev_sample
+    return sample
+
+
+def ema_decay(step: int, power: float, max_decay: float) -> float:
+    """The reference's EMA warm-up: 0 at the first update, then 1 - step^-power, capped."""
+    return 0.0 if step <= 1 else min(max_decay, 1.0 - step ** -power)
+
+
+class Denoiser(nn.Module):
+    """The trained network: observation encoder + conditional U-Net."""
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.obs_encoder = ObservationEncoder(config)
+        self.unet = ConditionalUnet1D(config.action_dim, self.obs_encoder.out_dim, config.down_dims,
+                                      config.step_embed, config.kernel_size, config.n_groups)
+
+
+class DiffusionPolicy(nn.Module):
+    """The policy with its EMA copy and normalisation. Build it from a :class:`PolicyConfig`, or
+    load a trained one with :meth:`from_pretrained`."""
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.config = config
+        self.net = Denoiser(config)
+        self.ema = copy.deepcopy(self.net).requires_grad_(False)  # updated by ema_update after each step
+        self.register_buffer("state_mean", torch.zeros(config.state_dim))
+        self.register_buffer("state_std", torch.ones(config.state_dim))
+        self.register_buffer("action_low", torch.zeros(config.action_dim))
+        self.register_buffer("action_high", torch.ones(config.action_dim))
+        self.register_buffer("goal_scale", torch.tensor(1.0))  # metres per unit of the goal input
+        self.noise_scheduler, self.sampler = make_schedulers(config)
+
+    def set_normalisation(self, state_mean, state_std, action_low, action_high, goal_scale: float) -> None:
+        """Take the dataset's statistics (meta/stats.json): state mean/std (16,), action min/max (8,),
+        and the goal's scale in metres. A thruster whose min equals its max keeps [0, 1]."""
+        low = torch.as_tensor(action_low, dtype=torch.float32)
+        high = torch.as_tensor(action_high, dtype=torch.float32)
+        flat = high - low < 1e-6
+        self.state_mean.copy_(torch.as_tensor(state_mean, dtype=torch.float32))
+        self.state_std.copy_(torch.as_tensor(state_std, dtype=torch.float32).clamp(min=1e-3))
+        self.action_low.copy_(torch.where(flat, torch.zeros_like(low), low))
+        self.action_high.copy_(torch.where(flat, torch.ones_like(high), high))
+        self.goal_scale.fill_(max(float(goal_scale), 1e-3))
+
+    # ---- normalisation ----------------------------------------------------------------------
+    def normalise_actions(self, actions: torch.Tensor) -> torch.Tensor:  # (..., 8) [0, 1] -> [-1, 1]
+        return (actions - self.action_low) / (self.action_high - self.action_low) * 2 - 1
+
+    def unnormalise_actions(self, x: torch.Tensor) -> torch.Tensor:  # (..., 8) [-1, 1] -> thrust in [0, 1]
+        return ((x + 1) / 2 * (self.action_high - self.action_low) + self.action_low).clamp(0.0, 1.0)
+
+    def condition(self, net: Denoiser, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3) metres world frame -> (B, C)."""
+        x = images.float() / 127.5 - 1.0  # [-1, 1]
+        s = (states - self.state_mean) / self.state_std
+        g = goal_in_body(states, goal[:, None, :].expand(-1, states.shape[1], -1)) / self.goal_scale  # (B, To, 3)
+        return net.obs_encoder(x, s, g)
+
+    # ---- training ---------------------------------------------------------------------------
+    def loss(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor, actions: torch.Tensor,
+             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """DDPM epsilon loss. images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
+        actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU)."""
+        B = len(actions)
+        a0 = self.normalise_actions(actions)  # (B, H, 8)
+        k = torch.randint(0, self.config.train_timesteps, (B,), generator=generator).to(a0.device)
+        eps = torch.randn(a0.shape, generator=generator).to(a0.device)
+        noisy = self.noise_scheduler.add_noise(a0, eps, k)
+        pred = self.net.unet(noisy, k, self.condition(self.net, images, states, goal))
+        return F.mse_loss(pred.float(), eps), {}
+
+    def forward(self, images, states, goal, actions, generator=None):
+        """The training loss (so DDP sees a forward): see :meth:`loss`."""
+        return self.loss(images, states, goal, actions, generator)
+
+    @torch.no_grad()
+    def ema_update(self, step: int, power: float, max_decay: float) -> None:
+        """ema <- decay * ema + (1 - decay) * net, after optimiser step ``step`` (1-based)."""
+        decay = ema_decay(step, power, max_decay)
+        for e, p in zip(self.ema.parameters(), self.net.parameters()):
+            e.lerp_(p.detach(), 1.0 - decay)
+        for e, b in zip(self.ema.buffers(), self.net.buffers()):
+            e.copy_(b)
+
+    # ---- acting -----------------------------------------------------------------------------
+    @torch.no_grad()
+    def sample_actions(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
+                       generator: torch.Generator | None = None, use_ema: bool = True) -> torch.Tensor:
+        """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
+        observations of frames t-To+1 .. t (see :meth:`condition`). Execute
+        ``[:, config.action_start : config.action_start + config.n_action_steps]``."""
+        net = self.ema if use_ema else self.net
+        device = self.state_mean.device
+        cond = self.condition(net, images.to(device), states.to(device).float(), goal.to(device).float())
+        c = self.config
+        x = torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
+        x = denoise(self.sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)
+        return self.unnormalise_actions(x)
+
+    # ---- persistence ------------------------------------------------------------------------
+    def num_parameters(self) -> int:
+        """Trained parameters (the EMA copy not counted)."""
+        return sum(p.numel() for p in self.net.parameters())
+
+    @classmethod
+    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "DiffusionPolicy":
+        """Load a trained policy from a run folder (``orbitmodel train-policy --out RUN``), in eval mode."""
+        from orbitmodel.baselines.diffusion.train import read_policy_run
+        from orbitmodel.train.checkpoint import RunError, load_weights
+
+        run = read_policy_run(path)
+        policy = cls(run.preset.model)
+        try:
+            policy.load_state_dict(load_weights(path))
+        except RuntimeError as err:
+            raise RunError(f"{path}: the weights do not fit the config's policy ({str(err).splitlines()[0]}); "
+                           "train the run again") from None
+        policy.run_info = run.dataset
+        return policy.to(device).eval()

@@ -1,0 +1,173 @@
+"""Train the Diffusion Policy on windows of the dataset (``orbitmodel train-policy``).
+
+A training window is ``horizon`` (16) frames starting at t-1: its first ``n_obs_steps`` (2)
+frames are the observations, and all 16 actions are the target. The horizon may run past the
+episode end (``pad=True``); padded frames repeat the terminal frame, whose action is zero
+thrust. The goal is joined from the episodes table by ``episode_index``. Only the image, the
+state, the action and the goal are read: never the obstacles.
+
+EMA: the weights' moving average lives in the policy module (``policy.ema``), so checkpoints
+and exact resume carry it; the shared loop calls :meth:`PolicyJob.after_step` after each
+optimiser step.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from orbitdata import schema as S
+from orbitdata.load import load_windows
+from orbitdata.load.source import load_episode_table
+from orbitmodel.baselines.diffusion.config import PolicyPreset
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
+from orbitmodel.train.checkpoint import CONFIG, RunDir, RunError
+from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
+
+STAGE = "policy"
+POLICY = "diffusion"
+COLUMNS = (S.IMAGE, S.STATE, S.ACTION)  # plus episode_index, always loaded; the goal comes from the episodes table
+DEFAULT_LEVELS = ("expert",)
+STREAM_NOISE, STREAM_SHIFT = 0, 1
+
+
+# ---- data ------------------------------------------------------------------------------------
+def episode_goals(source: str | Path, split: str) -> torch.Tensor:
+    """(max episode_index + 1, 3) goals, metres, world frame relative to the start; NaN rows for
+    episodes not in the split. Reads only the goal and index columns of the episodes table."""
+    table = load_episode_table(source, split, {}).select([S.EPISODE_INDEX, S.GOAL])
+    ids = table.column(S.EPISODE_INDEX).to_numpy().astype(np.int64)
+    goals = np.asarray(table.column(S.GOAL).to_pylist(), dtype=np.float32).reshape(-1, 3)
+    lookup = torch.full((int(ids.max()) + 1, 3), float("nan"))
+    lookup[torch.from_numpy(ids)] = torch.from_numpy(goals)
+    return lookup
+
+
+def action_range(source: str | Path) -> tuple[list[float], list[float]]:
+    """Per-thruster (min, max) of the action over the dataset, from meta/stats.json."""
+    path = Path(source) / S.STATS_PATH  # MERGE: orbitdata.load.read_meta (issue 10)
+    if not path.is_file():
+        raise FileNotFoundError(f"{source}: no {S.STATS_PATH}; not a complete orbitdata dataset folder")
+    stats = json.loads(path.read_text())[S.ACTION]
+    return [float(x) for x in stats["min"]], [float(x) for x in stats["max"]]
+
+
+def goal_scale(meta: DatasetMeta) -> float:
+    """Metres per unit of the goal input: the position's mean spread (the goal's order of size)."""
+    return float(np.mean(meta.state_std[S.STATE_SLICES["p"]]))
+
+
+def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:
+    """DrQ-style augmentation on (B, To, 3, S, S) uint8: replicate-pad by ``pad`` pixels and crop
+    back at a random offset per window (the same for its observations)."""
+    if pad == 0:
+        return images
+    B, To, C, H, W = images.shape
+    padded = F.pad(images.flatten(1, 2).float(), (pad,) * 4, mode="replicate")  # (B, To*3, H+2p, W+2p)
+    dx, dy = torch.randint(0, 2 * pad + 1, (2, B), generator=generator).tolist()
+    out = torch.stack([padded[b, :, dy[b]:dy[b] + H, dx[b]:dx[b] + W] for b in range(B)])
+    return out.view(B, To, C, H, W).to(images.dtype)
+
+
+class PolicyJob:
+    """What the shared loop needs: the module, how a batch becomes its inputs, the EMA update."""
+
+    def __init__(self, policy: DiffusionPolicy, preset: PolicyPreset, goals: torch.Tensor, rank: int = 0):
+        self.module = self.saved = policy
+        self.preset = preset
+        self.goals = goals
+        self.rank = rank
+
+    def inputs(self, batch: dict, step: int, device: torch.device) -> dict:
+        t, To = self.preset.train, self.preset.model.n_obs_steps
+        images = random_shift(batch[S.IMAGE][:, :To], t.shift, step_generator(t.seed, step, STREAM_SHIFT, self.rank))
+        goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
+        return {"images": images.to(device), "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
+                "actions": batch[S.ACTION].to(device),
+                "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
+
+    def after_step(self, step: int) -> None:
+        t = self.preset.train
+        self.module.ema_update(step, t.ema_power, t.ema_max)
+
+
+def policy_windows(source: str | Path, split: str, preset: PolicyPreset, levels, outcomes, stride: int | None = None):
+    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the chosen episodes."""
+    m = preset.model
+    return load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
+                        stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS),
+                        episodes=episode_filter(list(levels), list(outcomes)))
+
+
+# ---- runs ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PolicyRequest:
+    dataset: str
+    preset: PolicyPreset
+    out: Path
+    levels: tuple[str, ...] = DEFAULT_LEVELS
+    outcomes: tuple[str, ...] = ()
+    device: str = "auto"
+    resume: bool = False
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
+class PolicyRun:
+    preset: PolicyPreset
+    dataset: DatasetMeta
+    raw: dict
+
+
+def run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes) -> dict:
+    """The run's config.json, as it reads back (tuples as lists), so that a resume compares equal."""
+    config = {"stage": STAGE, "policy": POLICY, "preset": preset.to_dict(), "dataset": meta.to_dict(),
+              "levels": list(levels), "outcomes": list(outcomes)}
+    return json.loads(json.dumps(config))
+
+
+def read_policy_run(path: str | Path) -> PolicyRun:
+    """A policy run's preset and dataset facts, from its config.json; RunError for anything else."""
+    raw = RunDir(path).read_config()
+    if raw.get("stage") != STAGE or raw.get("policy") != POLICY:
+        raise RunError(f"{path} holds a {raw.get('stage', 'unknown')!r} run, not a diffusion policy; "
+                       "train one with `orbitmodel train-policy DATASET --out RUN`")
+    try:
+        return PolicyRun(PolicyPreset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
+    except (KeyError, TypeError, ValueError) as err:
+        raise RunError(f"{Path(path) / CONFIG} is not a policy run config ({err})") from None
+
+
+def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
+    """A fresh policy (initialised from the preset's seed) with the dataset's normalisation."""
+    if meta.image_size != preset.model.image_size:
+        raise RunError(f"preset {preset.name!r} takes {preset.model.image_size} px images but {meta.source} holds "
+                       f"{meta.image_size} px; generate one with `orbitdata generate DIR --image-size "
+                       f"{preset.model.image_size}`")
+    torch.manual_seed(preset.train.seed)  # initialisation
+    policy = DiffusionPolicy(preset.model)
+    low, high = action_range(meta.source)
+    policy.set_normalisation(meta.state_mean, meta.state_std, low, high, goal_scale(meta))
+    return policy
+
+
+def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
+    """Train (or resume) a Diffusion Policy run; returns the loop's summary."""
+    meta = read_dataset_meta(req.dataset)
+    device = resolve_device(req.device)
+    policy = build_policy(req.preset, meta)  # checks the image size before the run folder is claimed
+    run = RunDir(req.out)
+    rank = int(os.environ.get("RANK", 0))
+    if rank == 0:
+        run.start(run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume, overwrite=req.overwrite)
+    windows = policy_windows(req.dataset, "train", req.preset, req.levels, req.outcomes)
+    goals = episode_goals(req.dataset, "train")
+    return fit(PolicyJob(policy, req.preset, goals, rank), windows, LoopSettings.of(req.preset.train), run, device,
+               resume=req.resume, label="train-policy", on_log=on_log)

@@ -1,0 +1,90 @@
+"""``orbitmodel train-policy`` and ``orbitmodel eval policy``: the Diffusion Policy baseline."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from orbitmodel.baselines.diffusion.config import POLICY_PRESETS
+from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.train import Device, Level, Outcome
+
+PolicyName = Enum("PolicyName", {"diffusion": "diffusion"}, type=str)
+PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
+Split = Enum("Split", {"test": "test", "train": "train"}, type=str)
+
+
+def register(app: typer.Typer, eval_app: typer.Typer) -> None:
+    app.command("train-policy")(train_policy)
+    eval_app.command("policy")(eval_policy)
+
+
+@friendly
+def train_policy(
+    dataset: Annotated[str, typer.Argument(help="orbitdata dataset folder")],
+    out: Annotated[Path, typer.Option("--out", help="run folder to write (checkpoints, metrics, config)")],
+    policy: Annotated[PolicyName, typer.Option(help="the policy family")] = "diffusion",
+    preset: Annotated[PolicyPresetName, typer.Option(help="policy size and recipe: cpu or tiny")] = "cpu",
+    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
+    max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
+    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    level: Annotated[Optional[list[Level]], typer.Option("--level", "--levels",
+                     help="train on these levels (repeatable; default: expert)")] = None,
+    outcome: Annotated[Optional[list[Outcome]], typer.Option(help="train on these outcomes only (repeatable)")] = None,
+    workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
+    seed: Annotated[Optional[int], typer.Option(min=0, help="data order, noise, augmentation and initialisation")] = None,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
+    resume: Annotated[bool, typer.Option(help="continue the run in --out from its latest checkpoint")] = False,
+    overwrite: Annotated[bool, typer.Option(help="replace a run already in --out")] = False,
+) -> None:
+    """Train a Diffusion Policy (Chi et al. 2023) on the dataset's expert episodes.
+
+    It sees the last 2 camera images and states and the goal in the body frame, predicts 16
+    actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
+    """
+    from orbitmodel.baselines.diffusion.config import get_policy_preset
+    from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, PolicyRequest, train_policy as train
+
+    p = get_policy_preset(preset.value).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
+                                                   num_workers=workers, seed=seed)
+    req = PolicyRequest(dataset=dataset, preset=p, out=out,
+                        levels=tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS,
+                        outcomes=tuple(o.value for o in outcome or ()), device=device.value, resume=resume,
+                        overwrite=overwrite)
+    result = train(req)
+    typer.echo(f"trained {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} windows/s, "
+               f"{100 * result.data_wait:.1f} % waiting for data); weights in {out}")
+
+
+@friendly
+def eval_policy(
+    run: Annotated[Path, typer.Argument(help="policy run folder (from `orbitmodel train-policy`)")],
+    dataset: Annotated[str, typer.Argument(help="orbitdata dataset folder with held-out windows")],
+    split: Annotated[Split, typer.Option(help="the held-out split")] = "test",
+    level: Annotated[Optional[list[Level]], typer.Option("--level", "--levels",
+                     help="levels to measure on (repeatable; default: expert)")] = None,
+    stride: Annotated[int, typer.Option(min=1, help="frames between window starts")] = 4,
+    max_windows: Annotated[int, typer.Option(min=0, help="measure only the first N windows (0 = all)")] = 0,
+    batch_size: Annotated[int, typer.Option(min=1, help="windows sampled together")] = 64,
+    seed: Annotated[int, typer.Option(min=0, help="sampling noise")] = 0,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
+    as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
+) -> None:
+    """Action MSE of the executed actions on held-out windows, beside predicting the mean action."""
+    from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
+    from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS
+    from orbitmodel.train.loop import resolve_device
+
+    levels = tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS
+    result = evaluate_policy(run, dataset, split=split.value, levels=levels, stride=stride, max_windows=max_windows,
+                             batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)))
+    if as_json:
+        typer.echo(json.dumps(result.to_dict()))
+        return
+    typer.echo(f"action MSE on {result.windows} {split.value} windows ({result.frames} frames, {'/'.join(levels)}): "
+               f"policy {result.policy:.5f}, mean action {result.mean_action:.5f} (ratio {result.ratio:.3f})")

@@ -1,0 +1,151 @@
+"""The Diffusion Policy as a pilot: the interface, action chunking, seeding, and that it is
+told only the task (never the obstacles) and reads only the camera image and the state."""
+
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+import torch
+
+from orbitmodel.baselines.diffusion.config import get_policy_preset
+from orbitmodel.baselines.diffusion.pilot import DiffusionPilot, load_policy_pilot, make_diffusion_pilot
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.train import run_config
+from orbitmodel.data import DatasetMeta
+from orbitmodel.train.checkpoint import RunDir
+
+torch.set_num_threads(1)
+PRESET = get_policy_preset("tiny")
+
+
+@dataclass(frozen=True)
+class Task:  # the fields of orbitdata.fly.Task (issue 10)
+    goal: tuple[float, float, float]
+    goal_radius: float
+    initial_velocity: tuple[float, float, float]
+    seed: int
+
+
+class SpyTask(Task):
+    """Records every attribute the pilot reads."""
+
+    read: set
+
+    def __getattribute__(self, name):
+        if not name.startswith("__") and name != "read":
+            object.__getattribute__(self, "read").add(name)
+        return object.__getattribute__(self, name)
+
+
+def spy_task(goal, seed) -> SpyTask:
+    task = SpyTask(goal=tuple(goal), goal_radius=0.5, initial_velocity=(0.0, 0.0, 0.0), seed=seed)
+    object.__setattr__(task, "read", set())
+    return task
+
+
+class SpyObs(dict):
+    """An observation dict that records the keys the pilot reads."""
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.read = set()
+
+    def __getitem__(self, key):
+        self.read.add(key)
+        return super().__getitem__(key)
+
+    def get(self, key, default=None):
+        self.read.add(key)
+        return super().get(key, default)
+
+
+@pytest.fixture(scope="module")
+def policy() -> DiffusionPolicy:
+    torch.manual_seed(0)
+    return DiffusionPolicy(PRESET.model).eval()  # untrained: the interface does not care
+
+
+@pytest.fixture(scope="module")
+def env():
+    from orbitdata.sim import CubeSatEnv
+    from orbitdata.sim.config import CameraConfig, SimConfig
+
+    e = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=64)))
+    yield e
+    e.close()
+
+
+def test_interface():
+    assert DiffusionPilot.name == "diffusion"
+    assert DiffusionPilot.privileged is False
+    assert DiffusionPilot.needs_images is True
+    assert list(inspect.signature(DiffusionPilot.reset).parameters) == ["self", "task"]  # no scenario
+
+
+def test_flies_with_chunks_and_never_sees_the_obstacles(policy, env, monkeypatch):
+    pilot = DiffusionPilot(policy)
+    calls = []
+    sample = policy.sample_actions
+    monkeypatch.setattr(policy, "sample_actions", lambda *a, **k: calls.append(a[0].shape) or sample(*a, **k))
+    obs, info = env.reset(seed=7, options={"n_obstacles": 3, "speed": 1.0})
+    task = spy_task(env.scenario.goal, seed=7)
+    pilot.reset(task)
+    read = set()
+    for t in range(17):
+        o = SpyObs(obs)
+        action = pilot.act(o)
+        read |= o.read
+        assert action.shape == (8,) and action.dtype == np.float32
+        assert action.min() >= 0 and action.max() <= 1
+        obs, _, _, _, info = env.step(action.astype(np.float64))
+        assert info["outcome"] is None
+    assert task.read <= {"goal", "seed"}  # told the goal only, never the obstacles
+    assert read == {"image", "state"}  # no depth
+    assert len(calls) == 3  # a new chunk at steps 0, 8 and 16
+    assert calls[0] == (1, 2, 3, 64, 64)
+
+
+def test_an_episode_is_reproducible_from_its_seed(policy):
+    rng = np.random.default_rng(0)
+    obs = {"image": rng.integers(0, 256, (64, 64, 3), dtype=np.uint8), "state": np.zeros(16, np.float32)}
+    obs["state"][6:12] = [1, 0, 0, 1, 0, 0]
+
+    def first_actions(seed):
+        pilot = DiffusionPilot(policy)
+        pilot.reset(Task((2.0, 0.0, 0.0), 0.5, (0.0, 0.0, 0.0), seed))
+        return np.stack([pilot.act(obs) for _ in range(3)])
+
+    np.testing.assert_array_equal(first_actions(1), first_actions(1))
+    assert not np.array_equal(first_actions(1), first_actions(2))
+
+
+def test_errors(policy):
+    pilot = DiffusionPilot(policy)
+    obs = {"image": np.zeros((32, 32, 3), np.uint8), "state": np.zeros(16, np.float32)}
+    with pytest.raises(RuntimeError, match="reset"):
+        pilot.act(obs)
+    pilot.reset(Task((1.0, 0.0, 0.0), 0.5, (0.0, 0.0, 0.0), 0))
+    with pytest.raises(ValueError, match="64 px"):
+        pilot.act(obs)
+    with pytest.raises(ValueError, match="run="):
+        make_diffusion_pilot(None)
+
+
+def test_loads_from_a_run_folder(policy, tmp_path):
+    meta = DatasetMeta(source="x", image_size=64, state_mean=(0.0,) * 16, state_std=(1.0,) * 16,
+                       action_mean=(0.1,) * 8, action_std=(0.1,) * 8, depth_max=50.1, fovy_deg=100.0, root_seed=0,
+                       episodes={"train": 1})
+    run = RunDir(tmp_path / "run")
+    run.start(run_config(PRESET, meta, ["expert"], []), resume=False, overwrite=False)
+    run.save_final(policy.state_dict(), step=0)
+    pilot = load_policy_pilot(run.path)
+    for k, v in policy.state_dict().items():
+        assert torch.equal(pilot.policy.state_dict()[k], v), k
+    from orbitdata.config import GenerationConfig
+
+    config = GenerationConfig()  # renders 224 px by default
+    with pytest.raises(ValueError, match="--image-size 64"):
+        make_diffusion_pilot(config, run=str(run.path))

@@ -1,0 +1,164 @@
+"""Training the Diffusion Policy on a tiny dataset: run folders, the goal join, exact resume
+with EMA, checkpoint round trip, the open-loop evaluation, and one-line CLI errors."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+from typer.testing import CliRunner
+
+from orbitdata import schema as S
+from orbitmodel.baselines.diffusion import train as T
+from orbitmodel.baselines.diffusion.config import get_policy_preset
+from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.cli.app import app
+from orbitmodel.data import read_dataset_meta
+from orbitmodel.train.checkpoint import RunError, load_weights
+from orbitmodel.train.loop import KILL_AFTER_STEP
+
+torch.set_num_threads(1)
+runner = CliRunner()
+STEPS = 4
+PRESET = get_policy_preset("tiny").with_train(max_steps=STEPS, save_every=2)
+
+
+def request(dataset, out, **kw) -> T.PolicyRequest:
+    return T.PolicyRequest(dataset=str(dataset), preset=PRESET, out=Path(out), device="cpu", **kw)
+
+
+@pytest.fixture(scope="module")
+def trained(tiny_dataset_master, tmp_path_factory) -> tuple[Path, list[dict]]:
+    out = tmp_path_factory.mktemp("policy") / "run"
+    logs = []
+    T.train_policy(request(tiny_dataset_master, out), on_log=logs.append)
+    return out, logs
+
+
+def test_run_folder(trained):
+    out, logs = trained
+    config = json.loads((out / "config.json").read_text())
+    assert config["stage"] == "policy" and config["policy"] == "diffusion"
+    assert config["levels"] == ["expert"]
+    assert config["preset"]["model"]["horizon"] == 16
+    assert [r["step"] for r in logs] == list(range(1, STEPS + 1))
+    assert all(np.isfinite(r["loss"]) for r in logs)
+    assert (out / "model.safetensors").is_file()
+    weights = load_file(out / "model.safetensors")
+    ema = {k[len("ema."):]: v for k, v in weights.items() if k.startswith("ema.")}
+    net = {k[len("net."):]: v for k, v in weights.items() if k.startswith("net.")}
+    assert ema.keys() == net.keys()
+    assert any(not torch.equal(ema[k], net[k]) for k in net)  # the EMA trails the weights
+
+
+def test_checkpoint_round_trip(trained, tiny_dataset_master):
+    out, _ = trained
+    policy = DiffusionPolicy.from_pretrained(out)
+    saved = load_weights(out)
+    assert saved.keys() == policy.state_dict().keys()
+    for k, v in policy.state_dict().items():
+        assert torch.equal(v, saved[k]), k
+    meta = read_dataset_meta(tiny_dataset_master)
+    torch.testing.assert_close(policy.state_mean, torch.tensor(meta.state_mean))
+    latest = (out / "checkpoints" / "latest").read_text().strip()
+    assert latest == f"step-{STEPS:07d}"
+    ckpt = load_file(out / "checkpoints" / latest / "model.safetensors")
+    assert all(torch.equal(ckpt[k], saved[k]) for k in saved)
+
+
+def test_resume_is_exact(trained, tiny_dataset_master, tmp_path):
+    """Killed after the checkpoint at step 2 and resumed: the same weights and EMA as straight through."""
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "orbitmodel.cli.app", "train-policy", str(tiny_dataset_master), "--out", str(out),
+           "--preset", "tiny", "--max-steps", str(STEPS), "--device", "cpu"]
+    env = {**os.environ, KILL_AFTER_STEP: "2", "OMP_NUM_THREADS": "1"}
+    # the CLI's tiny preset saves every 2 steps, as PRESET does
+    assert get_policy_preset("tiny").train.save_every == 2
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == -9, done.stderr[-2000:]
+    assert not (out / "model.safetensors").exists()
+    T.train_policy(request(tiny_dataset_master, out, resume=True))
+    straight = load_file(trained[0] / "model.safetensors")
+    resumed = load_file(out / "model.safetensors")
+    for k in straight:
+        assert torch.equal(straight[k], resumed[k]), k
+
+
+def test_goal_join_reads_only_goals(tiny_dataset_master, monkeypatch):
+    table = T.load_episode_table(tiny_dataset_master, "train", {})
+    monkeypatch.setattr(T, "load_episode_table", lambda *a: table.drop_columns([S.OBSTACLES]))
+    goals = T.episode_goals(tiny_dataset_master, "train")
+    for idx, goal in zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.GOAL).to_pylist()):
+        np.testing.assert_allclose(goals[idx].numpy(), goal, rtol=1e-6)
+    assert S.OBSTACLES not in T.COLUMNS
+    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, T.DEFAULT_LEVELS, ())
+    levels = dict(zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.LEVEL).to_pylist()))
+    assert {levels[int(e)] for e in windows.episodes} == {"expert"}
+    item = windows[0]
+    assert item[S.ACTION].shape == (16, 8) and item[S.IMAGE].shape == (16, 3, 64, 64)
+
+
+def test_job_inputs(tiny_dataset_master):
+    meta = read_dataset_meta(tiny_dataset_master)
+    policy = T.build_policy(PRESET, meta)
+    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, T.DEFAULT_LEVELS, ())
+    from orbitdata.load import collate_windows
+
+    batch = collate_windows(windows.__getitems__([0, 1, 2]))
+    job = T.PolicyJob(policy, PRESET, T.episode_goals(tiny_dataset_master, "train"))
+    inputs = job.inputs(batch, step=0, device=torch.device("cpu"))
+    assert set(inputs) == {"images", "states", "goal", "actions", "generator"}
+    assert inputs["images"].shape == (3, 2, 3, 64, 64) and inputs["images"].dtype == torch.uint8
+    assert inputs["states"].shape == (3, 2, 16) and inputs["goal"].shape == (3, 3)
+    assert not torch.isnan(inputs["goal"]).any()
+    again = job.inputs(batch, step=0, device=torch.device("cpu"))
+    assert torch.equal(inputs["images"], again["images"])  # augmentation seeded by the step
+    with pytest.raises(RunError, match="32 px"):
+        T.build_policy(replace(PRESET, model=replace(PRESET.model, image_size=32)), meta)
+
+
+def test_evaluate(trained, tiny_dataset_master):
+    out, _ = trained
+    result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert result.windows > 0 and result.frames > 0
+    assert np.isfinite(result.policy) and result.mean_action > 0
+    again = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert again == result  # seeded sampling
+    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
+                              "--device", "cpu", "--max-windows", "3"])
+    assert cli.exit_code == 0, cli.output
+    assert json.loads(cli.stdout.strip().splitlines()[-1])["windows"] == 3
+
+
+def one_line_error(args) -> str:
+    result = runner.invoke(app, args)
+    assert result.exit_code == 2, result.output
+    lines = [l for l in result.stderr.splitlines() if l.startswith("error:")]
+    assert len(lines) == 1, result.stderr
+    assert "Traceback" not in result.output
+    return lines[0]
+
+
+def test_clear_errors(trained, tiny_dataset_master, tmp_path):
+    out, _ = trained
+    assert "not an orbitdata dataset" in one_line_error(["train-policy", str(tmp_path / "nope"), "--out", str(tmp_path / "r")])
+    assert "--resume" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(tmp_path / "r2"),
+                                         "--preset", "tiny", "--resume", "--device", "cpu"])
+    assert "another config" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(out),
+                                               "--preset", "tiny", "--device", "cpu"])
+    world = tmp_path / "wm"
+    world.mkdir()
+    (world / "config.json").write_text(json.dumps({"stage": "world_model"}))
+    assert "not a diffusion policy" in one_line_error(["eval", "policy", str(world), str(tiny_dataset_master)])
+    assert "not an orbitmodel run" in one_line_error(["eval", "policy", str(tmp_path), str(tiny_dataset_master)])
+    assert "exploratory" in one_line_error(["eval", "policy", str(out), str(tiny_dataset_master),
+                                            "--level", "exploratory", "--device", "cpu"])
