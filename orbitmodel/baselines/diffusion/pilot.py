@@ -23,13 +23,10 @@ import torch
 from orbitdata.seeding import rng
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 
-try:  # MERGE (issue 10): with orbitdata.fly, subclass its Pilot so that make_pilot / fly_grid accept it
-    from orbitdata.fly.pilot import Pilot as _PilotBase
-except ImportError:  # before it: the same interface by duck typing
-    _PilotBase = object
+from orbitdata.fly.pilot import Pilot
 
 
-class DiffusionPilot(_PilotBase):
+class DiffusionPilot(Pilot):
     """Flies a trained :class:`DiffusionPolicy` (EMA weights unless ``use_ema=False``).
 
     Every sampling draw comes from a generator seeded by the task's seed, so an episode is
