@@ -32,10 +32,11 @@ def presets() -> None:
 
 
 def _register() -> None:
-    from orbitmodel.cli import evaluate, train
+    from orbitmodel.cli import closed_loop, evaluate, train
 
     train.register(app)
     evaluate.register(eval_app)
+    closed_loop.register(eval_app)
 
 
 _register()
