@@ -1,0 +1,144 @@
+"""Planning latency of the learned planner (world model + probe + depth head + MPPI) on this CPU.
+
+    nice -n 19 python benchmarks/bench_plan.py [--samples 256] [--horizon 50] [--threads 1]
+        [--replan-every 1] [--steps 20] [--sweep] [--run RUN]
+
+Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
+step (median, p95), and the share of the time spent encoding the frame, in the depth head,
+rolling the K candidates out through the predictor, in the probe, and in the cost (points and
+collision queries included). Goal: <= 40 ms per control step (25 Hz) on 2 cores.
+
+The sizes are the ``cpu`` preset's; the weights do not change the time, so an untrained
+``WorldModel`` is used unless ``--run`` names a trained one. The probe is a stand-in with the
+DESIGN's architecture (MLP latent -> 256 -> 256 -> 10, integrated over the horizon) until the
+real one lands (MERGE issue 12: ``--run`` with a probe uses the real one).
+``--sweep`` prints a table over K, H and the replan interval instead.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+import torch
+from torch import nn
+
+from orbitdata.sim.config import CameraConfig, SimConfig
+from orbitmodel.config import get_preset
+from orbitmodel.evaluate.flying import Task
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.dynamics import LearnedDynamics
+from orbitmodel.plan.factory import PredictedDepth
+from orbitmodel.plan.mppi import MPPIConfig
+from orbitmodel.plan.obstacles import Camera
+from orbitmodel.plan.pilot import PlannerConfig, PlannerPilot, Variant
+from orbitmodel.plan.rotation import matrix_to_rot6d, rot6d_to_matrix, so3_exp
+from orbitmodel.plan.timing import Timings
+
+
+class StandInProbe(nn.Module):
+    """The DESIGN's probe, compute-wise: MLP D -> 256 -> 256 -> 10 (dp, dv, dw, dphi), integrated."""
+
+    def __init__(self, latent_dim: int, dt: float = 0.04):
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(latent_dim, 256), nn.GELU(), nn.Linear(256, 256), nn.GELU(),
+                                 nn.Linear(256, 10))
+        self.dt = dt
+
+    def forward(self, z: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:  # (B, n, D), (B, 16) -> (B, n, 16)
+        d = 1e-3 * self.net(z)  # (B, n, 10)
+        p = state0[:, None, 0:3] + torch.cumsum(d[..., 0:3], 1)
+        v = state0[:, None, 3:6] + torch.cumsum(d[..., 3:6], 1)
+        w = state0[:, None, 12:15] + torch.cumsum(d[..., 6:9], 1)
+        fuel = (state0[:, None, 15:16] - torch.cumsum(d[..., 9:10].abs(), 1)).clamp(0, 1)
+        turn = so3_exp(w * self.dt)
+        R = [rot6d_to_matrix(state0[:, 6:12])]
+        for t in range(z.shape[1]):
+            R.append(R[-1] @ turn[:, t])
+        return torch.cat([p, v, matrix_to_rot6d(torch.stack(R[1:], 1)), w, fuel], -1)
+
+
+def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[PlannerPilot, Timings]:
+    preset = get_preset("cpu")
+    if args.run:
+        from orbitmodel.plan.dynamics import load_probe
+
+        model = WorldModel.from_pretrained(args.run)
+        probe = load_probe(args.run)
+    else:
+        torch.manual_seed(0)
+        model = WorldModel(preset.model).eval()
+        probe = StandInProbe(preset.model.latent_dim).eval()
+    timings = Timings()
+    sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
+    config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every)
+    pilot = PlannerPilot(Variant.PLANNER, LearnedDynamics(model, probe, timings), PredictedDepth(model, timings),
+                         Camera.from_sim(sim), config, sim, timings)
+    return pilot, timings
+
+
+def synthetic_observation(rng: np.random.Generator, t: int, size: int) -> dict:
+    """A plausible frame: a random image, a state flying along +x, a depth map with a near blob."""
+    depth = np.full((16, 16), 50.1, np.float32)
+    depth[5:10, 6:11] = 3.0
+    state = np.zeros(16, np.float32)
+    state[0], state[3], state[6], state[9], state[15] = 0.04 * t, 1.0, 1.0, 1.0, 1.0
+    return {"image": rng.integers(0, 255, (size, size, 3), dtype=np.uint8), "state": state, "depth_low": depth}
+
+
+def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
+    pilot, timings = make_pilot(args, samples, horizon, replan_every)
+    pilot.reset(Task(goal=(10.0, 0.0, 0.0), goal_radius=0.5, initial_velocity=(1.0, 0.0, 0.0), seed=0))
+    rng = np.random.default_rng(0)
+    size = pilot.dynamics.model.config.image_size
+    warm = pilot.dynamics.history  # fill the context first: steady state has a full window
+    for t in range(warm):
+        pilot.act(synthetic_observation(rng, t, size))
+    pilot.step_seconds.clear()
+    pilot.replan_seconds.clear()
+    timings.clear()
+    start = time.perf_counter()
+    for t in range(warm, warm + args.steps):
+        pilot.act(synthetic_observation(rng, t, size))
+    wall = time.perf_counter() - start
+    steps, replans = 1e3 * np.array(pilot.step_seconds), 1e3 * np.array(pilot.replan_seconds)
+    phases = timings.snapshot()
+    return {"samples": samples, "horizon": horizon, "replan_every": replan_every,
+            "step_median": np.median(steps), "step_p95": np.percentile(steps, 95),
+            "replan_median": np.median(replans) if len(replans) else float("nan"),
+            "replan_p95": np.percentile(replans, 95) if len(replans) else float("nan"),
+            "share": {k: v / wall for k, v in sorted(phases.items())}, "wall": wall}
+
+
+def report(m: dict) -> str:
+    shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in m["share"].items())
+    return (f"K={m['samples']:4d} H={m['horizon']:3d} replan every {m['replan_every']}: per control step "
+            f"{m['step_median']:7.1f} ms median {m['step_p95']:7.1f} p95; per replan {m['replan_median']:7.1f} / "
+            f"{m['replan_p95']:7.1f} ms   [{shares}]")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--samples", type=int, default=256)
+    parser.add_argument("--horizon", type=int, default=50)
+    parser.add_argument("--replan-every", type=int, default=1)
+    parser.add_argument("--steps", type=int, default=20, help="control steps timed (after the context fills)")
+    parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
+    parser.add_argument("--run", default=None, help="a trained run with its probe (default: untrained cpu preset)")
+    parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    print(f"cpu preset, {args.threads} torch thread(s), {os.cpu_count()} cores visible, torch {torch.__version__}")
+    with torch.inference_mode():
+        if not args.sweep:
+            print(report(measure(args, args.samples, args.horizon, args.replan_every)))
+            return
+        for samples, horizon, every in [(256, 50, 1), (128, 50, 1), (64, 50, 1), (64, 25, 1), (32, 25, 1),
+                                        (256, 50, 5), (64, 25, 5)]:
+            print(report(measure(args, samples, horizon, every)), flush=True)
+
+
+if __name__ == "__main__":
+    main()

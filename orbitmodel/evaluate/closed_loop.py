@@ -1,0 +1,170 @@
+"""Closed loop: fly a planning pilot over the ``orbitdata fly`` grid and record every episode.
+
+The grid is orbitdata's (obstacle count x initial speed, ``orbitdata.seeding.grid_seed``), so
+the planner, its oracles, the expert and the risky pilot fly exactly the same episodes. None of
+those seeds generated a training episode: :func:`check_unseen_seeds` checks it against the run's
+dataset before flying.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from orbitdata.config import GenerationConfig
+from orbitdata.seeding import episode_seed, grid_seed
+from orbitdata.sim.env import CubeSatEnv
+from orbitmodel.evaluate.flying import CellResult, check_grid, fly_episode, grid_report
+from orbitmodel.plan.factory import build_pilot
+from orbitmodel.plan.pilot import PlannerConfig, Variant
+from orbitmodel.plan.timing import Timings
+
+
+@dataclass(frozen=True)
+class ClosedLoopRequest:
+    """One grid flight.
+
+    Args:
+        variant: the planning pilot (see ``orbitmodel.plan.pilot``).
+        run: the Stage I run folder (world model, probe, dataset facts); optional for the
+            rigid-body oracles, which then skip the unseen-seed check.
+        obstacles, speeds, episodes, seed: the grid, as ``orbitdata fly``.
+        planner: the pilot's settings.
+        config: scenario and simulator settings (the camera is set to the run's).
+        max_steps: frames per episode at most (None: the simulator's 300).
+        video_dir, video_format: one video per episode (".mp4" or ".gif").
+    """
+
+    variant: Variant = Variant.PLANNER
+    run: Path | None = None
+    obstacles: tuple[int, ...] = (1, 3, 5)
+    speeds: tuple[float, ...] = (1.0, 2.0)
+    episodes: int = 20
+    seed: int = 0
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    config: GenerationConfig = field(default_factory=GenerationConfig)
+    max_steps: int | None = None
+    video_dir: Path | None = None
+    video_format: str = ".mp4"
+
+
+@dataclass
+class ClosedLoopResult:
+    cells: list[CellResult]
+    episodes: list[dict]  # one record per episode (see episode_record)
+    step_ms: list[float]  # every control step's planning time
+    replan_ms: list[float]
+    timings: dict[str, float]  # seconds per phase, summed
+
+
+def grid_seeds(obstacles, speeds, episodes: int, seed: int) -> list[tuple[int, float, int, int]]:
+    """(obstacles, speed, episode, episode seed) of every grid episode, in flying order."""
+    return [(n, float(v), k, grid_seed(seed, n, v, k)) for n in obstacles for v in speeds for k in range(episodes)]
+
+
+def dataset_seeds(root_seed: int, episodes: int) -> set[int]:
+    """The episode seeds of a dataset generated with ``root_seed`` (``orbitdata.dataset.plan``)."""
+    return {episode_seed(root_seed, i) for i in range(episodes)}
+
+
+def check_unseen_seeds(seeds: list[int], root_seed: int, episodes: int) -> None:
+    """Raise ValueError if a grid seed generated one of the dataset's episodes."""
+    seen = dataset_seeds(root_seed, episodes) & set(seeds)
+    if seen:
+        raise ValueError(f"{len(seen)} grid seed(s) generated training episodes of the run's dataset "
+                         f"(root seed {root_seed}); choose another --seed")
+
+
+def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
+    goal = np.asarray(result.scenario.goal)
+    return {"obstacles": n, "speed": v, "episode": k, "seed": seed, "outcome": result.outcome,
+            "frames": int(result.length), "min_clearance_m": float(result.min_clearance.min()),
+            "goal_distance_m": float(np.linalg.norm(result.states[-1, 0:3] - goal)),
+            "fuel_used": float(result.states[0, 15] - result.states[-1, 15]), **result.pilot_info}
+
+
+EpisodeHook = Callable[[CellResult, dict], None]
+
+
+class ClosedLoop:
+    """A grid flight, checked and loaded: construction raises ValueError / RunError on input it
+    cannot fly (bad grid, missing weights or probe, another camera, seeds seen in training);
+    :meth:`fly` then flies every episode."""
+
+    def __init__(self, req: ClosedLoopRequest):
+        check_grid(list(req.obstacles), list(req.speeds), req.episodes)
+        if req.video_format not in (".mp4", ".gif"):
+            raise ValueError(f"video format {req.video_format!r}: use .mp4 or .gif")
+        if req.max_steps is not None and req.max_steps < 2:
+            raise ValueError(f"max_steps={req.max_steps}: an episode needs at least 2 frames")
+        self.req = req
+        self.seeds = grid_seeds(req.obstacles, req.speeds, req.episodes, req.seed)
+        if req.run is not None:
+            from orbitmodel.train.checkpoint import read_run_config
+
+            meta = read_run_config(req.run).dataset
+            check_unseen_seeds([s for *_, s in self.seeds], meta.root_seed, sum(meta.episodes.values()))
+        self.timings = Timings()
+        planner = dataclasses.replace(req.planner, record=req.video_dir is not None)
+        self.pilot, sim = build_pilot(req.variant, req.run, planner, req.config.sim, self.timings)
+        self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
+                                       max_steps=req.max_steps or sim.max_steps)
+
+    def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
+        req, pilot = self.req, self.pilot
+        env = CubeSatEnv(self.sim, req.config.scenario)
+        cells = {(n, float(v)): CellResult(obstacles=n, speed=float(v), episodes=req.episodes)
+                 for n in req.obstacles for v in req.speeds}
+        out = ClosedLoopResult(list(cells.values()), [], [], [], {})
+        self.timings.clear()
+        try:
+            for n, v, k, seed in self.seeds:
+                frames: list[np.ndarray] = []
+                sink = (lambda t, rgb, *_: frames.append(rgb)) if req.video_dir is not None else None
+                result = fly_episode(env, pilot, seed, n, v, frame_sink=sink)
+                cell = cells[(n, v)]
+                cell.add(result.outcome)
+                record = episode_record(n, v, k, seed, result)
+                out.episodes.append(record)
+                out.step_ms += [1e3 * s for s in pilot.step_seconds]
+                out.replan_ms += [1e3 * s for s in pilot.replan_seconds]
+                if req.video_dir is not None:
+                    from orbitmodel.evaluate.video import write_episode_video
+
+                    name = f"{req.variant.value}-obst{n}-v{v:g}-ep{k:03d}-{result.outcome}{req.video_format}"
+                    write_episode_video(Path(req.video_dir) / name, frames, result, pilot.replans)
+                if on_episode:
+                    on_episode(cell, record)
+        finally:
+            env.close()
+        out.timings = self.timings.snapshot()
+        return out
+
+
+def fly_closed_loop(req: ClosedLoopRequest, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
+    """Check, load and fly ``req`` (see :class:`ClosedLoop`)."""
+    return ClosedLoop(req).fly(on_episode)
+
+
+def _stats(values: list[float]) -> dict:
+    if not values:
+        return {"median": None, "p95": None}
+    return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
+
+
+def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult) -> dict:
+    """``orbitdata fly --json``'s table (pilot, seed, settings) plus episodes, settings, latency."""
+    report = grid_report(req.variant.value, req.seed, result.cells)
+    total = sum(result.timings.values()) or 1.0
+    report.update({
+        "run": None if req.run is None else str(req.run),
+        "planner": dataclasses.asdict(req.planner),
+        "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
+        "time_share": {k: v / total for k, v in sorted(result.timings.items())},
+        "episodes": result.episodes,
+    })
+    return report

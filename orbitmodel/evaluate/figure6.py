@@ -1,0 +1,81 @@
+"""The paper's Figure 6: success per grid setting and on average, one bar per pilot.
+
+Reads the JSON tables of ``orbitmodel eval closed-loop --json`` and ``orbitdata fly --json``
+(both: ``pilot``, ``seed``, ``settings`` with per-outcome counts), so the learned planner, its
+oracles, the expert and the risky pilot share one figure.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+
+def read_report(path: str | Path) -> dict:
+    path = Path(path)
+    try:
+        report = json.loads(path.read_text())
+        settings = report["settings"]
+        for s in settings:
+            s["obstacles"], s["speed"], s["episodes"], s["success"]  # noqa: B018 (presence check)
+        report["pilot"]
+    except FileNotFoundError:
+        raise
+    except (json.JSONDecodeError, KeyError, TypeError) as err:
+        raise ValueError(f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
+                         f"--json): {type(err).__name__} {err}") from None
+    return report
+
+
+def success_table(reports: list[dict]) -> tuple[list[tuple[int, float]], dict[str, list[float]]]:
+    """The grid settings and, per pilot, the success rate per setting then the average (in [0, 1]).
+
+    Every report must cover the same settings (raises ValueError naming the odd one).
+    """
+    if not reports:
+        raise ValueError("no results to plot: give at least one JSON file")
+    settings = [(int(s["obstacles"]), float(s["speed"])) for s in reports[0]["settings"]]
+    rates: dict[str, list[float]] = {}
+    for r in reports:
+        mine = {(int(s["obstacles"]), float(s["speed"])): s for s in r["settings"]}
+        if sorted(mine) != sorted(settings):
+            raise ValueError(f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
+                             f"{reports[0]['pilot']!r} ({sorted(settings)}); fly them on the same one")
+        name = r["pilot"] if r["pilot"] not in rates else f"{r['pilot']} ({len(rates)})"
+        per = [mine[k]["success"] / max(mine[k]["episodes"], 1) for k in settings]
+        rates[name] = per + [sum(per) / len(per)]
+    return settings, rates
+
+
+def plot_figure6(reports: list[dict], out: str | Path, title: str | None = None) -> Path:
+    """Grouped bars (settings + average) per pilot, written to ``out`` (PNG)."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ImportError("Figure 6 needs matplotlib: pip install 'orbitdata[viz]'") from None
+    settings, rates = success_table(reports)
+    labels = [f"{n} obst.\n{v:g} m/s" for n, v in settings] + ["average"]
+    width = 0.8 / len(rates)
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.3 * len(labels)), 3.6), dpi=150)
+    for i, (pilot, values) in enumerate(rates.items()):
+        xs = [j + (i - (len(rates) - 1) / 2) * width for j in range(len(labels))]
+        bars = ax.bar(xs, [100 * v for v in values], width, label=pilot)
+        ax.bar_label(bars, labels=[f"{100 * v:.0f}" for v in values], fontsize=6, padding=1)
+    ax.set_xticks(range(len(labels)), labels, fontsize=8)
+    ax.axvline(len(labels) - 1.5, color="0.7", lw=0.8)
+    ax.set_ylabel("success %")
+    ax.set_ylim(0, 110)
+    episodes = {s["episodes"] for r in reports for s in r["settings"]}
+    seeds = {r.get("seed") for r in reports}
+    ax.set_title(title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting, "
+                          f"seed {'/'.join(map(str, sorted(seeds, key=str)))}", fontsize=9)
+    ax.legend(fontsize=7, ncols=min(len(rates), 3), loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
+    fig.tight_layout()
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out)
+    plt.close(fig)
+    return out

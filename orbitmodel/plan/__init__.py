@@ -1,0 +1,44 @@
+"""Planning: MPPI over thrust sequences on imagined futures (``orbitmodel.plan``).
+
+    from orbitmodel.plan import MPPI, MPPIConfig, PlannerConfig, Variant, build_pilot
+
+* :mod:`~orbitmodel.plan.mppi`: the sampler, generic over a cost ``(K, H, 8) -> (K,)``;
+* :mod:`~orbitmodel.plan.dynamics`: the world model + probe, and the rigid-body oracle;
+* :mod:`~orbitmodel.plan.obstacles`: depth -> world points, and the true obstacles (oracles);
+* :mod:`~orbitmodel.plan.cost`: collision, progress, effort, spin, heading, speed;
+* :mod:`~orbitmodel.plan.pilot`: the pilots (``orbitdata.fly`` interface) and their variants;
+* :mod:`~orbitmodel.plan.factory`: a pilot from a run folder.
+
+Names import on first use (MuJoCo and the model load only when needed).
+"""
+
+_LAZY = {
+    "MPPI": "orbitmodel.plan.mppi",
+    "MPPIConfig": "orbitmodel.plan.mppi",
+    "CostConfig": "orbitmodel.plan.cost",
+    "trajectory_cost": "orbitmodel.plan.cost",
+    "LearnedDynamics": "orbitmodel.plan.dynamics",
+    "RigidBodyDynamics": "orbitmodel.plan.dynamics",
+    "Camera": "orbitmodel.plan.obstacles",
+    "PointCloud": "orbitmodel.plan.obstacles",
+    "TrueObstacles": "orbitmodel.plan.obstacles",
+    "depth_to_points": "orbitmodel.plan.obstacles",
+    "PlannerConfig": "orbitmodel.plan.pilot",
+    "PlannerPilot": "orbitmodel.plan.pilot",
+    "OraclePilot": "orbitmodel.plan.pilot",
+    "Variant": "orbitmodel.plan.pilot",
+    "build_pilot": "orbitmodel.plan.factory",
+    "pilot_factory": "orbitmodel.plan.factory",
+    "planner_config": "orbitmodel.plan.factory",
+}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'orbitmodel.plan' has no attribute {name!r}")
+
+
+__all__ = sorted(_LAZY)

@@ -1,0 +1,122 @@
+"""Make a planning pilot from a trained run: load what its variant needs, check it fits.
+
+:func:`build_pilot` is the library entry; :func:`pilot_factory` adapts it to
+``orbitdata.fly``'s registry (``factory(config, **options) -> Pilot``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from orbitdata.sim.config import SimConfig
+from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, load_probe
+from orbitmodel.plan.obstacles import Camera
+from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Variant
+from orbitmodel.plan.timing import Timings
+
+
+class PredictedDepth:
+    """The depth head on the current frame: observation -> (16, 16) z-depth, metres."""
+
+    def __init__(self, model, timings: Timings | None = None):
+        self.model = model.eval()
+        self.timings = timings or Timings()
+
+    @torch.inference_mode()
+    def __call__(self, obs: dict) -> np.ndarray:
+        with self.timings("depth-head"):
+            image = torch.from_numpy(np.ascontiguousarray(obs["image"])).permute(2, 0, 1)[None, None]  # (1, 1, 3, H, W)
+            return self.model.predict_depth(image)[0, 0].numpy()  # (16, 16) metres
+
+
+def sensor_depth(obs: dict) -> np.ndarray:
+    """The rendered depth_low: a perfect depth head (the ``oracle-true-dyn-sensor`` variant)."""
+    return obs["depth_low"]
+
+
+def load_world_model(run: str | Path | None, variant: Variant):
+    """The run's world model in eval mode; raises a one-line error when the variant needs one and there is none."""
+    from orbitmodel.model.world_model import WorldModel
+
+    if run is None:
+        raise ValueError(f"pilot {variant.value} plans with the world model: give the run folder (RUN)")
+    return WorldModel.from_pretrained(run)
+
+
+def camera_for_run(sim: SimConfig, model) -> SimConfig:
+    """The simulator's camera set to the run's image size and field of view.
+
+    The camera of ``sim`` must be the default one or already the run's: a checkpoint trained at
+    another size or field of view would see different images (raises RunError).
+    """
+    from orbitmodel.train.checkpoint import RunError
+
+    size, fovy = model.config.image_size, float(model.run_info.fovy_deg)
+    cam = sim.camera
+    default = type(cam)()
+    if (cam.image_size, cam.fovy_deg) not in ((size, fovy), (default.image_size, default.fovy_deg)):
+        raise RunError(f"the run sees {size} px images at {fovy:g} deg, but the simulator's camera is "
+                       f"{cam.image_size} px at {cam.fovy_deg:g} deg; fly it with the run's camera (drop the "
+                       "camera settings from --config) or use a run trained on such images")
+    return dataclasses.replace(sim, camera=dataclasses.replace(cam, image_size=size, fovy_deg=fovy))
+
+
+def build_pilot(variant: Variant | str, run: str | Path | None = None, config: PlannerConfig = PlannerConfig(),
+                sim: SimConfig = SimConfig(), timings: Timings | None = None) -> tuple[PlannerPilot, SimConfig]:
+    """The pilot of ``variant`` and the simulator settings it must fly in (the run's camera).
+
+    Raises RunError (a ValueError) for a run without weights or probe, or with another camera.
+    """
+    variant = Variant(variant)
+    timings = timings or Timings()
+    model = load_world_model(run, variant) if variant.needs_model else None
+    if model is not None:
+        sim = camera_for_run(sim, model)
+    if variant.learned_dynamics:
+        dynamics = LearnedDynamics(model, load_probe(run), timings)
+    else:
+        dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
+    depth = {"depth-head": lambda: PredictedDepth(model, timings), "sensor": lambda: sensor_depth,
+             "true": lambda: None}[variant.obstacles]()
+    camera = Camera.from_sim(sim)
+    cls = OraclePilot if variant.privileged else PlannerPilot
+    return cls(variant, dynamics, depth, camera, config, sim, timings), sim
+
+
+def pilot_factory(variant: Variant | str):
+    """An ``orbitdata.fly`` factory for ``variant``: ``factory(config, run=None, **planner) -> Pilot``.
+
+    MERGE (issue 10): register these with ``orbitdata.fly.register_pilot`` or as entry points.
+    ``planner`` options are PlannerConfig / MPPIConfig field names (``samples``, ``horizon``,
+    ``memory_frames``, ...); ``orbitdata fly --pilot-option`` passes strings, converted here.
+    """
+    def factory(config, run: str | None = None, **options) -> PlannerPilot:
+        pilot, sim = build_pilot(variant, run, planner_config(**options), config.sim)
+        if sim.camera != config.sim.camera:
+            raise ValueError(f"pilot {Variant(variant).value} needs the run's camera ({sim.camera.image_size} px); "
+                             "fly it with `orbitmodel eval closed-loop`, which sets it")
+        return pilot
+
+    return factory
+
+
+def planner_config(**options) -> PlannerConfig:
+    """A PlannerConfig from flat options: MPPIConfig, CostConfig and PlannerConfig field names
+    (values may be strings, as the command line gives them)."""
+    from orbitmodel.plan.cost import CostConfig
+    from orbitmodel.plan.mppi import MPPIConfig
+
+    parts: dict[type, dict] = {MPPIConfig: {}, CostConfig: {}, PlannerConfig: {}}
+    for key, value in options.items():
+        owner = next((cls for cls in parts if key in {f.name for f in dataclasses.fields(cls)}), None)
+        if owner is None or key in ("mppi", "cost"):
+            raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
+        kind = type(getattr(owner(), key))
+        parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
+            else kind(value)
+    return PlannerConfig(mppi=MPPIConfig(**parts[MPPIConfig]), cost=CostConfig(**parts[CostConfig]),
+                         **parts[PlannerConfig])

@@ -1,0 +1,191 @@
+"""What the planner believes is in the way: clearance from a point to the nearest obstacle.
+
+Two sources answer ``clearance(positions (..., 3)) -> (...,)`` metres (negative inside, +inf
+when nothing is near):
+
+* :class:`PointCloud`: the 16x16 depth map of the current frame (the depth head's prediction,
+  or the rendered ``depth_low``) back-projected through the camera into the world frame with the
+  current state, each point a sphere as wide as its cell (what a learned pilot knows);
+* :class:`TrueObstacles`: the scenario's obstacles, exact signed distances (oracles only).
+
+Camera facts (``orbitdata.sim``): the camera sits on the body's +x face looking along body +x,
+image up = body +z; ``depth_low`` is the 4x4 (at 64 px) area mean of the *z-depth* along the
+optical axis, no-return pixels counted at the far plane (``orbitdata.sim.render.pool_depth``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from orbitdata.scenario.spec import Obstacle, Scenario
+from orbitdata.schema import DEPTH_LOW_SIDE
+from orbitdata.sim.config import SimConfig
+from orbitmodel.plan.rotation import rot6d_to_matrix
+
+
+@dataclass(frozen=True)
+class Camera:
+    """Pinhole model of the onboard camera, in the body frame.
+
+    Attributes:
+        fovy_deg: vertical (= horizontal, square image) field of view.
+        far: metres; depth at or beyond it means no return.
+        position: (3,) metres, the optical centre in the body frame.
+        rotation: (3, 3) camera -> body (columns: camera x right, y up, z backwards, MuJoCo's).
+    """
+
+    fovy_deg: float
+    far: float
+    position: tuple[float, float, float]
+    rotation: tuple[tuple[float, ...], ...]
+
+    @classmethod
+    def from_sim(cls, sim: SimConfig = SimConfig(), fovy_deg: float | None = None) -> "Camera":
+        """Read the pose from the simulator's own MJCF, so it cannot drift from the renderer."""
+        import mujoco
+
+        from orbitdata.sim.mjcf import CAMERA, build_mjcf
+
+        model = mujoco.MjModel.from_xml_string(build_mjcf(Scenario(obstacles=(), goal=(1.0, 0.0, 0.0)), sim))
+        cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
+        R = np.zeros(9)
+        mujoco.mju_quat2Mat(R, model.cam_quat[cam])
+        return cls(fovy_deg=float(sim.camera.fovy_deg if fovy_deg is None else fovy_deg), far=float(sim.camera.far),
+                   position=tuple(float(x) for x in model.cam_pos[cam]),
+                   rotation=tuple(tuple(float(x) for x in row) for row in R.reshape(3, 3)))
+
+    def cell_rays(self, side: int = DEPTH_LOW_SIDE) -> np.ndarray:
+        """(side, side, 3) body-frame vectors through the cell centres, scaled to unit z-depth.
+
+        Row 0 is the top of the image (camera +y), column 0 its left (camera -x).
+        """
+        half = math.tan(math.radians(self.fovy_deg) / 2)  # image half-width at unit depth
+        centres = ((np.arange(side) + 0.5) / side * 2 - 1) * half  # (side,) left/top -> right/bottom
+        x, y = np.meshgrid(centres, -centres)  # x right, y up
+        ray_cam = np.stack([x, y, -np.ones_like(x)], -1)  # looking along -z (MuJoCo)
+        return ray_cam @ np.asarray(self.rotation).T
+
+    def cell_width(self, side: int = DEPTH_LOW_SIDE) -> float:
+        """Width of one cell at unit depth (metres per metre)."""
+        return 2 * math.tan(math.radians(self.fovy_deg) / 2) / side
+
+
+def depth_to_points(depth: np.ndarray, state: np.ndarray, camera: Camera, max_range: float = 20.0,
+                    footprint: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Back-project a (16, 16) z-depth map (metres) seen from ``state`` into world points.
+
+    Cells at or beyond ``min(max_range, 0.99 far)`` (no return, or too far to matter) and
+    non-finite cells are dropped. Returns points (N, 3) metres, world frame relative to the
+    start, and radii (N,) metres: ``footprint`` x half the cell's width at its depth, so the
+    spheres of neighbouring cells touch and a seen surface has no holes.
+    """
+    depth = np.asarray(depth, dtype=np.float64)
+    keep = np.isfinite(depth) & (depth > 0) & (depth < min(max_range, 0.99 * camera.far))
+    d = depth[keep]  # (N,)
+    body = np.asarray(camera.position) + d[:, None] * camera.cell_rays(depth.shape[0])[keep]  # (N, 3)
+    s = np.asarray(state, dtype=np.float64)
+    R = rot6d_to_matrix(torch.as_tensor(s[6:12])).numpy()  # body -> world
+    points = s[0:3] + body @ R.T
+    return points, footprint * 0.5 * camera.cell_width(depth.shape[0]) * d
+
+
+class PointCloud:
+    """Obstacles as a union of spheres; nearest-neighbour queries through a k-d tree.
+
+    ``reach``: clearances beyond it are reported as +inf (the cost ignores them anyway), which
+    lets the tree prune almost every query far from the points.
+    """
+
+    def __init__(self, points: np.ndarray, radii: np.ndarray, reach: float = 2.0, neighbours: int = 4):
+        from scipy.spatial import cKDTree
+
+        self.points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        self.radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        self.reach = float(reach)
+        self.k = min(neighbours, len(self.points))
+        self._tree = cKDTree(self.points) if len(self.points) else None
+        self._pad_radii = np.append(self.radii, 0.0)  # the tree's "no neighbour" index is N
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
+        """(..., 3) metres -> (...,) distance to the nearest sphere surface (+inf beyond reach)."""
+        shape = positions.shape[:-1]
+        if self._tree is None:
+            return torch.full(shape, math.inf)
+        x = positions.detach().reshape(-1, 3).double().numpy()
+        bound = self.reach + float(self.radii.max())
+        dist, idx = self._tree.query(x, k=self.k, distance_upper_bound=bound)  # (M, k) or (M,)
+        gap = np.asarray(dist) - self._pad_radii[np.asarray(idx)]  # inf where none within bound
+        gap = gap.min(-1) if gap.ndim == 2 else gap
+        return torch.from_numpy(gap).float().reshape(shape)
+
+
+class PointMemory:
+    """The points of the last ``frames`` frames, in the world frame (1 = the current frame only)."""
+
+    def __init__(self, frames: int = 1):
+        if frames < 1:
+            raise ValueError(f"memory of {frames} frames: keep at least the current one")
+        self._frames: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=frames)
+
+    def reset(self) -> None:
+        self._frames.clear()
+
+    def add(self, points: np.ndarray, radii: np.ndarray) -> None:
+        self._frames.append((points, radii))
+
+    def cloud(self, reach: float = 2.0) -> PointCloud:
+        if not self._frames:
+            return PointCloud(np.zeros((0, 3)), np.zeros(0), reach)
+        return PointCloud(np.concatenate([p for p, _ in self._frames]), np.concatenate([r for _, r in self._frames]),
+                          reach)
+
+
+def _quat_matrix(quat) -> torch.Tensor:
+    from orbitdata.scenario.spec import quat_to_mat
+
+    return torch.tensor(quat_to_mat(quat), dtype=torch.float32)
+
+
+def signed_distance(ob: Obstacle, x: torch.Tensor) -> torch.Tensor:
+    """(..., 3) world points -> (...,) metres to the surface of ``ob``, negative inside.
+
+    The torch twin of ``orbitdata.scenario.geometry.signed_distance`` (same formulas: exact,
+    except the ellipsoid's conservative lower bound).
+    """
+    local = (x - torch.tensor(ob.center, dtype=torch.float32)) @ _quat_matrix(ob.quat)  # R^T (x - c)
+    lx, ly, lz = local.unbind(-1)
+    a, b, c = ob.size
+    if ob.shape == "sphere":
+        return local.norm(dim=-1) - a
+    if ob.shape == "box":
+        q = local.abs() - torch.tensor([a, b, c], dtype=torch.float32)
+        return q.clamp(min=0).norm(dim=-1) + q.amax(-1).clamp(max=0)
+    if ob.shape == "capsule":
+        return torch.stack([lx, ly, lz - lz.clamp(-b, b)], -1).norm(dim=-1) - a
+    if ob.shape == "cylinder":
+        dr, dz = torch.hypot(lx, ly) - a, lz.abs() - b
+        return torch.maximum(dr, dz).clamp(max=0) + torch.hypot(dr.clamp(min=0), dz.clamp(min=0))
+    k = (local / torch.tensor([a, b, c], dtype=torch.float32)).norm(dim=-1)  # ellipsoid
+    return (k - 1) * min(a, b, c)
+
+
+class TrueObstacles:
+    """The scenario's obstacles (privileged: only the oracles get them)."""
+
+    def __init__(self, scenario: Scenario):
+        self.obstacles = tuple(scenario.obstacles)
+
+    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
+        """(..., 3) metres -> (...,) signed distance to the nearest obstacle surface."""
+        out = torch.full(positions.shape[:-1], math.inf)
+        for ob in self.obstacles:
+            out = torch.minimum(out, signed_distance(ob, positions.float()))
+        return out

@@ -1,0 +1,279 @@
+"""The planning pilots: MPPI on imagined futures, flown through the ``orbitdata.fly`` interface.
+
+A pilot is reset with the task (goal, goal radius, initial velocity, seed) and then maps each
+observation to 8 thrusts: it folds the frame into its model, replans with MPPI, executes the
+first action of the plan. Which model of the dynamics and of the obstacles it plans with is
+the :class:`Variant`:
+
+==========================  ==================  ======================  ===========
+variant                     dynamics            obstacles               privileged
+==========================  ==================  ======================  ===========
+planner                     world model+probe   depth head (16x16)      no
+oracle-true                 rigid body          the scenario's          yes
+oracle-learned-dyn          world model+probe   the scenario's          yes
+oracle-true-dyn-depth       rigid body          depth head (16x16)      no
+oracle-true-dyn-sensor      rigid body          rendered depth_low      no
+==========================  ==================  ======================  ===========
+
+Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
+planner never sees the obstacle list. The classes follow ``orbitdata.fly.Pilot`` by duck typing
+(``name``, ``privileged``, ``needs_images``, ``reset``, ``act``, ``metadata``).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Callable
+
+import numpy as np
+import torch
+
+from orbitdata.seeding import rng
+from orbitdata.sim.config import SimConfig
+from orbitdata.sim.thrusters import wrench_matrix
+from orbitmodel.plan.cost import CostConfig, trajectory_cost
+from orbitmodel.plan.mppi import MPPI, MPPIConfig, PlanResult
+from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, depth_to_points
+from orbitmodel.plan.timing import Timings
+
+
+class Variant(str, Enum):
+    PLANNER = "planner"
+    ORACLE_TRUE = "oracle-true"
+    ORACLE_LEARNED_DYN = "oracle-learned-dyn"
+    ORACLE_TRUE_DYN_DEPTH = "oracle-true-dyn-depth"
+    ORACLE_TRUE_DYN_SENSOR = "oracle-true-dyn-sensor"
+
+    @property
+    def learned_dynamics(self) -> bool:
+        return self in (Variant.PLANNER, Variant.ORACLE_LEARNED_DYN)
+
+    @property
+    def obstacles(self) -> str:
+        """'depth-head', 'sensor' (the rendered depth_low) or 'true' (the scenario's)."""
+        return {Variant.ORACLE_TRUE: "true", Variant.ORACLE_LEARNED_DYN: "true",
+                Variant.ORACLE_TRUE_DYN_SENSOR: "sensor"}.get(self, "depth-head")
+
+    @property
+    def privileged(self) -> bool:
+        return self.obstacles == "true"
+
+    @property
+    def needs_model(self) -> bool:
+        return self.learned_dynamics or self.obstacles == "depth-head"
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Everything a planning pilot is tuned by.
+
+    Args:
+        mppi: sampling (K, H, noise, temperature); see :class:`MPPIConfig`.
+        cost: weights and margins; see :class:`CostConfig`.
+        noise: "wrench" (perturb along thrust patterns that make independent body forces and
+            torques, torques scaled by ``torque_noise``) or "thrust" (each thruster alone).
+        torque_noise: scale of the torque patterns against the force patterns.
+        memory_frames: depth frames whose points stay in the world-frame cloud (1: current only).
+        max_range: metres; depth cells farther than this are not obstacles to plan around.
+        footprint: a point's sphere radius in half cell widths at its depth.
+        reach: metres of clearance beyond which points are ignored (>= the collision margin).
+        rigid_substeps: substeps of the rigid-body model (the simulator's 8 = exact).
+        replan_every: control steps between replans (in between, the plan's next step runs).
+        record: keep each replan's best imagined path and the believed points (for videos).
+    """
+
+    mppi: MPPIConfig = field(default_factory=MPPIConfig)
+    cost: CostConfig = field(default_factory=CostConfig)
+    noise: str = "wrench"
+    torque_noise: float = 0.3
+    memory_frames: int = 1
+    max_range: float = 10.0
+    footprint: float = 1.0
+    reach: float = 1.0
+    rigid_substeps: int = 1
+    replan_every: int = 1
+    record: bool = False
+
+    def __post_init__(self):
+        if self.noise not in ("wrench", "thrust"):
+            raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
+        if self.replan_every < 1 or self.memory_frames < 1:
+            raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
+        if self.reach < self.cost.margin + self.cost.hull_radius:
+            raise ValueError(f"reach={self.reach} m is shorter than the collision ramp "
+                             f"({self.cost.hull_radius + self.cost.margin:.2f} m)")
+
+
+def wrench_noise_basis(sim: SimConfig, torque_scale: float) -> torch.Tensor:
+    """(8, 6) thrust patterns, each the least-squares way to make one body force or torque axis,
+    normalised to unit length; the torque columns are scaled by ``torque_scale``."""
+    W = wrench_matrix(sim.cubesat)  # (6, 8)
+    B = np.linalg.pinv(W)  # (8, 6)
+    B = B / np.linalg.norm(B, axis=0, keepdims=True)
+    B[:, 3:] *= torque_scale
+    return torch.tensor(B, dtype=torch.float32)
+
+
+DepthSource = Callable[[dict], np.ndarray]  # observation -> (16, 16) z-depth, metres
+
+
+@dataclass
+class Replan:
+    """What the pilot believed when it replanned at ``step`` (kept when ``record``)."""
+
+    step: int
+    path: np.ndarray  # (H, 3) metres, world: the cheapest candidate's imagined positions
+    points: np.ndarray  # (N, 3) metres, world: the obstacle points it planned around
+    cost: float
+
+
+class PlannerPilot:
+    """MPPI on a dynamics model, around obstacles it sees. Never told where the obstacles are.
+
+    Args:
+        variant: which models (see the module docstring); a non-privileged one here.
+        dynamics: ``RigidBodyDynamics`` or ``LearnedDynamics``.
+        depth: observation -> 16x16 depth (the depth head, or the rendered ``depth_low``);
+            None for the oracles that plan around the true obstacles.
+        camera: the pinhole model that back-projects the depth map.
+        config: see :class:`PlannerConfig`.
+    """
+
+    name = Variant.PLANNER.value
+    privileged = False
+    needs_images = True
+
+    def __init__(self, variant: Variant, dynamics, depth: DepthSource | None, camera: Camera,
+                 config: PlannerConfig = PlannerConfig(), sim: SimConfig = SimConfig(), timings: Timings | None = None):
+        if variant.privileged != type(self).privileged:
+            raise ValueError(f"variant {variant.value} needs {'OraclePilot' if variant.privileged else 'PlannerPilot'}")
+        if (depth is None) != (variant.obstacles == "true"):
+            raise ValueError(f"variant {variant.value}: give a depth source exactly when it plans around depth")
+        self.variant, self.config = variant, config
+        self.name = variant.value
+        self.needs_images = bool(dynamics.needs_images or depth is not None)
+        self.dynamics, self.depth, self.camera = dynamics, depth, camera
+        self.timings = timings or getattr(dynamics, "timings", None) or Timings()
+        basis = wrench_noise_basis(sim, config.torque_noise) if config.noise == "wrench" else None
+        self.mppi = MPPI(config.mppi, noise_basis=basis)
+        self.memory = PointMemory(config.memory_frames)
+        self._true: TrueObstacles | None = None
+        self.goal = torch.zeros(3)
+        self.goal_radius = 0.5
+        self._reset_episode(seed=0)
+
+    # ---- the Pilot interface ----------------------------------------------------------------
+    def reset(self, task) -> None:
+        """Start an episode from an ``orbitdata.fly.Task`` (goal, goal_radius, seed, ...)."""
+        self.goal = torch.tensor(task.goal, dtype=torch.float32)
+        self.goal_radius = float(task.goal_radius)
+        self._reset_episode(int(task.seed))
+
+    def act(self, obs: dict) -> np.ndarray:
+        """(8,) thrusts in [0, 1]: replan (every ``replan_every`` steps), execute the first step."""
+        start = time.perf_counter()
+        self.dynamics.observe(obs, self._previous)
+        if self._step % self.config.replan_every == 0:
+            self._replan(obs)
+        action = self._safe(self.mppi.nominal[0].numpy())
+        self.mppi.shift()
+        self._previous = action
+        self._step += 1
+        self.step_seconds.append(time.perf_counter() - start)
+        return action
+
+    def metadata(self) -> dict:
+        """Per-episode facts: replans, effective samples, sanitised thrusts, latency."""
+        steps = np.array(self.step_seconds) * 1e3
+        replans = np.array(self.replan_seconds) * 1e3
+        return {
+            "variant": self.variant.value,
+            "replans": len(replans),
+            "nonfinite_actions": self.nonfinite_actions,
+            "clipped_actions": self.clipped_actions,
+            "step_ms_median": float(np.median(steps)) if len(steps) else None,
+            "step_ms_p95": float(np.percentile(steps, 95)) if len(steps) else None,
+            "replan_ms_median": float(np.median(replans)) if len(replans) else None,
+            "replan_ms_p95": float(np.percentile(replans, 95)) if len(replans) else None,
+            "effective_samples_median": float(np.median(self.effective_samples)) if self.effective_samples else None,
+            "points_median": float(np.median(self.cloud_sizes)) if self.cloud_sizes else None,
+        }
+
+    # ---- internals --------------------------------------------------------------------------
+    def _reset_episode(self, seed: int) -> None:
+        # One torch generator per episode, from the episode seed's planner stream.
+        self.generator = torch.Generator().manual_seed(int(rng(seed, "planner").integers(2**62)))
+        self.mppi.reset()
+        self.dynamics.reset()
+        self.memory.reset()
+        self._previous: np.ndarray | None = None
+        self._step = 0
+        self.step_seconds: list[float] = []
+        self.replan_seconds: list[float] = []
+        self.effective_samples: list[float] = []
+        self.cloud_sizes: list[int] = []
+        self.nonfinite_actions = 0
+        self.clipped_actions = 0
+        self.replans: list[Replan] = []
+        self.last: PlanResult | None = None
+
+    def _obstacles(self, obs: dict):
+        if self._true is not None:
+            return self._true
+        depth = self.depth(obs)  # (16, 16) metres; the depth head times itself
+        with self.timings("points"):
+            points, radii = depth_to_points(depth, obs["state"], self.camera, self.config.max_range,
+                                            self.config.footprint)
+            self.memory.add(points, radii)
+            cloud = self.memory.cloud(self.config.reach)
+        self.cloud_sizes.append(len(cloud))
+        return cloud
+
+    def _replan(self, obs: dict) -> None:
+        start = time.perf_counter()
+        field = self._obstacles(obs)
+        state0 = torch.as_tensor(obs["state"], dtype=torch.float32)
+        imagined: dict[str, torch.Tensor] = {}
+
+        def cost(actions: torch.Tensor) -> torch.Tensor:  # (K, H, 8) -> (K,)
+            states = self.dynamics.rollout(state0, actions)  # (K, H, 16)
+            with self.timings("cost"):
+                total, _ = trajectory_cost(states, actions, self.goal, self.goal_radius, field, self.config.cost)
+            imagined["states"] = states
+            return total
+
+        result = self.mppi.optimize(cost, self.generator)
+        self.last = result
+        self.effective_samples.append(result.effective_samples)
+        self.replan_seconds.append(time.perf_counter() - start)
+        if self.config.record:
+            points = getattr(field, "points", np.zeros((0, 3)))
+            path = imagined["states"][result.best, :, 0:3].numpy().copy()
+            self.replans.append(Replan(self._step, path, np.asarray(points).copy(), float(result.costs[result.best])))
+
+    def _safe(self, action: np.ndarray) -> np.ndarray:
+        """NaN / Inf -> 0 and out-of-range -> clipped, counted: nothing invalid reaches the simulator."""
+        a = np.asarray(action, dtype=np.float64)
+        bad = ~np.isfinite(a)
+        if bad.any():
+            self.nonfinite_actions += 1
+            a = np.where(bad, 0.0, a)
+        if a.min() < 0.0 or a.max() > 1.0:
+            self.clipped_actions += 1
+            a = np.clip(a, 0.0, 1.0)
+        return a
+
+
+class OraclePilot(PlannerPilot):
+    """A planning pilot handed the true obstacles (privileged): the oracles of the grid."""
+
+    privileged = True
+
+    def reset(self, task, scenario=None) -> None:
+        """``scenario``: the ground truth (orbitdata.fly passes it to privileged pilots only)."""
+        if scenario is None:
+            raise ValueError(f"the {self.name} oracle plans around the true obstacles: reset(task, scenario=...)")
+        self._true = TrueObstacles(scenario)
+        super().reset(task)

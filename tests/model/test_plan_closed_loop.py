@@ -1,0 +1,129 @@
+"""Closed loop: unseen seeds, a tiny episode end to end, the CLI's table, errors and Figure 6."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import torch
+from torch import nn
+from typer.testing import CliRunner
+
+from orbitdata.seeding import episode_seed
+from orbitmodel.cli.app import app
+from orbitmodel.config import get_preset
+from orbitmodel.evaluate.closed_loop import (ClosedLoopRequest, check_unseen_seeds, closed_loop_report,
+                                             dataset_seeds, fly_closed_loop, grid_seeds)
+from orbitmodel.evaluate.figure6 import plot_figure6, success_table
+from orbitmodel.plan.factory import planner_config
+from orbitmodel.plan.pilot import Variant
+
+torch.set_num_threads(1)
+runner = CliRunner()
+
+
+class StandInProbe(nn.Module):
+    """An untrained probe with the real one's call: (z (B, n, D), state0 (B, 16)) -> (B, n, 16)."""
+
+    def __init__(self, latent_dim: int):
+        super().__init__()
+        self.head = nn.Linear(latent_dim, 16)
+
+    def forward(self, z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
+        return state0[:, None] + 0.01 * torch.cumsum(self.head(z_future), 1)
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_dataset_master, tmp_path_factory):
+    """A Stage I run of the tiny preset, two steps on the tiny dataset."""
+    from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+    out = tmp_path_factory.mktemp("run") / "tiny"
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2),
+                                    out=out, device="cpu"))
+    return out
+
+
+@pytest.fixture
+def with_probe(monkeypatch):
+    """MERGE (issue 12): a real probe folder replaces this stand-in."""
+    monkeypatch.setattr("orbitmodel.plan.factory.load_probe",
+                        lambda run: StandInProbe(get_preset("tiny").model.latent_dim).eval())
+
+
+@pytest.mark.parametrize("episodes", [3000, 8000])  # the 64 px dataset of this repo, and the README's
+def test_grid_seeds_are_disjoint_from_the_datasets(episodes):
+    grid = [s for *_, s in grid_seeds((1, 3, 5), (1.0, 2.0), 20, seed=0)]  # the default grid
+    assert len(set(grid)) == len(grid) == 120
+    assert not dataset_seeds(0, episodes) & set(grid)
+    check_unseen_seeds(grid, 0, episodes)
+
+
+def test_a_colliding_seed_is_refused():
+    with pytest.raises(ValueError, match="another --seed"):
+        check_unseen_seeds([episode_seed(0, 5)], root_seed=0, episodes=10)
+
+
+def test_a_tiny_closed_loop_episode_runs_end_to_end(tiny_run, with_probe, tmp_path):
+    req = ClosedLoopRequest(variant=Variant.PLANNER, run=tiny_run, obstacles=(1,), speeds=(1.0,), episodes=1,
+                            planner=planner_config(samples=8, horizon=5), max_steps=6, video_dir=tmp_path / "video",
+                            video_format=".gif")
+    result = fly_closed_loop(req)
+    report = closed_loop_report(req, result)
+    (cell,) = report["settings"]
+    assert cell["episodes"] == 1 and sum(cell[o] for o in ("success", "collision", "timeout", "out_of_fuel")) == 1
+    (episode,) = report["episodes"]
+    assert episode["frames"] >= 2 and episode["replans"] == episode["frames"] - 1
+    assert episode["nonfinite_actions"] == 0
+    assert report["latency_ms"]["step"]["median"] > 0
+    assert {"encode", "rollout", "probe", "cost", "depth-head"} <= set(report["time_share"])
+    assert len(list((tmp_path / "video").glob("planner-obst1-v1-ep000-*.gif"))) == 1
+    json.dumps(report)  # serialisable as it is
+
+
+def test_cli_prints_the_success_table_and_figure6_plots_it(tiny_run, with_probe, tmp_path):
+    out = tmp_path / "planner.json"
+    res = runner.invoke(app, ["eval", "closed-loop", str(tiny_run), "--pilot", "oracle-true-dyn-depth",
+                              "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--samples", "8",
+                              "--horizon", "5", "--max-steps", "4", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
+    report = json.loads(out.read_text())
+    assert [(s["obstacles"], s["speed"]) for s in report["settings"]] == [(1, 1.0), (1, 2.0)]
+    expert = {"pilot": "expert", "seed": 0, "settings": [
+        {"obstacles": 1, "speed": v, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}
+        for v in (1.0, 2.0)]}
+    (tmp_path / "expert.json").write_text(json.dumps(expert))
+    res = runner.invoke(app, ["eval", "figure6", str(tmp_path / "expert.json"), str(out), "--out",
+                              str(tmp_path / "fig6.png")])
+    assert res.exit_code == 0, res.output
+    assert (tmp_path / "fig6.png").stat().st_size > 1000
+    settings, rates = success_table([expert, report])
+    assert rates["expert"] == [1.0, 1.0, 1.0] and len(rates) == 2
+
+
+def test_figure6_refuses_results_of_different_grids(tmp_path):
+    a = {"pilot": "a", "seed": 0, "settings": [{"obstacles": 1, "speed": 1.0, "episodes": 2, "success": 1}]}
+    b = {"pilot": "b", "seed": 0, "settings": [{"obstacles": 3, "speed": 1.0, "episodes": 2, "success": 1}]}
+    with pytest.raises(ValueError, match="another grid"):
+        plot_figure6([a, b], tmp_path / "f.png")
+
+
+def one_line_error(res) -> str:
+    assert res.exit_code == 2, res.output
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:"), res.output
+    return lines[0]
+
+
+def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
+    base = ["eval", "closed-loop", "--episodes", "1", "--samples", "8", "--horizon", "5", "--max-steps", "3"]
+    assert "no physics probe" in one_line_error(runner.invoke(app, base + [str(tiny_run)]))
+    assert "give the run folder" in one_line_error(runner.invoke(app, base))
+    assert "comma-separated" in one_line_error(runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", ","]))
+    assert "obstacle counts" in one_line_error(runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "-1"]))
+    toml = tmp_path / "camera.toml"
+    toml.write_text("[sim.camera]\nimage_size = 128\n")
+    assert "64 px" in one_line_error(runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth",
+                                                               "--config", str(toml)]))
+    assert "not an orbitmodel run" in one_line_error(runner.invoke(app, base + [str(tmp_path)]))

@@ -1,0 +1,152 @@
+"""The planning pilots: never told the obstacles, nothing invalid reaches the simulator, they fly."""
+
+from __future__ import annotations
+
+import dataclasses
+import gc
+import inspect
+
+import numpy as np
+import pytest
+import torch
+
+from orbitdata.scenario.spec import Obstacle, Scenario
+from orbitdata.seeding import grid_seed
+from orbitdata.sim.config import CameraConfig, SimConfig
+from orbitdata.sim.env import CubeSatEnv
+from orbitmodel.config import get_preset
+from orbitmodel.evaluate.flying import Task, fly_episode
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
+from orbitmodel.plan.factory import PredictedDepth, sensor_depth
+from orbitmodel.plan.mppi import MPPIConfig
+from orbitmodel.plan.obstacles import Camera
+from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Variant
+
+torch.set_num_threads(1)
+SIM = SimConfig(camera=CameraConfig(image_size=64), max_steps=8)
+SMALL = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=5))
+
+
+def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
+    return state0[:, None].expand(-1, z_future.shape[1], -1) + 0.01 * z_future[..., :1]
+
+
+def learned_planner(config: PlannerConfig = SMALL, model: WorldModel | None = None) -> PlannerPilot:
+    model = model or WorldModel(get_preset("tiny").model).eval()
+    return PlannerPilot(Variant.PLANNER, LearnedDynamics(model, stand_in_probe), PredictedDepth(model),
+                        Camera.from_sim(SIM), config, SIM)
+
+
+def sensor_planner(config: PlannerConfig = SMALL) -> PlannerPilot:
+    return PlannerPilot(Variant.ORACLE_TRUE_DYN_SENSOR, RigidBodyDynamics(SIM), sensor_depth, Camera.from_sim(SIM),
+                        config, SIM)
+
+
+def reachable(root, kinds: tuple[type, ...], limit: int = 200_000) -> list:
+    """Objects of ``kinds`` reachable from ``root`` through references (a breadth-first walk)."""
+    seen, queue, found = {id(root)}, [root], []
+    skip = (type, type(inspect), torch.Tensor, np.ndarray, str, bytes)
+    while queue and len(seen) < limit:
+        obj = queue.pop()
+        if isinstance(obj, kinds):
+            found.append(obj)
+        for ref in gc.get_referents(obj):
+            if id(ref) not in seen and not isinstance(ref, skip):
+                seen.add(id(ref))
+                queue.append(ref)
+    return found
+
+
+class Spy:
+    """Wraps a pilot: records what reset and act were given."""
+
+    def __init__(self, pilot):
+        self.pilot, self.resets, self.observations = pilot, [], []
+        self.name, self.privileged, self.needs_images = pilot.name, pilot.privileged, pilot.needs_images
+
+    def reset(self, *args, **kwargs):
+        self.resets.append((args, kwargs))
+        return self.pilot.reset(*args, **kwargs)
+
+    def act(self, obs):
+        self.observations.append(set(obs))
+        return self.pilot.act(obs)
+
+    def metadata(self):
+        return self.pilot.metadata()
+
+
+@pytest.mark.parametrize("make", [learned_planner, sensor_planner], ids=["planner", "sensor"])
+def test_the_planner_pilot_never_receives_the_obstacles(make):
+    pilot = make()
+    assert pilot.privileged is False and type(pilot).privileged is False
+    assert list(inspect.signature(type(pilot).reset).parameters) == ["self", "task"]
+    spy = Spy(pilot)
+    env = CubeSatEnv(SIM)
+    result = fly_episode(env, spy, grid_seed(0, 3, 1.0, 0), 3, 1.0)
+    env.close()
+    assert len(result.scenario.obstacles) == 3 and result.length > 1
+    (args, kwargs), = spy.resets
+    assert kwargs == {} and len(args) == 1 and isinstance(args[0], Task)
+    assert all(keys == {"state", "image", "depth", "depth_low"} for keys in spy.observations)
+    del result, env, spy
+    gc.collect()
+    assert reachable(pilot, (Scenario, Obstacle)) == []
+
+
+def test_the_spy_would_see_an_oracles_obstacles():
+    sim = dataclasses.replace(SIM, render=False)
+    oracle = OraclePilot(Variant.ORACLE_TRUE, RigidBodyDynamics(sim), None, Camera.from_sim(sim), SMALL, sim)
+    assert oracle.privileged is True and oracle.needs_images is False
+    env = CubeSatEnv(sim)
+    fly_episode(env, oracle, grid_seed(0, 3, 1.0, 0), 3, 1.0)
+    env.close()
+    assert len(reachable(oracle, (Obstacle,))) == 3
+    with pytest.raises(ValueError, match="scenario"):
+        oracle.reset(Task((1.0, 0, 0), 0.5, (0.0, 0, 0), 0))
+
+
+def test_variants_pick_the_right_class():
+    with pytest.raises(ValueError):
+        PlannerPilot(Variant.ORACLE_TRUE, RigidBodyDynamics(SIM), None, Camera.from_sim(SIM), SMALL, SIM)
+    with pytest.raises(ValueError):
+        OraclePilot(Variant.PLANNER, RigidBodyDynamics(SIM), sensor_depth, Camera.from_sim(SIM), SMALL, SIM)
+
+
+def test_nan_and_out_of_range_thrusts_never_reach_the_simulator():
+    pilot = sensor_planner()
+    pilot.reset(Task((5.0, 0, 0), 0.5, (0.0, 0, 0), 0))
+
+    def broken(cost, generator):  # a planner gone wrong: NaN and 1.5
+        pilot.mppi.nominal = torch.tensor([[float("nan"), 1.5, -0.2, 0.5, 0, 0, 0, 0]] * 5)
+
+    pilot._replan = lambda obs: broken(None, None)
+    obs = {"state": np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32),
+           "depth_low": np.full((16, 16), 50.1, np.float32)}
+    action = pilot.act(obs)
+    assert np.isfinite(action).all() and action.min() >= 0 and action.max() <= 1
+    assert action.tolist() == [0, 1, 0, 0.5, 0, 0, 0, 0]
+    meta = pilot.metadata()
+    assert meta["nonfinite_actions"] == 1 and meta["clipped_actions"] == 1
+
+
+def test_an_episode_is_a_function_of_its_seed():
+    runs, model = [], WorldModel(get_preset("tiny").model).eval()
+    for _ in range(2):
+        pilot = learned_planner(model=model)
+        env = CubeSatEnv(SIM)
+        runs.append(fly_episode(env, pilot, grid_seed(0, 1, 2.0, 0), 1, 2.0).actions)
+        env.close()
+    assert np.array_equal(runs[0], runs[1]) and np.abs(runs[0]).sum() > 0
+
+
+def test_the_true_oracle_flies_an_easy_episode_to_the_goal():
+    sim = SimConfig(render=False)
+    oracle = OraclePilot(Variant.ORACLE_TRUE, RigidBodyDynamics(sim), None, Camera.from_sim(sim), PlannerConfig(), sim)
+    env = CubeSatEnv(sim)
+    result = fly_episode(env, oracle, grid_seed(0, 1, 2.0, 1), 1, 2.0)  # the obstacle lies off the line
+    env.close()
+    assert result.outcome == "success", result.outcome
+    meta = result.pilot_info
+    assert meta["replans"] == result.length - 1 and meta["nonfinite_actions"] == 0 and meta["clipped_actions"] == 0
