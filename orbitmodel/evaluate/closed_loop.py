@@ -18,7 +18,8 @@ import numpy as np
 from orbitdata.config import GenerationConfig
 from orbitdata.seeding import episode_seed, grid_seed
 from orbitdata.sim.env import CubeSatEnv
-from orbitmodel.evaluate.flying import CellResult, check_grid, fly_episode, grid_report
+from orbitdata.fly.grid import CellResult, check_grid, grid_report
+from orbitdata.fly.rollout import fly_episode
 from orbitmodel.plan.factory import build_pilot
 from orbitmodel.plan.pilot import PlannerConfig, Variant
 from orbitmodel.plan.timing import Timings
@@ -67,7 +68,7 @@ def grid_seeds(obstacles, speeds, episodes: int, seed: int) -> list[tuple[int, f
 
 
 def dataset_seeds(root_seed: int, episodes: int) -> set[int]:
-    """The episode seeds of a dataset generated with ``root_seed`` (``orbitdata.dataset.plan``)."""
+    """The episode seeds of a dataset generated with ``root_seed`` (``orbitdata.write.plan``)."""
     return {episode_seed(root_seed, i) for i in range(episodes)}
 
 

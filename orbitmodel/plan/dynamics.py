@@ -1,7 +1,7 @@
 """What the planner imagines: candidate thrust sequences -> state trajectories.
 
 Both models answer ``rollout(state0 (16,), actions (K, H, 8)) -> states (K, H, 16)``, the
-states after each action (frames t+1..t+H), in the dataset's convention (``orbitdata.sim.state``):
+states after each action (frames t+1..t+H), in the dataset's convention (``orbitdata.state``):
 
 * :class:`LearnedDynamics`: the Stage I world model rolls the latents forward from the last
   ``history`` encoded frames, and the physics probe reads states out of them (the planner);

@@ -90,8 +90,8 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
 def pilot_factory(variant: Variant | str):
     """An ``orbitdata.fly`` factory for ``variant``: ``factory(config, run=None, **planner) -> Pilot``.
 
-    MERGE (issue 10): register these with ``orbitdata.fly.register_pilot`` or as entry points.
-    ``planner`` options are PlannerConfig / MPPIConfig field names (``samples``, ``horizon``,
+    ``make_planner`` below is registered as the ``orbitdata.pilots`` entry point ``planner``, so
+    ``orbitdata fly --pilot planner --pilot-option run=RUN --image-size 64`` flies it. ``planner`` options are PlannerConfig / MPPIConfig field names (``samples``, ``horizon``,
     ``memory_frames``, ...); ``orbitdata fly --pilot-option`` passes strings, converted here.
     """
     def factory(config, run: str | None = None, **options) -> PlannerPilot:
@@ -120,3 +120,10 @@ def planner_config(**options) -> PlannerConfig:
             else kind(value)
     return PlannerConfig(mppi=MPPIConfig(**parts[MPPIConfig]), cost=CostConfig(**parts[CostConfig]),
                          **parts[PlannerConfig])
+
+
+def make_planner(config, run: str | None = None, **options) -> PlannerPilot:
+    """The ``planner`` entry point of ``orbitdata.pilots``: the MPPI planner on a trained run."""
+    if run is None:
+        raise ValueError("pilot 'planner' needs its run folder: pass --pilot-option run=RUN")
+    return pilot_factory(Variant.PLANNER)(config, run, **options)

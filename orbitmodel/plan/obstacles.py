@@ -149,9 +149,9 @@ class PointMemory:
 
 
 def _quat_matrix(quat) -> torch.Tensor:
-    from orbitdata.scenario.spec import quat_to_mat
+    from orbitdata.state import quat_to_matrix
 
-    return torch.tensor(quat_to_mat(quat), dtype=torch.float32)
+    return torch.tensor(quat_to_matrix(quat), dtype=torch.float32)
 
 
 def signed_distance(ob: Obstacle, x: torch.Tensor) -> torch.Tensor:

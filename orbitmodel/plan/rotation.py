@@ -1,7 +1,7 @@
 """Rotation maths on batched torch tensors, in the dataset's state convention.
 
 ``rot6d`` is the first two columns of R (body -> world) stored row-major,
-``[R00, R01, R10, R11, R20, R21]`` (``orbitdata.sim.state.rot6d``); rotation vectors are axis *
+``[R00, R01, R10, R11, R20, R21]`` (``orbitdata.state.matrix_to_rot6d``); rotation vectors are axis *
 angle in radians. Every function takes leading batch dimensions.
 """
 

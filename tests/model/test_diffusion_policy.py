@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from orbitdata.sim.state import make_state
+from orbitdata.state import make_state
 from orbitmodel.baselines.diffusion.config import PolicyConfig, get_policy_preset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy, denoise, ema_decay, goal_in_body, make_schedulers
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D

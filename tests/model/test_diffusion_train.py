@@ -150,7 +150,7 @@ def one_line_error(args) -> str:
 
 def test_clear_errors(trained, tiny_dataset_master, tmp_path):
     out, _ = trained
-    assert "not an orbitdata dataset" in one_line_error(["train-policy", str(tmp_path / "nope"), "--out", str(tmp_path / "r")])
+    assert "no dataset folder" in one_line_error(["train-policy", str(tmp_path / "nope"), "--out", str(tmp_path / "r")])
     assert "--resume" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(tmp_path / "r2"),
                                          "--preset", "tiny", "--resume", "--device", "cpu"])
     assert "another config" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(out),

@@ -9,7 +9,7 @@ import torch
 from orbitdata.scenario.spec import Scenario
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
-from orbitdata.sim.state import so3_log
+from orbitdata.state import so3_log
 from orbitmodel.config import get_preset
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics

@@ -12,7 +12,7 @@ from orbitdata.scenario.geometry import signed_distance as reference_distance
 from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitdata.sim.env import CubeSatEnv
-from orbitdata.sim.state import make_state
+from orbitdata.state import make_state
 from orbitmodel.plan.obstacles import Camera, PointCloud, PointMemory, TrueObstacles, depth_to_points
 from orbitmodel.plan.obstacles import signed_distance
 

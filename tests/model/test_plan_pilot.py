@@ -15,7 +15,8 @@ from orbitdata.seeding import grid_seed
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitmodel.config import get_preset
-from orbitmodel.evaluate.flying import Task, fly_episode
+from orbitdata.fly.pilot import Task
+from orbitdata.fly.rollout import fly_episode
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.factory import PredictedDepth, sensor_depth
@@ -44,8 +45,13 @@ def sensor_planner(config: PlannerConfig = SMALL) -> PlannerPilot:
 
 
 def reachable(root, kinds: tuple[type, ...], limit: int = 200_000) -> list:
-    """Objects of ``kinds`` reachable from ``root`` through references (a breadth-first walk)."""
-    seen, queue, found = {id(root)}, [root], []
+    """Objects of ``kinds`` reachable from ``root`` through references (a breadth-first walk).
+    Module namespaces are not entered: a method's globals lead to every imported module, and
+    other test modules hold scenes of their own, which no pilot was given."""
+    import sys
+
+    namespaces = {id(vars(m)) for m in list(sys.modules.values()) if m is not None and hasattr(m, "__dict__")}
+    seen, queue, found = {id(root)} | namespaces, [root], []
     skip = (type, type(inspect), torch.Tensor, np.ndarray, str, bytes)
     while queue and len(seen) < limit:
         obj = queue.pop()

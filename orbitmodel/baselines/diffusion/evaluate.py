@@ -21,7 +21,7 @@ from torch.utils.data import DataLoader
 from orbitdata import schema as S
 from orbitdata.load import IS_PAD, collate_windows, load_windows
 from orbitdata.load.select import select_episodes
-from orbitdata.load.source import load_episode_table, load_steps
+from orbitdata.load.tables import load_episode_table, load_steps
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.baselines.diffusion.train import COLUMNS, DEFAULT_LEVELS, episode_goals
 from orbitmodel.data import episode_filter, read_dataset_meta

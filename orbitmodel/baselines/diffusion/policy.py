@@ -27,7 +27,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from orbitdata.schema import STATE_SLICES
+from orbitdata.state import STATE_SLICES
 from orbitmodel.baselines.diffusion.config import PolicyConfig
 from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D

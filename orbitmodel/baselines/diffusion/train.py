@@ -24,7 +24,8 @@ import torch.nn.functional as F
 
 from orbitdata import schema as S
 from orbitdata.load import load_windows
-from orbitdata.load.source import load_episode_table
+from orbitdata.load.tables import load_episode_table
+from orbitdata.state import STATE_SLICES
 from orbitmodel.baselines.diffusion.config import PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
@@ -52,16 +53,15 @@ def episode_goals(source: str | Path, split: str) -> torch.Tensor:
 
 def action_range(source: str | Path) -> tuple[list[float], list[float]]:
     """Per-thruster (min, max) of the action over the dataset, from meta/stats.json."""
-    path = Path(source) / S.STATS_PATH  # MERGE: orbitdata.load.read_meta (issue 10)
-    if not path.is_file():
-        raise FileNotFoundError(f"{source}: no {S.STATS_PATH}; not a complete orbitdata dataset folder")
-    stats = json.loads(path.read_text())[S.ACTION]
+    from orbitdata.load import read_meta
+
+    stats = read_meta(source)[1][S.ACTION]
     return [float(x) for x in stats["min"]], [float(x) for x in stats["max"]]
 
 
 def goal_scale(meta: DatasetMeta) -> float:
     """Metres per unit of the goal input: the position's mean spread (the goal's order of size)."""
-    return float(np.mean(meta.state_std[S.STATE_SLICES["p"]]))
+    return float(np.mean(meta.state_std[STATE_SLICES["p"]]))
 
 
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:

@@ -1,0 +1,83 @@
+"""``orbitmodel probe`` (Stage II: the physics probe) and ``orbitmodel eval probe`` (Table I, Figure 5)."""
+
+from __future__ import annotations
+
+from enum import Enum
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.train import Device
+from orbitmodel.probe.config import INTEGRATORS
+
+Integrator = Enum("Integrator", {name: name for name in INTEGRATORS}, type=str)
+
+
+def register(app: typer.Typer, eval_app: typer.Typer) -> None:
+    app.command("probe")(probe)
+    eval_app.command("probe")(eval_probe)
+
+
+@friendly
+def probe(
+    run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
+    dataset: Annotated[str, typer.Argument(help="orbitdata dataset: a local folder or a Hub repo id")],
+    state_only: Annotated[bool, typer.Option(help="train the state-only reference MLP (RUN/probe-state) instead")] = False,
+    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the recipe of the run's preset)")] = None,
+    max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
+    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    integrator: Annotated[Integrator, typer.Option(
+        help="upstream: p += dp, v += dv; coasting: zero increments hold the world-frame velocity")] = "upstream",
+    cache_windows: Annotated[Optional[int], typer.Option(
+        min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)")] = None,
+    workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
+    seed: Annotated[Optional[int], typer.Option(min=0, help="data order and initialisation")] = None,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
+    resume: Annotated[bool, typer.Option(help="continue the probe run from its latest checkpoint")] = False,
+    overwrite: Annotated[bool, typer.Option(help="replace a probe already trained in RUN")] = False,
+) -> None:
+    """Train the physics probe on the run's frozen world model (written to RUN/probe).
+
+    Windows of 8 context + 12 horizon frames: the world model imagines the horizon's latents from
+    the logged actions, the probe turns them into state increments, integrated from the true
+    state at the last context frame; the loss is the MSE of the integrated states.
+    """
+    from orbitmodel.probe.model import probe_folder
+    from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe
+
+    kind = "state" if state_only else "latent"
+    t = run_recipe(run).with_changes(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
+                                     cache_windows=cache_windows, num_workers=workers, seed=seed)
+    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, integrator=integrator.value,
+                       device=device.value, resume=resume, overwrite=overwrite)
+    result = train_probe(req)
+    typer.echo(f"trained the {kind} probe {result.steps} steps in {result.seconds / 60:.1f} min "
+               f"({result.windows_per_s:.1f} windows/s); weights in {probe_folder(run, kind)}")
+
+
+@friendly
+def eval_probe(
+    run: Annotated[Path, typer.Argument(help="a Stage I run folder with a trained probe (`orbitmodel probe`)")],
+    dataset: Annotated[str, typer.Argument(help="orbitdata dataset whose test split is evaluated")],
+    windows: Annotated[int, typer.Option(min=1, help="collision-free test windows, one per episode")] = 100,
+    seed: Annotated[int, typer.Option(min=0, help="which episodes and windows")] = 0,
+    horizon: Annotated[Optional[list[int]], typer.Option(min=1, help="steps of 0.04 s (repeatable)")] = None,
+    out: Annotated[Optional[Path], typer.Option(help="folder for the table and figures (default RUN/eval)")] = None,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "cpu",
+    figures: Annotated[bool, typer.Option(help="write Figure 5 (needs matplotlib)")] = True,
+) -> None:
+    """The paper's Table I: probe MAE at h = 25 and 50 steps beside the paper's, the state-only
+    MLP's and constant velocity's, on the same windows; and Figure 5."""
+    from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe, markdown
+
+    req = EvalRequest(run=run, dataset=dataset, windows=windows, seed=seed,
+                      horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures)
+    try:
+        result = evaluate_probe(req)
+    except ImportError as err:
+        fail(f"{err} (or pass --no-figures)")
+    typer.echo(markdown(result))
+    typer.echo("wrote " + ", ".join(result["files"]))

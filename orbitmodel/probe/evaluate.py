@@ -1,0 +1,190 @@
+"""The paper's Table I and Figure 5 (``orbitmodel eval probe RUN DATASET``).
+
+Protocol (upstream's eval_stage2, at the paper's horizons): test-split episodes in a seeded
+random order, one random window per episode whose frames hold no collision, until ``windows``
+windows; ``context`` frames are encoded, the world model imagines the next ``max(horizons)``
+latents from the logged actions, and the probe integrates them from the true state at the last
+context frame. Per window, the error is averaged over steps 1..h (per quantity: the mean absolute
+error over its components; the attitude as the geodesic angle); the table gives its mean +- std
+over the windows. The state-only MLP and constant velocity run on the same windows. The rollouts
+of the two horizons are one rollout (a prediction does not depend on what comes after it).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from orbitdata import schema as S
+from orbitdata.load import collate_windows, load_windows
+from orbitmodel.data import read_dataset_meta
+from orbitmodel.probe.baselines import StateDynamics, constant_velocity
+from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, geodesic_angle, rot6d_to_matrix
+from orbitmodel.probe.model import PhysicsProbe, probe_folder
+from orbitmodel.probe.train import load_stage1
+from orbitmodel.train.checkpoint import CONFIG, RunError
+from orbitmodel.train.loop import resolve_device
+
+QUANTITIES = {"position": "m", "velocity": "m/s", "rotation": "rad", "angular_velocity": "rad/s", "fuel": "ratio"}
+# Table I of the paper (MAE at h = 25 and h = 50 steps of 0.04 s).
+PAPER = {25: {"position": 0.0394, "velocity": 0.0636, "rotation": 0.0676, "angular_velocity": 0.0883, "fuel": 0.0019},
+         50: {"position": 0.0813, "velocity": 0.1191, "rotation": 0.2034, "angular_velocity": 0.1557, "fuel": 0.0033}}
+ROWS = {"probe": "ours: probe on imagined latents", "state_mlp": "state-only MLP (state, action)",
+        "constant_velocity": "constant velocity (coasting)"}
+TABLE_JSON, TABLE_MD = "probe_table.json", "probe_table.md"
+BATCH = 25  # windows per forward pass
+
+
+@dataclass(frozen=True)
+class EvalRequest:
+    run: Path
+    dataset: str
+    windows: int = 100
+    seed: int = 0
+    horizons: tuple[int, ...] = (25, 50)
+    out: Path | None = None  # default RUN/eval
+    device: str = "cpu"
+    figures: bool = True
+
+
+def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tensor]:
+    """Per-step absolute errors (K, n) of states (K, n, 16), per quantity."""
+    d = (pred - true).abs()
+    return {"position": d[..., P].mean(-1), "velocity": d[..., V].mean(-1),
+            "rotation": geodesic_angle(rot6d_to_matrix(true[..., ROT]), rot6d_to_matrix(pred[..., ROT])),
+            "angular_velocity": d[..., W].mean(-1), "fuel": d[..., FUEL].mean(-1)}
+
+
+def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int):
+    """(collision-free window indices, a window ending on a collision or None) into the test
+    windows of ``context + horizon`` frames (stride 1); one window per episode, seeded."""
+    flags = load_windows(dataset, split="test", context=context, horizon=horizon, stride=1, columns=[S.COLLISION])
+    episode = flags.index.episode  # (N,) episode_index of each window
+    rng = np.random.default_rng(seed)
+    chosen, collided = [], []
+    for e in rng.permutation(np.unique(episode)):
+        candidates = np.flatnonzero(episode == e)  # in frame order
+        if flags[int(candidates[-1])][S.COLLISION].any():
+            collided.append(int(candidates[-1]))  # the window that ends on the collision
+        if len(chosen) < count:
+            for c in rng.permutation(candidates):
+                if not flags[int(c)][S.COLLISION].any():
+                    chosen.append(int(c))
+                    break
+    if len(chosen) < count:
+        raise RunError(f"only {len(chosen)} test episodes of {dataset} hold a collision-free window of "
+                       f"{context} + {horizon} frames; ask for --windows {len(chosen)} or fewer, or shorter horizons")
+    return chosen, (collided[0] if collided else None)
+
+
+@torch.no_grad()
+def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, device) -> dict[str, torch.Tensor]:
+    """Every row's states (K, n, 16) for windows (K, context + n, ...), and the truth."""
+    m = context
+    images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
+    z = world_model.encode(images[:, :m], states[:, :m])  # (K, m, D)
+    z_future = world_model.rollout(z, actions[:, :m - 1 + n])  # (K, n, D)
+    out = {"truth": states[:, m:m + n].float(), "probe": probe(z_future, states[:, m - 1]),
+           "constant_velocity": constant_velocity(states[:, m - 1], n, probe.config.dt)}
+    if state_mlp is not None:
+        out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])
+    return {k: v.cpu() for k, v in out.items()}
+
+
+def summarise(errors: dict[str, dict[str, torch.Tensor]], horizons) -> dict:
+    """row -> quantity -> {"h25": {"mean", "std"}, ..., "per_step": [...]} from (K, n) errors."""
+    table = {}
+    for row, per_q in errors.items():
+        table[row] = {}
+        for q, e in per_q.items():
+            entry = {f"h{h}": {"mean": float(e[:, :h].mean(1).mean()), "std": float(e[:, :h].mean(1).std(unbiased=False))}
+                     for h in horizons}
+            entry["per_step"] = [float(x) for x in e.mean(0)]
+            table[row][q] = entry
+    return table
+
+
+def _cell(row: dict | None, q: str, h: int) -> str:
+    if row is None:
+        return "not trained"
+    e = row[q][f"h{h}"]
+    return f"{e['mean']:.4f} ± {e['std']:.4f}"
+
+
+def markdown(result: dict) -> str:
+    """The table: ours beside the paper and the reference rows, one line per quantity and horizon."""
+    t = result["table"]
+    lines = [f"Physics probe, {result['windows']} collision-free test windows (seed {result['seed']}), "
+             f"context {result['context']}, MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s).",
+             f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
+             f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.", "",
+             "| quantity | h | ours | paper | state-only MLP | constant velocity |",
+             "|---|---|---|---|---|---|"]
+    for q, unit in QUANTITIES.items():
+        for h in result["horizons"]:
+            paper = PAPER.get(h, {}).get(q)
+            lines.append(f"| {q.replace('_', ' ')} ({unit}) | {h} | {_cell(t['probe'], q, h)} | "
+                         f"{'-' if paper is None else f'{paper:.4f}'} | {_cell(t.get('state_mlp'), q, h)} | "
+                         f"{_cell(t['constant_velocity'], q, h)} |")
+    if t.get("state_mlp") is None:
+        lines += ["", f"The state-only row needs `orbitmodel probe {result['run']} DATASET --state-only` first."]
+    return "\n".join(lines) + "\n"
+
+
+def evaluate_probe(req: EvalRequest) -> dict:
+    """Table I (JSON + markdown) and Figure 5 (PNGs) of a run's probe; returns the result dict."""
+    if req.windows < 1 or not req.horizons or min(req.horizons) < 1:
+        raise ValueError(f"windows={req.windows}, horizons={req.horizons}: give at least one window and horizons >= 1")
+    stage1, world_model, wm_print = load_stage1(req.run, read_dataset_meta(req.dataset))
+    probe = PhysicsProbe.from_pretrained(req.run)
+    probe_config = json.loads((probe_folder(req.run, "latent") / CONFIG).read_text())
+    if probe_config.get("world_model") != wm_print:
+        raise RunError(f"{probe_folder(req.run, 'latent')} was trained on another world model than {req.run} holds "
+                       f"now; train it again with `orbitmodel probe {req.run} DATASET --overwrite`")
+    try:
+        state_mlp = StateDynamics.from_pretrained(req.run)
+    except RunError:
+        state_mlp = None  # the table says how to add it
+    device = resolve_device(req.device)
+    world_model, probe = world_model.to(device), probe.to(device)
+    state_mlp = state_mlp.to(device) if state_mlp is not None else None
+    context, n = int(probe_config["train"]["context"]), max(req.horizons)
+    chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed)
+    windows = load_windows(req.dataset, split="test", context=context, horizon=n, stride=1,
+                           columns=[S.IMAGE, S.STATE, S.ACTION])
+    errors: dict[str, dict[str, list]] = {}
+    first = None
+    for i in range(0, len(chosen), BATCH):
+        batch = collate_windows(windows.__getitems__(chosen[i:i + BATCH]))
+        states = predict(world_model, probe, state_mlp, batch, context, n, device)
+        first = first or {"batch": batch, "states": states}
+        for row in (r for r in ROWS if r in states):
+            for q, e in step_errors(states[row], states["truth"]).items():
+                errors.setdefault(row, {}).setdefault(q, []).append(e)
+    table = summarise({r: {q: torch.cat(v) for q, v in per_q.items()} for r, per_q in errors.items()},
+                      req.horizons)
+    table.setdefault("state_mlp", None)
+    result = {"run": str(req.run), "dataset": str(req.dataset), "preset": stage1.preset.name,
+              "windows": len(chosen), "seed": req.seed, "context": context, "horizons": list(req.horizons),
+              "dt": probe.config.dt, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
+              "integrators": {"probe": probe.config.integrator,
+                              **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
+              "episodes": [int(windows.index.episode[c]) for c in chosen], "table": table}
+    out = Path(req.out) if req.out is not None else Path(req.run) / "eval"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / TABLE_JSON).write_text(json.dumps(result, indent=2) + "\n")
+    (out / TABLE_MD).write_text(markdown(result))
+    result["files"] = [str(out / TABLE_JSON), str(out / TABLE_MD)]
+    if req.figures:
+        from orbitmodel.probe.figures import figure5
+
+        crash = None
+        if collided is not None:
+            batch = collate_windows(windows.__getitems__([collided]))
+            crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device)}
+        result["files"] += figure5(first, crash, req.dataset, context, probe.config.dt, out)
+    return result

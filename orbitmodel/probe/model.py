@@ -1,0 +1,109 @@
+"""The physics probe: reads physical states out of a frozen world model's imagined latents.
+
+    inc_k  = scale * MLP(z_k)                     (B, n, 10) increments, per step
+    x_k    = integrate(x_0, inc_1..k)              (B, n, 16) states, frames t+1..t+n
+
+(``config.integrator``: upstream's p += dp, v += dv, or "coasting", where zero increments hold
+the world-frame velocity; see ``probe.integrator``.)
+
+x_0 is the true state at the last context frame. The MLP sees one latent at a time (upstream's
+design: the latent alone must say how the craft moves), so all n increments come from one
+batched call and only the attitude product loops over time.
+
+``scale`` is fixed at training start to the RMS of the true per-step increments (metres per step
+for dp, fuel ratio per step for dfuel, ...), so the MLP's outputs are of order 1 for every
+quantity: dfuel is ~1e-4 per step while dp is ~1e-2, and with raw outputs AdamW's per-weight
+steps would swamp the small ones. (Upstream predicts raw increments.)
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from torch import nn
+
+from orbitmodel.model.world_model import mlp
+from orbitmodel.probe.config import ProbeConfig
+from orbitmodel.probe.integrator import INCREMENT_DIM, integrate
+
+PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a Stage I run
+
+
+class Increments(nn.Module):
+    """MLP features (..., d_in) -> increments (..., 10), in physical units."""
+
+    def __init__(self, config: ProbeConfig):
+        super().__init__()
+        self.config = config
+        self.net = mlp(config.dims)
+        self.register_buffer("scale", torch.ones(INCREMENT_DIM))
+        self.initialize_weights()
+
+    def initialize_weights(self) -> None:
+        """Default init for the hidden layers; zero on the output layer, so an untrained probe
+        predicts zero increments (upstream integrator: p, v, w and fuel held, the attitude turning
+        at w; coasting integrator: constant velocity) and training starts from a smooth loss."""
+        last = self.net[-1]
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
+
+    def set_scale(self, scale: torch.Tensor) -> None:
+        """Per-increment units (10,): the RMS of the true increments of the training windows."""
+        self.scale.copy_(scale.clamp(min=1e-8))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x) * self.scale
+
+
+class PhysicsProbe(nn.Module):
+    """Latents -> physical states. ``probe(z_future, state0)``; load with :meth:`from_pretrained`."""
+
+    def __init__(self, config: ProbeConfig):
+        super().__init__()
+        if config.kind != "latent":
+            raise ValueError(f"PhysicsProbe reads latents; got a {config.kind!r} probe config")
+        self.config = config
+        self.increments = Increments(config)
+
+    def forward(self, z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
+        """z_future (B, n, D) imagined latents of frames t+1..t+n, state0 (B, 16) the state at
+        frame t -> states (B, n, 16) at frames t+1..t+n (float32)."""
+        D = self.config.latent_dim
+        if z_future.shape[-1] != D or z_future.ndim != 3:
+            raise ValueError(f"z_future has shape {tuple(z_future.shape)}; expected (B, n, {D})")
+        return integrate(state0, self.increments(z_future), self.config.dt, self.config.coasting)
+
+    @classmethod
+    def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu") -> "PhysicsProbe":
+        """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/``, in eval mode."""
+        config, weights = load_probe(run_dir, "latent")
+        probe = cls(config)
+        probe.load_state_dict(weights)
+        return probe.to(device).eval()
+
+
+def probe_folder(run_dir: str | Path, kind: str) -> Path:
+    return Path(run_dir) / PROBE_FOLDER[kind]
+
+
+def load_probe(run_dir: str | Path, kind: str) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
+    """(config, weights) of a Stage I run's probe of ``kind``; RunError with the fix if absent."""
+    from orbitmodel.train.checkpoint import CONFIG, RunError, load_weights
+
+    folder = probe_folder(run_dir, kind)
+    command = f"orbitmodel probe {run_dir} DATASET" + (" --state-only" if kind == "state" else "")
+    if not (folder / CONFIG).is_file():
+        raise RunError(f"{run_dir} has no trained {kind} probe ({folder} is missing); train it with `{command}`")
+    raw = json.loads((folder / CONFIG).read_text())
+    try:
+        config = ProbeConfig(**raw["probe"])
+    except (KeyError, TypeError) as err:
+        raise RunError(f"{folder / CONFIG} is not a probe config ({err}); train it again with `{command} "
+                       "--overwrite`") from None
+    try:
+        weights = load_weights(folder)
+    except RunError:
+        raise RunError(f"{folder} has no weights yet; train it with `{command}`") from None
+    return config, weights

@@ -1,0 +1,224 @@
+"""Stage II: train the probe on a frozen world model (``orbitmodel probe RUN DATASET``), or the
+state-only reference MLP on the same windows (``--state-only``), with the shared training loop.
+
+Per window of ``context + horizon`` frames (8 + 12 upstream)::
+
+    z        = WM.encode(images[:, :m], states[:, :m])          (B, m, D)    frozen
+    z_future = WM.rollout(z, actions[:, :m-1+n])                 (B, n, D)    frozen
+    x_hat    = probe(z_future, states[:, m-1])                   (B, n, 16)
+    loss     = sum_q w_q MSE(x_hat[q], states[:, m:][q])         q = p, v, rot6d, w, fuel
+
+The world model stays in eval mode (BatchNorm running statistics, no dropout) with
+``requires_grad`` off, so its weights and buffers end the run bit-for-bit as they started.
+The probe is written to ``RUN/probe/`` (``RUN/probe-state/`` for the reference), a run folder
+of its own: config.json, checkpoints/, metrics.jsonl, model.safetensors.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from orbitdata import schema as S
+from orbitdata.load import collate_windows, load_windows
+from orbitmodel.data import DatasetMeta, read_dataset_meta
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
+from orbitmodel.probe.cache import LATENT, TensorWindows, cache_key, gather, imagine, load_cache, save_cache, subset
+from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, recipe
+from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, increments_of
+from orbitmodel.probe.model import PhysicsProbe, probe_folder
+from orbitmodel.train.checkpoint import RunConfig, RunDir, RunError, load_weights, read_run_config
+from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device
+
+COLUMNS = {"latent": (S.IMAGE, S.STATE, S.ACTION), "state": (S.STATE, S.ACTION)}
+PARTS = ("pos", "vel", "rot", "w", "fuel")
+SLICES = (P, V, ROT, W, FUEL)
+
+
+def state_loss(pred: torch.Tensor, target: torch.Tensor, weights) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    """Weighted MSE per quantity over states (B, n, 16): upstream's ProberLoss."""
+    parts = {name: F.mse_loss(pred[..., s], target[..., s].float()) for name, s in zip(PARTS, SLICES)}
+    total = sum(w * parts[name] for w, name in zip(weights, PARTS))
+    return total, {k: v.detach() for k, v in parts.items()}
+
+
+class LatentObjective(nn.Module):
+    """Frozen world model + trainable probe -> the Stage II loss."""
+
+    def __init__(self, world_model: WorldModel, probe: PhysicsProbe, train: ProbeTrainConfig):
+        super().__init__()
+        self.world_model = world_model.requires_grad_(False).eval()
+        self.probe = probe
+        self.context, self.weights = train.context, train.weights
+
+    def train(self, mode: bool = True) -> "LatentObjective":
+        """Only the probe follows train/eval; the world model stays in eval (BatchNorm, dropout)."""
+        super().train(mode)
+        self.world_model.eval()
+        return self
+
+    def forward(self, states, actions, images=None, z_future=None):
+        """states (B, m+n, 16); actions (B, m+n, 8); either images (B, m, 3, H, W) uint8 of the
+        context, or the latents the world model imagined for this window (B, n, D)."""
+        m = self.context
+        if z_future is None:
+            with torch.no_grad():
+                z = self.world_model.encode(images, states[:, :m])  # (B, m, D)
+                z_future = self.world_model.rollout(z, actions[:, :-1])  # (B, n, D)
+        pred = self.probe(z_future.float(), states[:, m - 1])  # (B, n, 16)
+        return state_loss(pred, states[:, m:], self.weights)
+
+
+class StateObjective(nn.Module):
+    """The state-only reference on the same windows: rolled out from the same state, same loss."""
+
+    def __init__(self, model: StateDynamics, train: ProbeTrainConfig):
+        super().__init__()
+        self.model = model
+        self.context, self.weights = train.context, train.weights
+
+    def forward(self, states, actions):
+        m = self.context
+        pred = self.model(states[:, m - 1], actions[:, m - 1:-1])  # (B, n, 16)
+        return state_loss(pred, states[:, m:], self.weights)
+
+
+class ProbeJob:
+    def __init__(self, module: nn.Module, saved: nn.Module, kind: str, context: int):
+        self.module, self.saved, self.kind, self.context = module, saved, kind, context
+
+    def inputs(self, batch: dict, step: int, device: torch.device) -> dict:
+        out = {"states": batch[S.STATE].to(device), "actions": batch[S.ACTION].to(device)}
+        if LATENT in batch:
+            out["z_future"] = batch[LATENT].to(device)
+        elif self.kind == "latent":
+            out["images"] = batch[S.IMAGE][:, :self.context].to(device)  # only the context frames are seen
+        return out
+
+
+@dataclass(frozen=True)
+class ProbeRequest:
+    run: Path  # the Stage I run folder
+    dataset: str
+    train: ProbeTrainConfig
+    kind: str = "latent"
+    hidden: int = 256
+    integrator: str = "upstream"
+    device: str = "auto"
+    resume: bool = False
+    overwrite: bool = False
+
+
+def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> tuple[RunConfig, WorldModel, str]:
+    """A Stage I run's config, its world model (frozen, eval mode, on CPU) and its weights'
+    fingerprint; RunError with the fix when the run is missing or untrained, or when the
+    dataset ``meta`` does not fit it."""
+    config = read_run_config(run)
+    if meta is not None:
+        check_dataset(meta, config)
+    weights = load_weights(run)
+    model = WorldModel(config.preset.model)
+    model.load_state_dict(weights)
+    model.run_info = config.dataset
+    return config, model.requires_grad_(False).eval(), fingerprint(weights)
+
+
+def fingerprint(weights: dict[str, torch.Tensor]) -> str:
+    """sha256 of a state dict's names and bytes: which world model a probe was trained on."""
+    h = hashlib.sha256()
+    for name in sorted(weights):
+        h.update(name.encode())
+        h.update(weights[name].detach().cpu().contiguous().reshape(-1).view(torch.uint8).numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def run_recipe(run: str | Path) -> ProbeTrainConfig:
+    """The probe recipe for a Stage I run's preset (see ``RECIPES``)."""
+    return recipe(read_run_config(run).preset.name)
+
+
+def check_dataset(meta: DatasetMeta, stage1: RunConfig) -> None:
+    """The dataset must give the images the run's encoder was built for."""
+    want = stage1.preset.model.image_size
+    if meta.image_size != want:
+        raise RunError(f"{meta.source} holds {meta.image_size} px images but the world model of this run takes "
+                       f"{want} px; use a dataset generated with `--image-size {want}` (like {stage1.dataset.source})")
+
+
+def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig) -> torch.Tensor:
+    """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
+    (a seeded draw), the probe's output units."""
+    windows = load_windows(dataset, split="train", context=train.context, horizon=train.horizon,
+                           stride=train.window_stride, columns=[S.STATE])
+    g = torch.Generator().manual_seed(train.seed)
+    chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
+    states = collate_windows(windows.__getitems__(chosen))[S.STATE]  # (N, T, 16)
+    inc = increments_of(states, config.dt, config.coasting)  # (N, T-1, 10)
+    return inc.flatten(0, 1).pow(2).mean(0).sqrt()  # (10,)
+
+
+def probe_run_config(kind: str, probe: ProbeConfig, train: ProbeTrainConfig, meta: DatasetMeta, run: Path,
+                     world_model: str | None) -> dict:
+    config = {"stage": "probe", "probe": probe.to_dict(), "train": train.to_dict(), "dataset": meta.to_dict(),
+              "stage1_run": str(run)}
+    if kind == "latent":
+        config["world_model"] = world_model  # a probe reads one world model's latents only
+    return json.loads(json.dumps(config))  # as config.json holds it (lists, not tuples), so --resume compares equal
+
+
+def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
+             folder: Path) -> dict:
+    """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
+    key = cache_key(world_model=wm_print, dataset=meta.to_dict(), windows=chosen, context=req.train.context,
+                    horizon=req.train.horizon, stride=req.train.window_stride)
+    cached = load_cache(folder, key)
+    if cached is None:
+        cached = imagine(world_model.to(device), windows, chosen, req.train.context, device)
+        save_cache(folder, key, cached)
+    return cached
+
+
+def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
+    """Train (or resume) the probe of a Stage I run; returns the loop's summary."""
+    if req.kind not in KINDS:
+        raise ValueError(f"probe kind {req.kind!r}: choose one of {', '.join(KINDS)}")
+    meta = read_dataset_meta(req.dataset)
+    stage1, world_model, wm_print = load_stage1(req.run, meta)
+    device = resolve_device(req.device)
+    t = req.train
+    latent = req.kind == "latent"
+    config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
+                         hidden=req.hidden, integrator=req.integrator)
+    out = probe_folder(req.run, req.kind)
+    run = RunDir(out)
+    run.start(probe_run_config(req.kind, config, t, meta, Path(req.run), wm_print if latent else None),
+              resume=req.resume, overwrite=req.overwrite)
+    windows = load_windows(req.dataset, split="train", context=t.context, horizon=t.horizon,
+                           stride=t.window_stride, columns=list(COLUMNS[req.kind]))
+    data = windows
+    if t.cache_windows:
+        chosen = subset(len(windows), t.cache_windows, t.seed)
+        if latent:
+            data = TensorWindows(imagined(world_model, windows, chosen, req, wm_print, meta, device, out))
+        else:
+            data = TensorWindows(gather(windows, chosen, (S.STATE, S.ACTION)))
+    torch.manual_seed(t.seed)  # initialisation
+    if latent:
+        model = PhysicsProbe(config)
+        module = LatentObjective(world_model, model, t)
+    else:
+        model = StateDynamics(config)
+        model.set_normalisation(stage1.dataset.state_mean, stage1.dataset.state_std)
+        module = StateObjective(model, t)
+    if not req.resume:
+        model.increments.set_scale(increment_scale(req.dataset, t, config))
+    job = ProbeJob(module, model, req.kind, t.context)
+    return fit(job, data, LoopSettings.of(t), run, device, resume=req.resume,
+               label="probe" if latent else "state-only", on_log=on_log)

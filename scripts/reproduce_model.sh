@@ -1,0 +1,40 @@
+#!/usr/bin/env bash
+# Reproduce the README's model tables and figures from an empty folder, on a 2-core CPU:
+#   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
+# generate a 64 px dataset -> train the world model (Stage I) -> eval rollout -> train the probe
+# (Stage II) and its state-only reference -> eval probe -> train the Diffusion Policy -> fly the
+# planner, its three MPPI oracles, Diffusion Policy, the expert and the risky pilot on the grid
+# (same seeds, none used by the dataset) -> Figure 6. Every step resumes if run again.
+set -euo pipefail
+OUT=${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}
+N=${2:-20}
+cd "$(dirname "$0")/.."
+BIN=${BIN:-.venv/bin}
+mkdir -p "$OUT/grid"
+DATA="$OUT/orbit64"
+WM="$OUT/wm-cpu"
+DP="$OUT/dp-cpu"
+GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
+
+[ -f "$DATA/meta/info.json" ] || "$BIN/orbitdata" generate "$DATA" --episodes 3000 --image-size 64 --workers 2 --seed 0
+if [ ! -f "$WM/model.safetensors" ]; then
+  if [ -d "$WM/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
+  "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$WM" $RESUME
+fi
+"$BIN/orbitmodel" eval rollout "$WM" "$DATA"
+[ -f "$WM/probe/model.safetensors" ] || "$BIN/orbitmodel" probe "$WM" "$DATA"
+[ -f "$WM/probe-state/model.safetensors" ] || "$BIN/orbitmodel" probe "$WM" "$DATA" --state-only
+"$BIN/orbitmodel" eval probe "$WM" "$DATA"
+if [ ! -f "$DP/model.safetensors" ]; then
+  if [ -d "$DP/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
+  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" --max-steps 1500 $RESUME
+fi
+"$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth; do
+  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${GRID[@]}" --json "$OUT/grid/$pilot.json"
+done
+[ -f "$OUT/grid/diffusion.json" ] || "$BIN/orbitdata" fly --pilot diffusion --pilot-option "run=$DP" --image-size 64 "${GRID[@]}" --json "$OUT/grid/diffusion.json"
+for pilot in expert risky; do
+  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" --json "$OUT/grid/$pilot.json"
+done
+"$BIN/orbitmodel" eval figure6 "$OUT"/grid/*.json --out "$OUT/grid/figure6.png"

@@ -1,0 +1,154 @@
+"""Stage II on tiny data: the probe trains on a frozen world model, resumes, is evaluated into
+the Table I layout, and bad input gives one line and exit 2."""
+
+import json
+import shutil
+
+import pytest
+import torch
+from safetensors.torch import load_file
+from typer.testing import CliRunner
+
+from orbitdata import schema as S
+from orbitdata.load import load_windows
+from orbitmodel.cli.app import app
+from orbitmodel.probe.cache import CACHE_FILE, LATENT
+from orbitmodel.probe.config import ProbeConfig, recipe
+from orbitmodel.probe.evaluate import PAPER, QUANTITIES, ROWS, TABLE_JSON, TABLE_MD
+from orbitmodel.probe.model import PhysicsProbe
+from orbitmodel.probe.train import LatentObjective, ProbeJob, ProbeRequest, load_stage1, train_probe
+from orbitmodel.train.checkpoint import RunDir
+from orbitmodel.train.loop import LoopSettings, fit
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_dataset_master, tmp_path_factory):
+    """A Stage I run of the tiny preset, a few steps (do not modify it)."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+    out = tmp_path_factory.mktemp("stage1") / "run"
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2),
+                                    out=out, device="cpu"))
+    return out
+
+
+@pytest.fixture
+def run(tiny_run, tmp_path):
+    dst = tmp_path / "run"
+    shutil.copytree(tiny_run, dst)
+    return dst
+
+
+def request(run, dataset, kind="latent", **changes):
+    return ProbeRequest(run=run, dataset=str(dataset), train=recipe("tiny").with_changes(**changes), kind=kind,
+                        hidden=32, device="cpu")
+
+
+def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
+    """No cache: the world model runs on every batch, and ends exactly as it started
+    (weights and BatchNorm statistics), even when the objective is put in train mode."""
+    _, world_model, _ = load_stage1(run)
+    before = {k: v.clone() for k, v in world_model.state_dict().items()}
+    t = recipe("tiny").with_changes(cache_windows=0, max_steps=4)
+    probe = PhysicsProbe(ProbeConfig(latent_dim=32, hidden=32))
+    module = LatentObjective(world_model, probe, t).train()
+    windows = load_windows(tiny_dataset_master, context=t.context, horizon=t.horizon, stride=t.window_stride,
+                           columns=[S.IMAGE, S.STATE, S.ACTION])
+    out = run / "probe"
+    RunDir(out).start({"stage": "probe"}, resume=False, overwrite=False)
+    fit(ProbeJob(module, probe, "latent", t.context), windows, LoopSettings.of(t), RunDir(out), torch.device("cpu"))
+    assert not world_model.training and all(not p.requires_grad for p in world_model.parameters())
+    after = world_model.state_dict()
+    assert all(torch.equal(before[k], after[k]) for k in before)
+    assert any(p.abs().sum() > 0 for p in probe.increments.net[-1].parameters())  # the probe did train
+
+
+def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
+    result = train_probe(request(run, tiny_dataset_master, epochs=6))
+    assert result.steps == 6 * (32 // 4)
+    batch = load_file(run / "probe" / CACHE_FILE)  # the imagined latents of the 32 training windows
+    _, world_model, _ = load_stage1(run)
+    t = recipe("tiny")
+
+    def loss(probe):
+        with torch.no_grad():
+            return float(LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION],
+                                                                z_future=batch[LATENT])[0])
+
+    untrained = PhysicsProbe(PhysicsProbe.from_pretrained(run).config)  # zero increments
+    trained = PhysicsProbe.from_pretrained(run)
+    assert loss(trained) < 0.8 * loss(untrained)
+    assert trained.increments.scale.ne(1).all()  # output units from the data
+
+
+class Interrupt(Exception):
+    pass
+
+
+def test_resume_continues_exactly(run, tiny_dataset_master, tmp_path):
+    other = tmp_path / "other"
+    shutil.copytree(run, other)
+    train_probe(request(run, tiny_dataset_master))
+
+    def stop(record):
+        if record["step"] == 5:
+            raise Interrupt  # after the checkpoint of step 4
+
+    with pytest.raises(Interrupt):
+        train_probe(request(other, tiny_dataset_master), on_log=stop)
+    resumed = ProbeRequest(**{**request(other, tiny_dataset_master).__dict__, "resume": True})
+    train_probe(resumed)  # reads the cached latents back
+    straight, again = PhysicsProbe.from_pretrained(run).state_dict(), PhysicsProbe.from_pretrained(other).state_dict()
+    assert all(torch.equal(straight[k], again[k]) for k in straight)
+
+
+def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
+    for flag in ([], ["--state-only"]):
+        res = runner.invoke(app, ["probe", str(run), str(tiny_dataset_master), "--device", "cpu", "--integrator",
+                                  "coasting", *flag])
+        assert res.exit_code == 0, res.output
+    assert PhysicsProbe.from_pretrained(run).config.integrator == "coasting"
+    out = tmp_path / "eval"
+    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2",
+                              "--horizon", "25", "--horizon", "50", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    result = json.loads((out / TABLE_JSON).read_text())
+    for row in ROWS:
+        for q in QUANTITIES:
+            for h in (25, 50):
+                cell = result["table"][row][q][f"h{h}"]
+                assert cell["mean"] >= 0 and cell["std"] >= 0
+            assert len(result["table"][row][q]["per_step"]) == 50
+    table = (out / TABLE_MD).read_text()
+    assert table.count("\n| ") == 1 + 2 * len(QUANTITIES)  # header + one line per quantity and horizon
+    assert f"{PAPER[25]['position']:.4f}" in table and f"{PAPER[50]['fuel']:.4f}" in table
+    assert (out / "probe_fig5_states.png").stat().st_size > 0 and (out / "probe_fig5_3d.png").stat().st_size > 0
+
+
+def one_line_error(res, message):
+    assert res.exit_code == 2, res.output
+    assert message in res.output and "Traceback" not in res.output
+    assert len(res.output.strip().splitlines()) == 1, res.output
+
+
+def test_clear_errors(run, tiny_dataset_master, tmp_path):
+    data = str(tiny_dataset_master)
+    one_line_error(runner.invoke(app, ["probe", str(tmp_path / "nothing"), data]), "not an orbitmodel run")
+    one_line_error(runner.invoke(app, ["eval", "probe", str(run), data]), "no trained latent probe")
+    untrained = tmp_path / "untrained"
+    shutil.copytree(run, untrained)
+    (untrained / "model.safetensors").unlink()
+    shutil.rmtree(untrained / "checkpoints")
+    one_line_error(runner.invoke(app, ["probe", str(untrained), data]), "has no weights")
+    other_size = tmp_path / "other_size"
+    shutil.copytree(run, other_size)
+    config = json.loads((other_size / "config.json").read_text())
+    config["preset"]["model"]["image_size"] = 32
+    (other_size / "config.json").write_text(json.dumps(config))
+    one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "64 px images")
+    assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
+    one_line_error(runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5",
+                                       "--no-figures"]), "test episodes")
