@@ -67,8 +67,8 @@ def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
 
 
 def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
-    result = train_probe(request(run, tiny_dataset_master, epochs=6))
-    assert result.steps == 6 * (32 // 4)
+    result = train_probe(request(run, tiny_dataset_master, epochs=12))
+    assert result.steps == 12 * (32 // 4)
     batch = load_file(run / "probe" / CACHE_FILE)  # the imagined latents of the 32 training windows
     _, world_model, _ = load_stage1(run)
     t = recipe("tiny")
