@@ -30,7 +30,8 @@ from orbitdata.load import collate_windows, load_windows
 from orbitmodel.data import DatasetMeta, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
-from orbitmodel.probe.cache import LATENT, TensorWindows, cache_key, gather, imagine, load_cache, save_cache, subset
+from orbitmodel.probe.cache import (CACHE_FILE, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
+                                    save_cache, subset)
 from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, recipe
 from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, increments_of
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
@@ -197,6 +198,10 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
                          hidden=req.hidden, integrator=req.integrator)
     out = probe_folder(req.run, req.kind)
+    if req.overwrite:
+        # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
+        # again must not reuse latents imagined by another version of the model code.
+        (out / CACHE_FILE).unlink(missing_ok=True)
     run = RunDir(out)
     run.start(probe_run_config(req.kind, config, t, meta, Path(req.run), wm_print if latent else None),
               resume=req.resume, overwrite=req.overwrite)
