@@ -9,9 +9,7 @@ rolling the K candidates out through the predictor, in the probe, and in the cos
 collision queries included). Goal: <= 40 ms per control step (25 Hz) on 2 cores.
 
 The sizes are the ``cpu`` preset's; the weights do not change the time, so an untrained
-``WorldModel`` is used unless ``--run`` names a trained one. The probe is a stand-in with the
-DESIGN's architecture (MLP latent -> 256 -> 256 -> 10, integrated over the horizon) until the
-real one lands (MERGE issue 12: ``--run`` with a probe uses the real one).
+``WorldModel`` and ``PhysicsProbe`` are used unless ``--run`` names a trained run with its probe.
 ``--sweep`` prints a table over K, H and the replan interval instead.
 """
 
@@ -23,41 +21,19 @@ import time
 
 import numpy as np
 import torch
-from torch import nn
 
+from orbitdata.fly.pilot import Task
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitmodel.config import get_preset
-from orbitmodel.evaluate.flying import Task
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics
 from orbitmodel.plan.factory import PredictedDepth
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import PlannerConfig, PlannerPilot, Variant
-from orbitmodel.plan.rotation import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.timing import Timings
-
-
-class StandInProbe(nn.Module):
-    """The DESIGN's probe, compute-wise: MLP D -> 256 -> 256 -> 10 (dp, dv, dw, dphi), integrated."""
-
-    def __init__(self, latent_dim: int, dt: float = 0.04):
-        super().__init__()
-        self.net = nn.Sequential(nn.Linear(latent_dim, 256), nn.GELU(), nn.Linear(256, 256), nn.GELU(),
-                                 nn.Linear(256, 10))
-        self.dt = dt
-
-    def forward(self, z: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:  # (B, n, D), (B, 16) -> (B, n, 16)
-        d = 1e-3 * self.net(z)  # (B, n, 10)
-        p = state0[:, None, 0:3] + torch.cumsum(d[..., 0:3], 1)
-        v = state0[:, None, 3:6] + torch.cumsum(d[..., 3:6], 1)
-        w = state0[:, None, 12:15] + torch.cumsum(d[..., 6:9], 1)
-        fuel = (state0[:, None, 15:16] - torch.cumsum(d[..., 9:10].abs(), 1)).clamp(0, 1)
-        turn = so3_exp(w * self.dt)
-        R = [rot6d_to_matrix(state0[:, 6:12])]
-        for t in range(z.shape[1]):
-            R.append(R[-1] @ turn[:, t])
-        return torch.cat([p, v, matrix_to_rot6d(torch.stack(R[1:], 1)), w, fuel], -1)
+from orbitmodel.probe import PhysicsProbe
+from orbitmodel.probe.config import ProbeConfig
 
 
 def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[PlannerPilot, Timings]:
@@ -70,7 +46,7 @@ def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[Pla
     else:
         torch.manual_seed(0)
         model = WorldModel(preset.model).eval()
-        probe = StandInProbe(preset.model.latent_dim).eval()
+        probe = PhysicsProbe(ProbeConfig(latent_dim=preset.model.latent_dim)).eval()
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
     config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every)

@@ -50,17 +50,19 @@ def main() -> None:
     goal = torch.tensor([[3.0, 0.5, -0.5]])
     for _ in range(3):
         policy.sample_actions(images, states, goal, g)
-    times = []
+    times, cpu = [], []
     for _ in range(args.repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         policy.sample_actions(images, states, goal, g)
         times.append(time.perf_counter() - start)
+        cpu.append(time.process_time() - start_cpu)
     t = np.array(times) * 1e3
     print(f"Diffusion Policy ({preset_name}: {policy.num_parameters() / 1e6:.2f}M params, "
           f"{c.inference_steps} DDIM steps) on {args.threads} threads: one {c.horizon}-action chunk "
           f"median {np.median(t):.1f} ms, p95 {np.percentile(t, 95):.1f} ms over {len(t)} calls; "
           f"{np.median(t) / c.n_action_steps:.1f} ms per control step amortised over {c.n_action_steps} "
-          f"(the control period is 40 ms)")
+          f"(the control period is 40 ms); CPU time per chunk {np.median(cpu) * 1e3:.1f} ms, all threads "
+          f"(wall far above CPU / threads means the cores were shared)")
 
     if args.train_steps and train is not None:
         policy.train()

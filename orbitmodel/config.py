@@ -31,6 +31,9 @@ class ModelConfig:
         history: latents the predictor sees in a rollout (a sliding window).
         depth_hidden: per-patch depth head MLP width -> hidden -> GELU -> cells.
         sigreg_projections, sigreg_knots: SIGReg's random 1-D projections and quadrature knots.
+        sigreg_pool: False (upstream): SIGReg per time step over the batch, averaged, so N = batch
+            size. True: one SIGReg over every frame of the batch (N = batch x window), for small
+            batches where N = batch leaves the statistic too weak to keep z from collapsing.
         lambda_sigreg, lambda_depth: loss weights.
     """
 
@@ -53,6 +56,7 @@ class ModelConfig:
     depth_hidden: int = 96
     sigreg_projections: int = 512
     sigreg_knots: int = 17
+    sigreg_pool: bool = False
     lambda_sigreg: float = 0.1
     lambda_depth: float = 0.1
     state_dim: int = STATE_DIM
@@ -161,7 +165,7 @@ def _paper() -> Preset:
 def _cpu() -> Preset:
     model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
                         state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
-                        depth_hidden=64, sigreg_projections=256)
+                        depth_hidden=64, sigreg_projections=256, sigreg_pool=True)
     train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
                         epochs=100, max_steps=1000, warmup=0.05, num_workers=0, log_every=10, save_every=100)
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "

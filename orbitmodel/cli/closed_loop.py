@@ -75,14 +75,28 @@ def closed_loop(
                             max_steps=max_steps, video_dir=video, video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     console = Console(stderr=True)
+    stream = None
+    if json_out is not None:  # each episode as it lands, so a grid stopped early keeps what it flew
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        stream = json_out.with_suffix(".episodes.jsonl").open("w")
+
+    def landed(cell, record: dict) -> None:
+        bar.advance(task)
+        if stream is not None:
+            stream.write(json.dumps(record) + "\n")
+            stream.flush()
+
     with Progress(TextColumn(f"[bold]fly {pilot.value}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   console=console) as bar:
         task = bar.add_task("fly", total=len(n_obst) * len(v) * episodes)
-        result = loop.fly(on_episode=lambda cell, record: bar.advance(task))
+        try:
+            result = loop.fly(on_episode=landed)
+        finally:
+            if stream is not None:
+                stream.close()
     report = closed_loop_report(req, result)
     print_table(report, episodes)
     if json_out is not None:
-        json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(report, indent=2) + "\n")
 
 

@@ -122,8 +122,11 @@ class ClosedLoop:
                  for n in req.obstacles for v in req.speeds}
         out = ClosedLoopResult(list(cells.values()), [], [], [], {})
         self.timings.clear()
+        # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
+        # early has covered every setting alike. Each episode's seed is fixed by (n, v, k).
+        order = sorted(self.seeds, key=lambda cell: cell[2])
         try:
-            for n, v, k, seed in self.seeds:
+            for n, v, k, seed in order:
                 frames: list[np.ndarray] = []
                 sink = (lambda t, rgb, *_: frames.append(rgb)) if req.video_dir is not None else None
                 result = fly_episode(env, pilot, seed, n, v, frame_sink=sink)

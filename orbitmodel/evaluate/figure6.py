@@ -12,7 +12,11 @@ from pathlib import Path
 
 
 def read_report(path: str | Path) -> dict:
+    """A grid result: the ``--json`` table, or the ``.episodes.jsonl`` stream of a grid that
+    was stopped early (its settings count the episodes flown, and ``partial`` is true)."""
     path = Path(path)
+    if path.suffix == ".jsonl":
+        return report_from_episodes(path)
     try:
         report = json.loads(path.read_text())
         settings = report["settings"]
@@ -25,6 +29,34 @@ def read_report(path: str | Path) -> dict:
         raise ValueError(f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
                          f"--json): {type(err).__name__} {err}") from None
     return report
+
+
+OUTCOMES = ("success", "collision", "timeout", "out_of_fuel")
+
+
+def report_from_episodes(path: str | Path) -> dict:
+    """The table of the episodes streamed to ``path`` so far (one JSON record per line)."""
+    path = Path(path)
+    settings: dict[tuple[int, float], dict] = {}
+    pilot = None
+    try:
+        for line in path.read_text().splitlines():
+            if not line.strip():
+                continue
+            e = json.loads(line)
+            key = (int(e["obstacles"]), float(e["speed"]))
+            cell = settings.setdefault(key, {"obstacles": key[0], "speed": key[1], "episodes": 0,
+                                             **{o: 0 for o in OUTCOMES}})
+            cell["episodes"] += 1
+            cell[e["outcome"]] += 1
+            pilot = e.get("variant", pilot)
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{path} is not an episode stream of orbitmodel eval closed-loop --json: "
+                         f"{type(err).__name__} {err}") from None
+    if not settings:
+        raise ValueError(f"{path} holds no episodes yet")
+    name = pilot or path.name.split(".")[0]
+    return {"pilot": name, "seed": None, "partial": True, "settings": [settings[k] for k in sorted(settings)]}
 
 
 def success_table(reports: list[dict]) -> tuple[list[tuple[int, float]], dict[str, list[float]]]:
@@ -69,7 +101,7 @@ def plot_figure6(reports: list[dict], out: str | Path, title: str | None = None)
     ax.set_ylabel("success %")
     ax.set_ylim(0, 110)
     episodes = {s["episodes"] for r in reports for s in r["settings"]}
-    seeds = {r.get("seed") for r in reports}
+    seeds = {r.get("seed") for r in reports if r.get("seed") is not None}
     ax.set_title(title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting, "
                           f"seed {'/'.join(map(str, sorted(seeds, key=str)))}", fontsize=9)
     ax.legend(fontsize=7, ncols=min(len(rates), 3), loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)

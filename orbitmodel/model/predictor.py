@@ -29,8 +29,11 @@ class AdaLNBlock(nn.Module):
         self.mlp = Mlp(dim, mlp, dropout)
         self.adaln = nn.Sequential(nn.SiLU(), nn.Linear(dim, 6 * dim))
 
-    def forward(self, x: torch.Tensor, c: torch.Tensor) -> torch.Tensor:  # x, c: (B, T, D)
-        shift_msa, scale_msa, gate_msa, shift_mlp, scale_mlp, gate_mlp = self.adaln(c).chunk(6, dim=-1)
+    def forward(self, x: torch.Tensor, c: torch.Tensor, mod: torch.Tensor | None = None) -> torch.Tensor:
+        """x, c: (B, T, D). ``mod`` (B, T, 6D), optional: ``self.adaln(c)`` computed beforehand
+        (a rollout computes it once for the whole horizon, not at every step)."""
+        mod = self.adaln(c) if mod is None else mod
+        shift_msa, scale_msa, gate_msa, shift_mlp, scale_mlp, gate_mlp = mod.chunk(6, dim=-1)
         x = x + gate_msa * self.attn(modulate(self.norm1(x), shift_msa, scale_msa), causal=True)
         return x + gate_mlp * self.mlp(modulate(self.norm2(x), shift_mlp, scale_mlp))
 
@@ -47,10 +50,16 @@ class Predictor(nn.Module):
                                     for _ in range(c.pred_depth))
         self.norm = nn.LayerNorm(c.latent_dim)
 
-    def forward(self, z: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
+    def modulations(self, cond: torch.Tensor) -> list[torch.Tensor]:
+        """Every block's AdaLN shift/scale/gate for action embeddings cond (B, T, D): [(B, T, 6D)]."""
+        return [block.adaln(cond) for block in self.blocks]
+
+    def forward(self, z: torch.Tensor, cond: torch.Tensor | None, mods: list[torch.Tensor] | None = None) -> torch.Tensor:
+        """z (B, T, D) and cond (B, T, D), or ``mods`` = ``self.modulations(cond)`` sliced to the
+        same T frames, -> features (B, T, D)."""
         T = z.shape[1]
         assert T <= self.pos.shape[1], f"sequence of {T} frames exceeds max_seq_len {self.pos.shape[1]}"
         x = self.drop(z + self.pos[:, :T])
-        for block in self.blocks:
-            x = block(x, cond)
+        for i, block in enumerate(self.blocks):
+            x = block(x, cond, None if mods is None else mods[i])
         return self.norm(x)

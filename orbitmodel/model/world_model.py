@@ -144,11 +144,12 @@ class WorldModel(nn.Module):
         if n < 1:
             raise ValueError(f"actions cover {actions.shape[1]} frames; with {m} context latents give at least {m}")
         cond = self.action_encoder(self._norm_action(actions))  # (B, m-1+n, D)
+        mods = self.predictor.modulations(cond)  # each block's AdaLN for every frame, computed once
         z = z_context
         for i in range(n):
             end = m + i  # frames [0, end) are known; predict frame `end`
             start = max(0, end - self.config.history)
-            out = self.predictor(z[:, start:end], cond[:, start:end])[:, -1]  # (B, D)
+            out = self.predictor(z[:, start:end], None, [mod[:, start:end] for mod in mods])[:, -1]  # (B, D)
             z = torch.cat([z, (z[:, end - 1] + self.pred_projector(out)).unsqueeze(1)], dim=1)
         return z[:, m:]
 
@@ -168,13 +169,14 @@ class WorldModel(nn.Module):
     def loss(self, images: torch.Tensor, states: torch.Tensor, actions: torch.Tensor, depth_low: torch.Tensor,
              generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Upstream's Stage I loss over windows of T frames (teacher forcing, no stop-gradient):
-        MSE(ẑ[:, :-1], z[:, 1:]) + lambda_sig SIGReg(z, per frame over the batch) + lambda_depth
+        MSE(ẑ[:, :-1], z[:, 1:]) + lambda_sig SIGReg(z, per frame over the batch, or pooled) + lambda_depth
         MSE(depth). images (B, T, 3, H, W) float in [0, 1] or uint8; depth_low (B, T, 16, 16) m."""
         c = self.config
         z, patches = self._encode(images, states)  # (B, T, D), (B*T, P, width)
         z_hat = self.predict_next(z, actions)
         pred = F.mse_loss(z_hat[:, :-1], z[:, 1:])
-        sig = sigreg(z.transpose(0, 1), c.sigreg_projections, c.sigreg_knots, generator)
+        samples = z.flatten(0, 1) if c.sigreg_pool else z.transpose(0, 1)  # (B*T, D) or (T, B, D)
+        sig = sigreg(samples, c.sigreg_projections, c.sigreg_knots, generator)
         depth = F.mse_loss(self.depth_head(patches), (depth_low / self.depth_scale).flatten(0, 1))
         total = pred + c.lambda_sigreg * sig + c.lambda_depth * depth
         return total, {"pred": pred.detach(), "sigreg": sig.detach(), "depth": depth.detach()}

@@ -158,19 +158,11 @@ class LearnedDynamics:
 
 
 def load_probe(run: str | Path) -> Probe:
-    """The physics probe trained on ``run`` (``orbitmodel probe RUN`` writes ``RUN/probe/``).
-
-    MERGE (issue 12): the one place that names the probe; adjust the import and the folder
-    check to ``PhysicsProbe.from_pretrained``'s final signature.
-    """
+    """The physics probe trained on ``run`` (``orbitmodel probe RUN`` writes ``RUN/probe/``)."""
+    from orbitmodel.probe import PhysicsProbe
     from orbitmodel.train.checkpoint import RunError
 
     folder = Path(run) / "probe"
     if not folder.is_dir():
         raise RunError(f"{run} has no physics probe ({folder} is missing); train one with `orbitmodel probe {run}`")
-    try:
-        from orbitmodel.probe import PhysicsProbe
-    except ImportError:
-        raise RunError(f"{run} has a probe folder, but this orbitmodel has no orbitmodel.probe to load it; "
-                       "install the version that trained it") from None
     return PhysicsProbe.from_pretrained(run).eval()

@@ -177,7 +177,14 @@ def probe_run_config(kind: str, probe: ProbeConfig, train: ProbeTrainConfig, met
 def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
              folder: Path) -> dict:
     """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
-    key = cache_key(world_model=wm_print, dataset=meta.to_dict(), windows=chosen, context=req.train.context,
+    from dataclasses import asdict
+    from importlib.metadata import version
+
+    # The rollout depends on the weights, the model's config (its history) and the code that
+    # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
+    # and so does --overwrite.
+    key = cache_key(world_model=wm_print, config=asdict(world_model.config), package=version("orbitdata"),
+                    dataset=meta.to_dict(), windows=chosen, context=req.train.context,
                     horizon=req.train.horizon, stride=req.train.window_stride)
     cached = load_cache(folder, key)
     if cached is None:

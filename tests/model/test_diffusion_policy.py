@@ -42,6 +42,9 @@ def test_shapes(config):
     assert cond.shape == (B, config.n_obs_steps * (config.image_features + 16 + 3))
     loss, parts = policy(**b, generator=torch.Generator().manual_seed(0))
     assert loss.ndim == 0 and torch.isfinite(loss)
+    x0_policy = DiffusionPolicy(replace(config, prediction_type="sample"))
+    loss, _ = x0_policy(**b, generator=torch.Generator().manual_seed(0))
+    assert loss.ndim == 0 and torch.isfinite(loss)
     paper = DiffusionPolicy(PolicyConfig())  # the cpu preset's sizes
     assert 3e6 < paper.num_parameters() < 8e6
 
@@ -63,6 +66,8 @@ def test_config_errors():
         PolicyConfig(n_action_steps=16)
     with pytest.raises(ValueError, match="image_size"):
         PolicyConfig(image_size=72)
+    with pytest.raises(ValueError, match="prediction_type"):
+        PolicyConfig(prediction_type="v_prediction")
 
 
 def test_ddpm_round_trip():
@@ -79,15 +84,17 @@ def test_ddpm_round_trip():
         torch.testing.assert_close(back, x0, atol=1e-3, rtol=0)  # float32 error divided by sqrt(abar_99) = 5e-4
 
 
-def test_ddim_sampling_with_the_true_noise_returns_the_sample():
-    _, ddim = make_schedulers(PolicyConfig())
+@pytest.mark.parametrize("prediction_type", ["epsilon", "sample"])
+def test_ddim_sampling_with_the_true_noise_returns_the_sample(prediction_type):
+    """DDIM from the noised sample, with an oracle network, ends on the sample."""
+    ddpm, ddim = make_schedulers(PolicyConfig(prediction_type=prediction_type))
     g = torch.Generator().manual_seed(1)
     x0 = torch.rand(2, 16, 8, generator=g) * 2 - 1
     eps = torch.randn(x0.shape, generator=g)
     start = int(ddim.timesteps[0])
-    ddpm, _ = make_schedulers(PolicyConfig())
     noisy = ddpm.add_noise(x0, eps, torch.tensor([start, start]))
-    out = denoise(ddim, lambda x, k: eps, noisy)
+    oracle = eps if prediction_type == "epsilon" else x0
+    out = denoise(ddim, lambda x, k: oracle, noisy)
     torch.testing.assert_close(out, x0, atol=1e-4, rtol=0)
     assert len(ddim.timesteps) == PolicyConfig().inference_steps
 

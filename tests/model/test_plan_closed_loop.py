@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import pytest
 import torch
-from torch import nn
 from typer.testing import CliRunner
 
 from orbitdata.seeding import episode_seed
@@ -14,23 +14,12 @@ from orbitmodel.cli.app import app
 from orbitmodel.config import get_preset
 from orbitmodel.evaluate.closed_loop import (ClosedLoopRequest, check_unseen_seeds, closed_loop_report,
                                              dataset_seeds, fly_closed_loop, grid_seeds)
-from orbitmodel.evaluate.figure6 import plot_figure6, success_table
+from orbitmodel.evaluate.figure6 import plot_figure6, read_report, success_table
 from orbitmodel.plan.factory import planner_config
 from orbitmodel.plan.pilot import Variant
 
 torch.set_num_threads(1)
 runner = CliRunner()
-
-
-class StandInProbe(nn.Module):
-    """An untrained probe with the real one's call: (z (B, n, D), state0 (B, 16)) -> (B, n, 16)."""
-
-    def __init__(self, latent_dim: int):
-        super().__init__()
-        self.head = nn.Linear(latent_dim, 16)
-
-    def forward(self, z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
-        return state0[:, None] + 0.01 * torch.cumsum(self.head(z_future), 1)
 
 
 @pytest.fixture(scope="module")
@@ -44,11 +33,17 @@ def tiny_run(tiny_dataset_master, tmp_path_factory):
     return out
 
 
-@pytest.fixture
-def with_probe(monkeypatch):
-    """MERGE (issue 12): a real probe folder replaces this stand-in."""
-    monkeypatch.setattr("orbitmodel.plan.factory.load_probe",
-                        lambda run: StandInProbe(get_preset("tiny").model.latent_dim).eval())
+@pytest.fixture(scope="module")
+def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
+    """A copy of the tiny run with a real physics probe in RUN/probe (two tiny epochs)."""
+    from orbitmodel.probe.config import recipe
+    from orbitmodel.probe.train import ProbeRequest, train_probe
+
+    run = tmp_path_factory.mktemp("probed") / "tiny"
+    shutil.copytree(tiny_run, run)
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), train=recipe("tiny"), hidden=32,
+                             device="cpu"))
+    return run
 
 
 @pytest.mark.parametrize("episodes", [3000, 8000])  # the 64 px dataset of this repo, and the README's
@@ -64,8 +59,8 @@ def test_a_colliding_seed_is_refused():
         check_unseen_seeds([episode_seed(0, 5)], root_seed=0, episodes=10)
 
 
-def test_a_tiny_closed_loop_episode_runs_end_to_end(tiny_run, with_probe, tmp_path):
-    req = ClosedLoopRequest(variant=Variant.PLANNER, run=tiny_run, obstacles=(1,), speeds=(1.0,), episodes=1,
+def test_a_tiny_closed_loop_episode_runs_end_to_end(probed_run, tmp_path):
+    req = ClosedLoopRequest(variant=Variant.PLANNER, run=probed_run, obstacles=(1,), speeds=(1.0,), episodes=1,
                             planner=planner_config(samples=8, horizon=5), max_steps=6, video_dir=tmp_path / "video",
                             video_format=".gif")
     result = fly_closed_loop(req)
@@ -81,15 +76,19 @@ def test_a_tiny_closed_loop_episode_runs_end_to_end(tiny_run, with_probe, tmp_pa
     json.dumps(report)  # serialisable as it is
 
 
-def test_cli_prints_the_success_table_and_figure6_plots_it(tiny_run, with_probe, tmp_path):
+def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path):
     out = tmp_path / "planner.json"
-    res = runner.invoke(app, ["eval", "closed-loop", str(tiny_run), "--pilot", "oracle-true-dyn-depth",
+    res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
                               "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--samples", "8",
                               "--horizon", "5", "--max-steps", "4", "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
     report = json.loads(out.read_text())
     assert [(s["obstacles"], s["speed"]) for s in report["settings"]] == [(1, 1.0), (1, 2.0)]
+    # Each episode was streamed as it landed; a grid stopped early is read back from that stream.
+    streamed = read_report(tmp_path / "planner.episodes.jsonl")
+    assert streamed["partial"] and streamed["pilot"] == "oracle-true-dyn-depth"
+    assert [{k: s[k] for k in streamed["settings"][0]} for s in report["settings"]] == streamed["settings"]
     expert = {"pilot": "expert", "seed": 0, "settings": [
         {"obstacles": 1, "speed": v, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}
         for v in (1.0, 2.0)]}

@@ -1,15 +1,16 @@
 """Diffusion Policy (Chi et al. 2023): a denoiser of action sequences conditioned on observations.
 
-Training (DDPM, epsilon prediction)::
+Training (DDPM)::
 
     a_0   = minmax(actions)               (B, H, 8) in [-1, 1], frames t-1 .. t+14
     k ~ U{0..K-1}, eps ~ N(0, I)          per window, from the step's seeded generator
     a_k   = sqrt(abar_k) a_0 + sqrt(1 - abar_k) eps        DDPMScheduler.add_noise
-    loss  = || eps - UNet(a_k, k, ObsEncoder(o_{t-1}, o_t)) ||^2
+    loss  = || eps - UNet(a_k, k, ObsEncoder(o_{t-1}, o_t)) ||^2      (prediction_type "epsilon")
+          = || a_0 - UNet(...) ||^2                                    (prediction_type "sample")
 
 Acting: a ~ N(0, I), then ``inference_steps`` DDIM steps (deterministic, eta 0) with the EMA
 weights; the actions for frames t .. t+7 are executed. Both schedules come from ``diffusers``
-with the reference's settings (100 steps, squaredcos_cap_v2, clip_sample, epsilon).
+with the reference's settings (100 steps, squaredcos_cap_v2, clip_sample, epsilon or sample).
 
 States and actions are normalised inside the module from the dataset's ``meta/stats.json``
 (states by mean/std, actions min-max to [-1, 1], the goal by the position's spread), so
@@ -53,20 +54,22 @@ def make_schedulers(config: PolicyConfig):
     from diffusers import DDIMScheduler, DDPMScheduler
 
     ddpm = DDPMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
-                         variance_type="fixed_small", clip_sample=config.clip_sample, prediction_type="epsilon")
+                         variance_type="fixed_small", clip_sample=config.clip_sample,
+                         prediction_type=config.prediction_type)
     ddim = DDIMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
                          clip_sample=config.clip_sample, set_alpha_to_one=True, steps_offset=0,
-                         prediction_type="epsilon")
+                         prediction_type=config.prediction_type)
     ddim.set_timesteps(config.inference_steps)
     return ddpm, ddim
 
 
-def denoise(scheduler, predict_noise: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], sample: torch.Tensor,
+def denoise(scheduler, predict: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], sample: torch.Tensor,
             generator: torch.Generator | None = None) -> torch.Tensor:
-    """Run ``scheduler``'s reverse process from ``sample`` (B, H, A): predict_noise(x, k (B,)) -> eps."""
+    """Run ``scheduler``'s reverse process from ``sample`` (B, H, A): predict(x, k (B,)) is the
+    network's output (the noise or the clean sample, as the scheduler's prediction_type says)."""
     for k in scheduler.timesteps:
-        eps = predict_noise(sample, k.expand(len(sample)).to(sample.device))
-        sample = scheduler.step(eps, k, sample, generator=generator).prev_sample
+        out = predict(sample, k.expand(len(sample)).to(sample.device))
+        sample = scheduler.step(out, k, sample, generator=generator).prev_sample
     return sample
 
 
@@ -130,7 +133,7 @@ class DiffusionPolicy(nn.Module):
     # ---- training ---------------------------------------------------------------------------
     def loss(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor, actions: torch.Tensor,
              generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
-        """DDPM epsilon loss. images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
+        """DDPM loss on the noise (or the clean sample). images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
         actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU)."""
         B = len(actions)
         a0 = self.normalise_actions(actions)  # (B, H, 8)
@@ -138,7 +141,8 @@ class DiffusionPolicy(nn.Module):
         eps = torch.randn(a0.shape, generator=generator).to(a0.device)
         noisy = self.noise_scheduler.add_noise(a0, eps, k)
         pred = self.net.unet(noisy, k, self.condition(self.net, images, states, goal))
-        return F.mse_loss(pred.float(), eps), {}
+        target = eps if self.config.prediction_type == "epsilon" else a0
+        return F.mse_loss(pred.float(), target), {}
 
     def forward(self, images, states, goal, actions, generator=None):
         """The training loss (so DDP sees a forward): see :meth:`loss`."""
