@@ -49,8 +49,10 @@ def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[Pla
         probe = PhysicsProbe(ProbeConfig(latent_dim=preset.model.latent_dim)).eval()
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
-    config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every)
-    pilot = PlannerPilot(Variant.PLANNER, LearnedDynamics(model, probe, timings), PredictedDepth(model, timings),
+    config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every,
+                           history=args.history)
+    dynamics = LearnedDynamics(model, probe, timings, history=args.history or None)
+    pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings),
                          Camera.from_sim(sim), config, sim, timings)
     return pilot, timings
 
@@ -81,7 +83,7 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
     wall = time.perf_counter() - start
     steps, replans = 1e3 * np.array(pilot.step_seconds), 1e3 * np.array(pilot.replan_seconds)
     phases = timings.snapshot()
-    return {"samples": samples, "horizon": horizon, "replan_every": replan_every,
+    return {"samples": samples, "horizon": horizon, "replan_every": replan_every, "history": pilot.dynamics.history,
             "step_median": np.median(steps), "step_p95": np.percentile(steps, 95),
             "replan_median": np.median(replans) if len(replans) else float("nan"),
             "replan_p95": np.percentile(replans, 95) if len(replans) else float("nan"),
@@ -90,7 +92,7 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
 
 def report(m: dict) -> str:
     shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in m["share"].items())
-    return (f"K={m['samples']:4d} H={m['horizon']:3d} replan every {m['replan_every']}: per control step "
+    return (f"K={m['samples']:4d} H={m['horizon']:3d} history {m['history']} replan every {m['replan_every']}: per control step "
             f"{m['step_median']:7.1f} ms median {m['step_p95']:7.1f} p95; per replan {m['replan_median']:7.1f} / "
             f"{m['replan_p95']:7.1f} ms   [{shares}]")
 
@@ -102,6 +104,7 @@ def main() -> None:
     parser.add_argument("--replan-every", type=int, default=1)
     parser.add_argument("--steps", type=int, default=20, help="control steps timed (after the context fills)")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
+    parser.add_argument("--history", type=int, default=0, help="latents per imagined step (0: the model's 8)")
     parser.add_argument("--run", default=None, help="a trained run with its probe (default: untrained cpu preset)")
     parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
     args = parser.parse_args()

@@ -165,11 +165,19 @@ def _paper() -> Preset:
 def _cpu() -> Preset:
     model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
                         state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
-                        depth_hidden=64, sigreg_projections=256, sigreg_pool=True)
+                        depth_hidden=64, sigreg_projections=256)
     train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
                         epochs=100, max_steps=1000, warmup=0.05, num_workers=0, log_every=10, save_every=100)
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
                   "4-block predictor; < 60 min", model, train)
+
+
+def _cpu_pooled() -> Preset:
+    # Measured on the same data and budget (README): effective rank 61.7 of 128 instead of 42.9,
+    # but rollout NMSE 0.14 instead of 0.007 at h = 1 and depth MAE 1.93 m instead of 1.17 m.
+    cpu = _cpu()
+    return replace(cpu, name="cpu-pooled", description="cpu with SIGReg pooled over batch x window (N = 512, "
+                   "not 32): fuller rank, worse prediction", model=replace(cpu.model, sigreg_pool=True))
 
 
 def _tiny() -> Preset:
@@ -181,7 +189,7 @@ def _tiny() -> Preset:
     return Preset("tiny", "a few thousand parameters, for tests", model, train)
 
 
-PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "tiny": _tiny}
+PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "cpu-pooled": _cpu_pooled, "tiny": _tiny}
 
 
 def get_preset(name: str) -> Preset:

@@ -15,6 +15,9 @@ DATA="$OUT/orbit64"
 WM="$OUT/wm-cpu"
 DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
+# MPPI at what this 2-core CPU flies in reasonable time (README, "Plan and fly"); the defaults
+# (K 256, H 50, 8 latents of history) are for a faster machine.
+PLAN=(--samples 32 --horizon 50 --history 2)
 
 [ -f "$DATA/meta/info.json" ] || "$BIN/orbitdata" generate "$DATA" --episodes 3000 --image-size 64 --workers 2 --seed 0
 if [ ! -f "$WM/model.safetensors" ]; then
@@ -27,11 +30,12 @@ fi
 "$BIN/orbitmodel" eval probe "$WM" "$DATA"
 if [ ! -f "$DP/model.safetensors" ]; then
   if [ -d "$DP/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
-  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" --max-steps 1500 $RESUME
+  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" $RESUME
 fi
 "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
-for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth; do
-  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${GRID[@]}" --json "$OUT/grid/$pilot.json"
+for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth oracle-true-dyn-sensor; do
+  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" \
+    --json "$OUT/grid/$pilot.json"
 done
 [ -f "$OUT/grid/diffusion.json" ] || "$BIN/orbitdata" fly --pilot diffusion --pilot-option "run=$DP" --image-size 64 "${GRID[@]}" --json "$OUT/grid/diffusion.json"
 for pilot in expert risky; do

@@ -48,6 +48,8 @@ def closed_loop(
     iterations: Annotated[Optional[int], typer.Option(min=1, help="MPPI iterations per replan [default: 1]")] = None,
     replan_every: Annotated[Optional[int], typer.Option(min=1, help="control steps per replan [default: 1]")] = None,
     memory_frames: Annotated[Optional[int], typer.Option(min=1, help="depth frames kept in the point cloud")] = None,
+    history: Annotated[Optional[int], typer.Option(min=1, help="latents the world model sees per imagined step "
+                                                               "[default: the model's own, 8]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
     config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
@@ -67,7 +69,8 @@ def closed_loop(
 
     n_obst, v = _numbers(obstacles, int, "--obstacles"), _numbers(speeds, float, "--speeds")
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
-                                     replan_every=replan_every, memory_frames=memory_frames).items() if x is not None}
+                                     replan_every=replan_every, memory_frames=memory_frames,
+                                     history=history).items() if x is not None}
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(variant=Variant(pilot.value), run=run, obstacles=tuple(n_obst), speeds=tuple(v),
                             episodes=episodes, seed=seed, planner=planner_config(**options),

@@ -63,7 +63,8 @@ class ClosedLoopResult:
 
 
 def grid_seeds(obstacles, speeds, episodes: int, seed: int) -> list[tuple[int, float, int, int]]:
-    """(obstacles, speed, episode, episode seed) of every grid episode, in flying order."""
+    """(obstacles, speed, episode, episode seed) of every grid episode, setting by setting
+    (:meth:`ClosedLoop.fly` flies them round-robin: episode k of every setting, then k + 1)."""
     return [(n, float(v), k, grid_seed(seed, n, v, k)) for n in obstacles for v in speeds for k in range(episodes)]
 
 

@@ -131,16 +131,20 @@ class WorldModel(nn.Module):
         """images (B, T, 3, H, W) uint8, states (B, T, 16) -> z (B, T, D)."""
         return self._encode(images, states)[0]
 
-    def rollout(self, z_context: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    def rollout(self, z_context: torch.Tensor, actions: torch.Tensor, history: int | None = None) -> torch.Tensor:
         """Imagine n future latents from m context latents.
 
         z_context (B, m, D) holds frames t-m+1..t; actions (B, m-1+n, 8) holds the m-1 actions
         taken inside the context and then the n planned ones (frames t-m+1..t+n-1). Returns
         z_future (B, n, D), frames t+1..t+n. Each prediction is fed back, and the predictor sees
-        a sliding window of the last ``config.history`` latents.
+        a sliding window of the last ``history`` latents (default ``config.history``; training
+        covers every shorter context, so a planner may pass fewer to trade accuracy for time).
         """
         B, m, _ = z_context.shape
         n = actions.shape[1] - m + 1
+        history = self.config.history if history is None else history
+        if not 1 <= history <= self.config.max_seq_len:
+            raise ValueError(f"history={history} must be in [1, max_seq_len={self.config.max_seq_len}]")
         if n < 1:
             raise ValueError(f"actions cover {actions.shape[1]} frames; with {m} context latents give at least {m}")
         cond = self.action_encoder(self._norm_action(actions))  # (B, m-1+n, D)
@@ -148,7 +152,7 @@ class WorldModel(nn.Module):
         z = z_context
         for i in range(n):
             end = m + i  # frames [0, end) are known; predict frame `end`
-            start = max(0, end - self.config.history)
+            start = max(0, end - history)
             out = self.predictor(z[:, start:end], None, [mod[:, start:end] for mod in mods])[:, -1]  # (B, D)
             z = torch.cat([z, (z[:, end - 1] + self.pred_projector(out)).unsqueeze(1)], dim=1)
         return z[:, m:]

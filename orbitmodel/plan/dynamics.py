@@ -115,10 +115,13 @@ class LearnedDynamics:
 
     needs_images = True
 
-    def __init__(self, model, probe: Probe, timings: Timings | None = None):
+    def __init__(self, model, probe: Probe, timings: Timings | None = None, history: int | None = None):
         self.model = model.eval()
         self.probe = probe
-        self.history = model.config.history
+        self.history = model.config.history if history is None else int(history)
+        if not 1 <= self.history <= model.config.history:
+            raise ValueError(f"history={self.history}: the world model rolls out from at most "
+                             f"{model.config.history} latents; give 1..{model.config.history}")
         self.timings = timings or Timings()
         self.reset()
 
@@ -152,7 +155,7 @@ class LearnedDynamics:
             if taken:
                 past = torch.stack(taken)[None].expand(K, -1, -1)  # (K, m-1, 8)
                 actions = torch.cat([past, actions.float()], 1)  # (K, m-1+H, 8)
-            z_future = self.model.rollout(z_ctx, actions.float())  # (K, H, D)
+            z_future = self.model.rollout(z_ctx, actions.float(), self.history)  # (K, H, D)
         with self.timings("probe"):
             return self.probe(z_future, state0.float().expand(K, -1))  # (K, H, 16)
 

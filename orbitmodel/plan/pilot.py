@@ -75,6 +75,8 @@ class PlannerConfig:
         noise: "wrench" (perturb along thrust patterns that make independent body forces and
             torques, torques scaled by ``torque_noise``) or "thrust" (each thruster alone).
         torque_noise: scale of the torque patterns against the force patterns.
+        history: latents the world model sees per imagined step (0: its own ``config.history``,
+            8). Fewer is faster (the rollout's cost is proportional) and less accurate.
         memory_frames: depth frames whose points stay in the world-frame cloud (1: current only).
         max_range: metres; depth cells farther than this are not obstacles to plan around.
         footprint: a point's sphere radius in half cell widths at its depth.
@@ -88,6 +90,7 @@ class PlannerConfig:
     cost: CostConfig = field(default_factory=CostConfig)
     noise: str = "wrench"
     torque_noise: float = 0.3
+    history: int = 0
     memory_frames: int = 1
     max_range: float = 10.0
     footprint: float = 1.0
@@ -99,6 +102,8 @@ class PlannerConfig:
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
             raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
+        if self.history < 0:
+            raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
         if self.reach < self.cost.margin + self.cost.hull_radius:

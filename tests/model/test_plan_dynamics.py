@@ -104,9 +104,10 @@ def test_rotation_helpers():
 class SpyModel(WorldModel):
     """The tiny world model, recording what its rollout was given."""
 
-    def rollout(self, z_context, actions):
+    def rollout(self, z_context, actions, history=None):
         self.seen = (z_context.clone(), actions.clone())
-        return super().rollout(z_context, actions)
+        self.history_seen = history
+        return super().rollout(z_context, actions, history)
 
 
 def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
@@ -133,6 +134,21 @@ def test_learned_dynamics_keeps_the_context_and_the_actions_between_frames():
     # the 3 actions taken between the 4 context frames (frames 2..5), then the plan
     assert torch.allclose(actions[0, :3], torch.tensor(np.array(taken[2:5])))
     assert torch.equal(actions[:, 3:], plan)
+    assert model.history_seen == 4
+
+
+def test_learned_dynamics_with_a_shorter_history_keeps_fewer_frames():
+    model = SpyModel(get_preset("tiny").model).eval()  # history 4
+    dyn = LearnedDynamics(model, stand_in_probe, history=2)
+    rng = np.random.default_rng(0)
+    for t in range(5):
+        obs = {"image": rng.integers(0, 255, (64, 64, 3), dtype=np.uint8), "state": np.zeros(16, np.float32)}
+        dyn.observe(obs, None if t == 0 else rng.uniform(0, 1, 8).astype(np.float32))
+    dyn.rollout(torch.zeros(16), torch.rand(3, 5, 8))
+    z_context, actions = model.seen
+    assert z_context.shape[:2] == (3, 2) and actions.shape == (3, 1 + 5, 8) and model.history_seen == 2
+    with pytest.raises(ValueError, match="at most 4 latents"):
+        LearnedDynamics(model, stand_in_probe, history=5)
 
 
 def test_learned_dynamics_starts_with_one_frame_and_forgets_on_reset():

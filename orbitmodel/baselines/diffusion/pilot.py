@@ -20,10 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from orbitdata.fly.pilot import Pilot
 from orbitdata.seeding import rng
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
-
-from orbitdata.fly.pilot import Pilot
 
 
 class DiffusionPilot(Pilot):
