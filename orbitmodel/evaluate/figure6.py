@@ -10,6 +10,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from orbitdata.schema import OUTCOMES
+
 
 def read_report(path: str | Path) -> dict:
     """A grid result: the ``--json`` table, or the ``.episodes.jsonl`` stream of a grid that
@@ -29,9 +31,6 @@ def read_report(path: str | Path) -> dict:
         raise ValueError(f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
                          f"--json): {type(err).__name__} {err}") from None
     return report
-
-
-OUTCOMES = ("success", "collision", "timeout", "out_of_fuel")
 
 
 def report_from_episodes(path: str | Path) -> dict:

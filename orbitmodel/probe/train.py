@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
+from importlib.metadata import version
 from pathlib import Path
 
 import torch
@@ -177,9 +178,6 @@ def probe_run_config(kind: str, probe: ProbeConfig, train: ProbeTrainConfig, met
 def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
              folder: Path) -> dict:
     """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
-    from dataclasses import asdict
-    from importlib.metadata import version
-
     # The rollout depends on the weights, the model's config (its history) and the code that
     # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
     # and so does --overwrite.

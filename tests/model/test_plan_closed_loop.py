@@ -11,7 +11,6 @@ from typer.testing import CliRunner
 
 from orbitdata.seeding import episode_seed
 from orbitmodel.cli.app import app
-from orbitmodel.config import get_preset
 from orbitmodel.evaluate.closed_loop import (ClosedLoopRequest, check_unseen_seeds, closed_loop_report,
                                              dataset_seeds, fly_closed_loop, grid_seeds)
 from orbitmodel.evaluate.figure6 import plot_figure6, read_report, success_table
@@ -20,17 +19,6 @@ from orbitmodel.plan.pilot import Variant
 
 torch.set_num_threads(1)
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def tiny_run(tiny_dataset_master, tmp_path_factory):
-    """A Stage I run of the tiny preset, two steps on the tiny dataset."""
-    from orbitmodel.train.stage1 import Stage1Request, train_world_model
-
-    out = tmp_path_factory.mktemp("run") / "tiny"
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2),
-                                    out=out, device="cpu"))
-    return out
 
 
 @pytest.fixture(scope="module")

@@ -23,18 +23,6 @@ from orbitmodel.train.loop import LoopSettings, fit
 runner = CliRunner()
 
 
-@pytest.fixture(scope="module")
-def tiny_run(tiny_dataset_master, tmp_path_factory):
-    """A Stage I run of the tiny preset, a few steps (do not modify it)."""
-    from orbitmodel.config import get_preset
-    from orbitmodel.train.stage1 import Stage1Request, train_world_model
-
-    out = tmp_path_factory.mktemp("stage1") / "run"
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2),
-                                    out=out, device="cpu"))
-    return out
-
-
 @pytest.fixture
 def run(tiny_run, tmp_path):
     dst = tmp_path / "run"
