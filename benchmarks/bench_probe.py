@@ -3,8 +3,9 @@
     python benchmarks/bench_probe.py [--k 256] [--horizon 50] [--latent-dim 128] [--repeats 50]
                                      [--threads 0] [--device cpu]
 
-Times ``probe(z_future (K, H, D), state0 (K, 16))`` (the MLP on all K x H latents in one call,
-then the integration) under ``torch.no_grad()``, and its two parts alone, on random inputs
+Times ``probe(z_future (K, H, D), state0 (K, 16), z_last (K, D))`` with the default probe (it
+reads [z_k, z_k - z_{k-1}] and integrates coasting; the MLP on all K x H steps in one call, then
+the integration) under ``torch.no_grad()``, and its two parts alone, on random inputs
 (the cost does not depend on the weights' values). D = 128 is the ``cpu`` preset's latent size,
 256 the ``paper`` one's. Also times the state-only reference MLP, which must step its
 increments one at a time. Each figure: median and 95th percentile over ``--repeats`` calls after
@@ -62,11 +63,13 @@ def main() -> None:
     g = torch.Generator().manual_seed(0)
     device = torch.device(args.device)
     K, H, D = args.k, args.horizon, args.latent_dim
-    probe = PhysicsProbe(ProbeConfig(latent_dim=D)).to(device).eval()
+    probe = PhysicsProbe(ProbeConfig(latent_dim=D, inputs="latent+change", integrator="coasting")).to(device).eval()
     for p in probe.parameters():  # non-zero output layer: the timing of a trained probe
         torch.nn.init.normal_(p, std=0.02, generator=g)
     state_mlp = StateDynamics(ProbeConfig(kind="state", latent_dim=STATE_ACTION_DIM)).to(device).eval()
     z = torch.randn(K, H, D, generator=g).to(device)  # (K, H, D)
+    z_last = torch.randn(K, D, generator=g).to(device)  # (K, D)
+    features = torch.cat([z, z - torch.cat([z_last[:, None], z[:, :-1]], 1)], -1)  # (K, H, 2D) what the MLP reads
     state0 = random_states(K, g).to(device)  # (K, 16)
     actions = torch.rand(K, H, S.ACTION_DIM, generator=g).to(device)  # (K, H, 8) thrust in [0, 1]
     inc = torch.randn(K, H, 10, generator=g).to(device) * 1e-2
@@ -79,9 +82,9 @@ def main() -> None:
         return run
 
     cases = {
-        "probe forward + integration": lambda: probe(z, state0),
-        "  MLP only (K*H latents)": lambda: probe.increments(z),
-        "  integration only": lambda: integrate(state0, inc),
+        "probe forward + integration": lambda: probe(z, state0, z_last),
+        "  MLP only (K*H steps)": lambda: probe.increments(features),
+        "  integration only": lambda: integrate(state0, inc, coasting=True),
         "state-only MLP rollout (reference)": lambda: state_mlp(state0, actions),
     }
     print(f"K = {K} rollouts x H = {H} steps, latent {D}, device {device}, {torch.get_num_threads()} threads, "

@@ -10,9 +10,10 @@ import typer
 
 from orbitmodel.cli.errors import fail, friendly
 from orbitmodel.cli.train import Device
-from orbitmodel.probe.config import INTEGRATORS
+from orbitmodel.probe.config import INPUTS, INTEGRATORS
 
 Integrator = Enum("Integrator", {name: name for name in INTEGRATORS}, type=str)
+Inputs = Enum("Inputs", {name: name for name in INPUTS}, type=str)
 
 
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
@@ -29,8 +30,14 @@ def probe(
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    inputs: Annotated[Inputs, typer.Option(
+        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}] (measured best); latent: z_k alone (upstream)")
+    ] = "latent+change",
     integrator: Annotated[Integrator, typer.Option(
-        help="upstream: p += dp, v += dv; coasting: zero increments hold the world-frame velocity")] = "upstream",
+        help="coasting: zero increments hold the world-frame velocity (measured best); upstream: p += dp, v += dv")
+    ] = "coasting",
+    loss_weights: Annotated[Optional[str], typer.Option(
+        help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)")] = None,
     cache_windows: Annotated[Optional[int], typer.Option(
         min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)")] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
@@ -49,9 +56,18 @@ def probe(
     from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe
 
     kind = "state" if state_only else "latent"
+    weights = None
+    if loss_weights is not None:
+        try:
+            weights = tuple(float(w) for w in loss_weights.split(","))
+        except ValueError:
+            weights = ()
+        if len(weights) != 5 or min(weights) < 0:
+            fail(f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
+                 "(e.g. 1,1,1,1,100)")
     t = run_recipe(run).with_changes(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
-                                     cache_windows=cache_windows, num_workers=workers, seed=seed)
-    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, integrator=integrator.value,
+                                     weights=weights, cache_windows=cache_windows, num_workers=workers, seed=seed)
+    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value, integrator=integrator.value,
                        device=device.value, resume=resume, overwrite=overwrite)
     result = train_probe(req)
     typer.echo(f"trained the {kind} probe {result.steps} steps in {result.seconds / 60:.1f} min "

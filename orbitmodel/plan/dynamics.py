@@ -25,8 +25,10 @@ from orbitmodel.plan.timing import Timings
 
 G0 = 9.80665  # m/s^2, defines specific impulse (as orbitdata.sim.env)
 
-# probe(z_future (B, n, D), state0 (B, 16)) -> states (B, n, 16), frames t+1..t+n (issue 12's API).
-Probe = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
+# probe(z_future (B, n, D), state0 (B, 16), z_last (B, D)) -> states (B, n, 16), frames t+1..t+n:
+# the PhysicsProbe's API; z_last, the latent of frame t, is what a probe reading latent changes
+# starts from (one reading the latents alone ignores it).
+Probe = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
 
 
 class RigidBodyDynamics:
@@ -157,7 +159,7 @@ class LearnedDynamics:
                 actions = torch.cat([past, actions.float()], 1)  # (K, m-1+H, 8)
             z_future = self.model.rollout(z_ctx, actions.float(), self.history)  # (K, H, D)
         with self.timings("probe"):
-            return self.probe(z_future, state0.float().expand(K, -1))  # (K, H, 16)
+            return self.probe(z_future, state0.float().expand(K, -1), z_ctx[:, -1])  # (K, H, 16)
 
 
 def load_probe(run: str | Path) -> Probe:

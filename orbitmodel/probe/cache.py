@@ -25,6 +25,7 @@ from orbitdata.load.collate import WindowBatch
 from orbitmodel.train.progress import Progress
 
 LATENT = "z_future"  # not a dataset column: the imagined latents of the horizon frames (N, n, D)
+LAST = "z_last"  # not a dataset column: the latent of the last context frame (N, D)
 CACHE_FILE = "latents.safetensors"
 IMAGINE_BATCH = 64  # windows per world-model call
 
@@ -70,9 +71,9 @@ def gather(windows, indices: list[int], keys: tuple[str, ...]) -> dict[str, torc
 
 @torch.no_grad()
 def imagine(world_model, windows, indices: list[int], context: int, device: torch.device) -> dict[str, torch.Tensor]:
-    """{z_future (N, n, D), states (N, T, 16), actions (N, T, 8)} of these windows of T = context + n
+    """{z_future (N, n, D), z_last (N, D), states, actions} of these windows of T = context + n
     frames: the frozen world model encodes the context and imagines the rest from the actions."""
-    out: dict[str, list[torch.Tensor]] = {LATENT: [], S.STATE: [], S.ACTION: []}
+    out: dict[str, list[torch.Tensor]] = {LATENT: [], LAST: [], S.STATE: [], S.ACTION: []}
     progress = Progress("imagine", len(indices), 0)
     started = time.perf_counter()
     try:
@@ -81,6 +82,7 @@ def imagine(world_model, windows, indices: list[int], context: int, device: torc
             states, actions = batch[S.STATE], batch[S.ACTION]
             z = world_model.encode(batch[S.IMAGE][:, :context].to(device), states[:, :context].to(device))
             out[LATENT].append(world_model.rollout(z, actions[:, :-1].to(device)).float().cpu())  # (b, n, D)
+            out[LAST].append(z[:, -1].float().cpu())  # (b, D)
             out[S.STATE].append(states)
             out[S.ACTION].append(actions)
             done = min(i + IMAGINE_BATCH, len(indices))
@@ -103,8 +105,8 @@ def load_cache(folder: Path, key: str) -> dict[str, torch.Tensor] | None:
         from safetensors import safe_open
 
         with safe_open(str(path), "pt") as f:
-            if (f.metadata() or {}).get("key") != key:
-                return None
+            if (f.metadata() or {}).get("key") != key or LAST not in f.keys():
+                return None  # another world model or windows, or a cache from before z_last
         return load_file(path)
     except (OSError, SafetensorError):
         return None  # a torn write: imagine again

@@ -2,8 +2,11 @@
 
 Upstream (configs/stage2.yaml): MLP 256 -> 256 -> GELU -> 256 -> GELU -> 10, windows of 8 + 12
 frames, loss weights pos 1, vel 1, rot6d 1, w 1, fuel 0.1, AdamW 3e-4, wd 0.01, batch 256,
-25 epochs with 3 of warm-up, cosine, clip 1.0, bf16. The ``cpu`` recipe keeps the model and the
-loss and shortens the run to fit a few minutes of a 2-core machine (measured; see the README).
+25 epochs with 3 of warm-up, cosine, clip 1.0, bf16. The ``cpu`` recipe keeps the model, trains
+on a cache of imagined latents to fit a few minutes of a 2-core machine, and weights fuel so that
+it trains at all (measured; see the README). Which latents the MLP reads (``inputs``) and how the
+increments integrate (``integrator``) are ProbeConfig fields; ``orbitmodel probe`` defaults to
+the measured best (latent+change, coasting), upstream's is ``--inputs latent --integrator upstream``.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ from orbitdata import schema as S
 
 KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
 INTEGRATORS = ("upstream", "coasting")
+INPUTS = ("latent", "latent+change")  # what the latent probe's MLP reads per step
 
 
 @dataclass(frozen=True)
@@ -25,6 +29,9 @@ class ProbeConfig:
         latent_dim: the world model's z size (latent kind) or 16 + 8 (state kind).
         hidden, layers: ``layers`` hidden layers of ``hidden`` units with GELU, then 10 outputs.
         dt: seconds per step; the attitude integrates exp(w' dt).
+        inputs: "latent" (upstream): the MLP reads z_k. "latent+change": it reads [z_k, z_k - z_{k-1}]
+            (z_0 the last context latent): the world model predicts the change of z, and the
+            increments are about change.
         integrator: "upstream": p' = p + dp, v' = v + dv. "coasting": zero increments hold the
             world-frame velocity and the position follows it; the increments are what thrust
             changes (see ``probe.integrator``).
@@ -35,11 +42,14 @@ class ProbeConfig:
     hidden: int = 256
     layers: int = 2
     dt: float = S.DT
+    inputs: str = "latent"
     integrator: str = "upstream"
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"probe kind {self.kind!r}: choose one of {', '.join(KINDS)}")
+        if self.inputs not in INPUTS or (self.kind == "state" and self.inputs != "latent"):
+            raise ValueError(f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)} (the state kind reads its own)")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator {self.integrator!r}: choose one of {', '.join(INTEGRATORS)}")
         if self.layers < 1 or self.hidden < 1:
@@ -50,8 +60,13 @@ class ProbeConfig:
         return self.integrator == "coasting"
 
     @property
+    def reads_change(self) -> bool:
+        return self.inputs == "latent+change"
+
+    @property
     def dims(self) -> tuple[int, ...]:
-        return (self.latent_dim, *([self.hidden] * self.layers), 10)
+        d_in = 2 * self.latent_dim if self.reads_change else self.latent_dim
+        return (d_in, *([self.hidden] * self.layers), 10)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -118,8 +133,12 @@ class ProbeTrainConfig:
 # The probe's training recipe for each Stage I preset (by the run's preset name).
 RECIPES: dict[str, ProbeTrainConfig] = {
     "paper": ProbeTrainConfig(),
-    "cpu": ProbeTrainConfig(window_stride=3, cache_windows=8192, batch_size=128, lr=1e-3, min_lr=1e-5, epochs=30,
-                            warmup=0.05, num_workers=0, log_every=20, save_every=200),
+    # fuel weight 100, not 0.1: fuel moves ~1e-4 per step, so at 0.1 its MSE is ~1e-5 of the
+    # loss and gets no gradient to speak of (measured: fuel MAE 0.0025 -> 0.0019 at h = 25).
+    # 60 epochs, not 30: velocity at h = 50 0.134 -> 0.117 m/s (3.3 min on 1 thread).
+    "cpu": ProbeTrainConfig(window_stride=3, weights=(1.0, 1.0, 1.0, 1.0, 100.0), cache_windows=10240,
+                            batch_size=128, lr=1e-3, min_lr=1e-5, epochs=60, warmup=0.05, num_workers=0,
+                            log_every=20, save_every=200),
     "tiny": ProbeTrainConfig(context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4,
                              lr=3e-3, epochs=2, warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0),
 }

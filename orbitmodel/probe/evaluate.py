@@ -88,7 +88,7 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m], states[:, :m])  # (K, m, D)
     z_future = world_model.rollout(z, actions[:, :m - 1 + n])  # (K, n, D)
-    out = {"truth": states[:, m:m + n].float(), "probe": probe(z_future, states[:, m - 1]),
+    out = {"truth": states[:, m:m + n].float(), "probe": probe(z_future, states[:, m - 1], z[:, -1]),
            "constant_velocity": constant_velocity(states[:, m - 1], n, probe.config.dt)}
     if state_mlp is not None:
         out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])
@@ -121,6 +121,7 @@ def markdown(result: dict) -> str:
     lines = [f"Physics probe, {result['windows']} collision-free test windows (seed {result['seed']}), "
              f"context {result['context']}, MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s).",
              f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
+             f"probe inputs: {result['probe_inputs']}; "
              f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.", "",
              "| quantity | h | ours | paper | state-only MLP | constant velocity |",
              "|---|---|---|---|---|---|"]
@@ -171,6 +172,7 @@ def evaluate_probe(req: EvalRequest) -> dict:
     result = {"run": str(req.run), "dataset": str(req.dataset), "preset": stage1.preset.name,
               "windows": len(chosen), "seed": req.seed, "context": context, "horizons": list(req.horizons),
               "dt": probe.config.dt, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
+              "probe_inputs": probe.config.inputs,
               "integrators": {"probe": probe.config.integrator,
                               **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
               "episodes": [int(windows.index.episode[c]) for c in chosen], "table": table}

@@ -5,7 +5,7 @@ Per window of ``context + horizon`` frames (8 + 12 upstream)::
 
     z        = WM.encode(images[:, :m], states[:, :m])          (B, m, D)    frozen
     z_future = WM.rollout(z, actions[:, :m-1+n])                 (B, n, D)    frozen
-    x_hat    = probe(z_future, states[:, m-1])                   (B, n, 16)
+    x_hat    = probe(z_future, states[:, m-1], z[:, -1])         (B, n, 16)
     loss     = sum_q w_q MSE(x_hat[q], states[:, m:][q])         q = p, v, rot6d, w, fuel
 
 The world model stays in eval mode (BatchNorm running statistics, no dropout) with
@@ -31,7 +31,7 @@ from orbitdata.load import collate_windows, load_windows
 from orbitmodel.data import DatasetMeta, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
-from orbitmodel.probe.cache import (CACHE_FILE, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
+from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
                                     save_cache, subset)
 from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, recipe
 from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, increments_of
@@ -66,15 +66,17 @@ class LatentObjective(nn.Module):
         self.world_model.eval()
         return self
 
-    def forward(self, states, actions, images=None, z_future=None):
+    def forward(self, states, actions, images=None, z_future=None, z_last=None):
         """states (B, m+n, 16); actions (B, m+n, 8); either images (B, m, 3, H, W) uint8 of the
-        context, or the latents the world model imagined for this window (B, n, D)."""
+        context, or the latents the world model imagined for this window (B, n, D) with the
+        last context latent (B, D)."""
         m = self.context
         if z_future is None:
             with torch.no_grad():
                 z = self.world_model.encode(images, states[:, :m])  # (B, m, D)
                 z_future = self.world_model.rollout(z, actions[:, :-1])  # (B, n, D)
-        pred = self.probe(z_future.float(), states[:, m - 1])  # (B, n, 16)
+                z_last = z[:, -1]  # (B, D)
+        pred = self.probe(z_future.float(), states[:, m - 1], None if z_last is None else z_last.float())  # (B, n, 16)
         return state_loss(pred, states[:, m:], self.weights)
 
 
@@ -100,6 +102,7 @@ class ProbeJob:
         out = {"states": batch[S.STATE].to(device), "actions": batch[S.ACTION].to(device)}
         if LATENT in batch:
             out["z_future"] = batch[LATENT].to(device)
+            out["z_last"] = batch[LAST].to(device)
         elif self.kind == "latent":
             out["images"] = batch[S.IMAGE][:, :self.context].to(device)  # only the context frames are seen
         return out
@@ -112,7 +115,8 @@ class ProbeRequest:
     train: ProbeTrainConfig
     kind: str = "latent"
     hidden: int = 256
-    integrator: str = "upstream"
+    inputs: str = "latent+change"
+    integrator: str = "coasting"
     device: str = "auto"
     resume: bool = False
     overwrite: bool = False
@@ -201,7 +205,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     t = req.train
     latent = req.kind == "latent"
     config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
-                         hidden=req.hidden, integrator=req.integrator)
+                         hidden=req.hidden, inputs=req.inputs if latent else "latent", integrator=req.integrator)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
         # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting

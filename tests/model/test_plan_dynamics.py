@@ -110,8 +110,8 @@ class SpyModel(WorldModel):
         return super().rollout(z_context, actions, history)
 
 
-def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
-    """(B, n, D), (B, 16) -> (B, n, 16): the initial state held, shifted by the latent mean."""
+def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor) -> torch.Tensor:
+    """(B, n, D), (B, 16), (B, D) -> (B, n, 16): the initial state held, shifted by the latent mean."""
     return state0[:, None].expand(-1, z_future.shape[1], -1) + z_future.mean(-1, keepdim=True)
 
 

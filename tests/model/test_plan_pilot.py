@@ -29,7 +29,7 @@ SIM = SimConfig(camera=CameraConfig(image_size=64), max_steps=8)
 SMALL = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=5))
 
 
-def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor) -> torch.Tensor:
+def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor) -> torch.Tensor:
     return state0[:, None].expand(-1, z_future.shape[1], -1) + 0.01 * z_future[..., :1]
 
 

@@ -199,3 +199,23 @@ def test_both_integrators_agree_with_their_step_and_invert_their_increments(coas
 def test_coasting_with_zero_increments_is_constant_velocity():
     state = make_state(3, p=(0.5, 0, 0), v=(1.5, 0.1, 0), R=random_rotations(1, seed=13)[0], w=(0.3, 0, -0.2))
     assert torch.allclose(integrate(state, torch.zeros(3, 40, 10), coasting=True), constant_velocity(state, 40))
+
+
+def test_a_probe_reading_latent_changes_needs_the_last_context_latent():
+    probe = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16, inputs="latent+change"))
+    assert probe.increments.net[0].in_features == 16  # [z_k, z_k - z_{k-1}]
+    state = make_state(2, v=(0.4, 0, 0))
+    z = torch.randn(2, 5, 8)
+    assert torch.allclose(probe(z, state, torch.randn(2, 8)), integrate(state, torch.zeros(2, 5, 10)))
+    with pytest.raises(ValueError, match="z_last"):
+        probe(z, state)
+    torch.nn.init.normal_(probe.increments.net[-1].weight, generator=torch.Generator().manual_seed(0))
+    z_last = torch.randn(2, 8)
+    first = probe(z[:, :1], state, z_last)  # the first step's change is taken from z_last
+    assert torch.allclose(probe(z, state, z_last)[:, :1], first) and not torch.allclose(first, probe(z[:, :1], state,
+                                                                                                      z_last + 1))
+    with pytest.raises(ValueError, match="inputs"):
+        ProbeConfig(kind="state", latent_dim=STATE_ACTION_DIM, inputs="latent+change")
+    upstream = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16))  # reads z_k alone: z_last changes nothing
+    torch.nn.init.normal_(upstream.increments.net[-1].weight, generator=torch.Generator().manual_seed(1))
+    assert torch.equal(upstream(z, state), upstream(z, state, z_last))

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.cli.app import app
-from orbitmodel.probe.cache import CACHE_FILE, LATENT
+from orbitmodel.probe.cache import CACHE_FILE, LAST, LATENT
 from orbitmodel.probe.config import ProbeConfig, recipe
 from orbitmodel.probe.evaluate import PAPER, QUANTITIES, ROWS, TABLE_JSON, TABLE_MD
 from orbitmodel.probe.model import PhysicsProbe
@@ -63,11 +63,11 @@ def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
 
     def loss(probe):
         with torch.no_grad():
-            return float(LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION],
-                                                                z_future=batch[LATENT])[0])
+            return float(LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION], z_future=batch[LATENT],
+                                                                z_last=batch[LAST])[0])
 
-    untrained = PhysicsProbe(PhysicsProbe.from_pretrained(run).config)  # zero increments
     trained = PhysicsProbe.from_pretrained(run)
+    untrained = PhysicsProbe(trained.config)  # zero increments: coasting
     assert loss(trained) < 0.8 * loss(untrained)
     assert trained.increments.scale.ne(1).all()  # output units from the data
 
@@ -95,10 +95,10 @@ def test_resume_continues_exactly(run, tiny_dataset_master, tmp_path):
 
 def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
     for flag in ([], ["--state-only"]):
-        res = runner.invoke(app, ["probe", str(run), str(tiny_dataset_master), "--device", "cpu", "--integrator",
-                                  "coasting", *flag])
+        res = runner.invoke(app, ["probe", str(run), str(tiny_dataset_master), "--device", "cpu", *flag])
         assert res.exit_code == 0, res.output
-    assert PhysicsProbe.from_pretrained(run).config.integrator == "coasting"
+    config = PhysicsProbe.from_pretrained(run).config
+    assert (config.integrator, config.inputs) == ("coasting", "latent+change")  # the defaults
     out = tmp_path / "eval"
     res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2",
                               "--horizon", "25", "--horizon", "50", "--out", str(out)])
@@ -137,6 +137,8 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     config["preset"]["model"]["image_size"] = 32
     (other_size / "config.json").write_text(json.dumps(config))
     one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "64 px images")
+    for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1"):
+        one_line_error(runner.invoke(app, ["probe", str(run), data, "--loss-weights", bad]), "--loss-weights")
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
     one_line_error(runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5",
                                        "--no-figures"]), "test episodes")
