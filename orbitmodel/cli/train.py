@@ -31,6 +31,11 @@ def train(
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=2, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    lambda_sigreg: Annotated[Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
+    ] = None,
+    sigreg_pool: Annotated[Optional[bool], typer.Option(
+        help="SIGReg over every frame of the batch (pool) or per frame over the batch (upstream; default: the preset's)")
+    ] = None,
     level: Annotated[Optional[list[Level]], typer.Option(help="train on these levels only (repeatable)")] = None,
     outcome: Annotated[Optional[list[Outcome]], typer.Option(help="train on these outcomes only (repeatable)")] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
@@ -47,7 +52,7 @@ def train(
     from orbitmodel.config import get_preset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
-    p = get_preset(preset.value).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
+    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
                                             num_workers=workers, seed=seed)
     req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
                         outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,

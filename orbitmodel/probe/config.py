@@ -144,8 +144,6 @@ RECIPES: dict[str, ProbeTrainConfig] = {
 }
 
 
-RECIPES["cpu-pooled"] = RECIPES["cpu"]
-
 
 def recipe(preset_name: str) -> ProbeTrainConfig:
     """The recipe for a Stage I preset; upstream's for a preset without one."""

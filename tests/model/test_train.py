@@ -166,3 +166,15 @@ def test_tensorboard_event_files_when_installed(trained):
     pytest.importorskip("tensorboard", reason="the tensorboard extra is not installed")
     events = list((trained / "tensorboard").glob("events.out.tfevents.*"))
     assert events and events[0].stat().st_size > 0
+
+
+def test_sigreg_flags_override_the_preset_and_land_in_the_run_config(tiny_dataset_master, tmp_path):
+    from orbitmodel.train.checkpoint import read_run_config
+
+    run = tmp_path / "run"
+    args = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "1", "--out", str(run),
+            "--lambda-sigreg", "0.7", "--sigreg-pool"]
+    assert runner.invoke(app, args).exit_code == 0
+    model = read_run_config(run).preset.model
+    assert (model.lambda_sigreg, model.sigreg_pool) == (0.7, True)
+    assert not get_preset("tiny").model.sigreg_pool  # the preset itself is untouched

@@ -172,9 +172,9 @@ def test_sigreg_draws_its_projections_from_the_generator():
 
 
 def test_pooled_sigreg_separates_anisotropy_that_32_samples_per_frame_miss():
-    """The cpu-pooled preset pools SIGReg over batch x window: with 32 windows of 16 frames, a latent
-    of effective rank ~52 in 128 dims (short of the 64 the issue asks) scores near the isotropic
-    level per frame and far above it pooled (why cpu-pooled exists; the README has both runs)."""
+    """The cpu preset pools SIGReg over batch x window: with 32 windows of 16 frames, a latent of
+    effective rank ~52 in 128 dims (short of the 64 the issue asks) scores near the isotropic
+    level per frame and far above it pooled (why cpu pools; the README has the runs)."""
     g = torch.Generator().manual_seed(0)
     spectrum = torch.exp(-torch.arange(128.0) / 10)  # decaying variances, effective rank ~52
     spectrum = spectrum * 128 / spectrum.sum()  # mean variance 1, as the BatchNorm gives
