@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Reproduce the README's model tables and figures from an empty folder, on a 2-core CPU:
 #   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
-# generate a 64 px dataset -> train the world model (Stage I) -> eval rollout -> train the probe
-# (Stage II) and its state-only reference -> eval probe -> train the Diffusion Policy -> fly the
+# generate a 64 px dataset -> train the world model (Stage I: the cpu preset, and the per-frame
+# SIGReg variant) -> eval rollout -> train the probe (Stage II) and its state-only reference ->
+# eval probe -> train the Diffusion Policy -> fly the
 # planner, its three MPPI oracles, Diffusion Policy, the expert and the risky pilot on the grid
 # (same seeds, none used by the dataset) -> Figure 6. Every step resumes if run again.
 set -euo pipefail
@@ -13,6 +14,7 @@ BIN=${BIN:-.venv/bin}
 mkdir -p "$OUT/grid"
 DATA="$OUT/orbit64"
 WM="$OUT/wm-cpu"
+WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
 # MPPI at what this 2-core CPU flies in reasonable time (README, "Plan and fly"); the defaults
@@ -24,17 +26,25 @@ if [ ! -f "$WM/model.safetensors" ]; then
   if [ -d "$WM/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
   "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$WM" $RESUME
 fi
-"$BIN/orbitmodel" eval rollout "$WM" "$DATA"
-[ -f "$WM/probe/model.safetensors" ] || "$BIN/orbitmodel" probe "$WM" "$DATA"
-[ -f "$WM/probe-state/model.safetensors" ] || "$BIN/orbitmodel" probe "$WM" "$DATA" --state-only
-"$BIN/orbitmodel" eval probe "$WM" "$DATA"
+# The per-frame SIGReg run (upstream's recipe on the cpu sizes): the README's Stage I comparison,
+# its Table I row, and the run the planner's grid was flown on.
+if [ ! -f "$WMF/model.safetensors" ]; then
+  if [ -d "$WMF/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
+  "$BIN/orbitmodel" train "$DATA" --preset cpu --no-sigreg-pool --lambda-sigreg 0.1 --out "$WMF" $RESUME
+fi
+for run in "$WM" "$WMF"; do
+  "$BIN/orbitmodel" eval rollout "$run" "$DATA"
+  [ -f "$run/probe/model.safetensors" ] || "$BIN/orbitmodel" probe "$run" "$DATA"
+  [ -f "$run/probe-state/model.safetensors" ] || "$BIN/orbitmodel" probe "$run" "$DATA" --state-only --batch-size 512 --lr 0.002
+  "$BIN/orbitmodel" eval probe "$run" "$DATA"
+done
 if [ ! -f "$DP/model.safetensors" ]; then
   if [ -d "$DP/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
   "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" $RESUME
 fi
 "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
 for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth oracle-true-dyn-sensor; do
-  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" \
+  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WMF" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" \
     --json "$OUT/grid/$pilot.json"
 done
 [ -f "$OUT/grid/diffusion.json" ] || "$BIN/orbitdata" fly --pilot diffusion --pilot-option "run=$DP" --image-size 64 "${GRID[@]}" --json "$OUT/grid/diffusion.json"

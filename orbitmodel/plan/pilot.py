@@ -78,6 +78,8 @@ class PlannerConfig:
         history: latents the world model sees per imagined step (0: its own ``config.history``,
             8). Fewer is faster (the rollout's cost is proportional) and less accurate.
         memory_frames: depth frames whose points stay in the world-frame cloud (1: current only).
+            50 (2 s) by measurement on a validation grid seed (1, not the reported 0): the
+            depth-head oracle flew 75.0 / 78.3 / 81.7 / 83.3 / 83.3 % at 1 / 10 / 25 / 50 / 100.
         max_range: metres; depth cells farther than this are not obstacles to plan around.
         footprint: a point's sphere radius in half cell widths at its depth.
         reach: metres of clearance beyond which points are ignored (>= the collision margin).
@@ -91,7 +93,7 @@ class PlannerConfig:
     noise: str = "wrench"
     torque_noise: float = 0.3
     history: int = 0
-    memory_frames: int = 1
+    memory_frames: int = 50
     max_range: float = 10.0
     footprint: float = 1.0
     reach: float = 1.0
