@@ -52,8 +52,8 @@ def train(
     from orbitmodel.config import get_preset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
-    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
-                                            num_workers=workers, seed=seed)
+    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool)
+    p = p.with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr, num_workers=workers, seed=seed)
     req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
                         outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,
                         resume=resume, overwrite=overwrite)

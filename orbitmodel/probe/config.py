@@ -49,7 +49,8 @@ class ProbeConfig:
         if self.kind not in KINDS:
             raise ValueError(f"probe kind {self.kind!r}: choose one of {', '.join(KINDS)}")
         if self.inputs not in INPUTS or (self.kind == "state" and self.inputs != "latent"):
-            raise ValueError(f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)} (the state kind reads its own)")
+            raise ValueError(f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)} "
+                             "(the state kind reads its own)")
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator {self.integrator!r}: choose one of {', '.join(INTEGRATORS)}")
         if self.layers < 1 or self.hidden < 1:
@@ -142,7 +143,6 @@ RECIPES: dict[str, ProbeTrainConfig] = {
     "tiny": ProbeTrainConfig(context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4,
                              lr=3e-3, epochs=2, warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0),
 }
-
 
 
 def recipe(preset_name: str) -> ProbeTrainConfig:

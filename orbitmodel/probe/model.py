@@ -8,10 +8,10 @@
 the world-frame velocity; see ``probe.integrator``.)
 
 x_0 is the true state at the last context frame. An increment is a change between frames, and a
-latent alone says where the craft is, not what just changed: on the ``cpu`` run, reading the
-change took the angular-velocity MAE at h = 25 from 0.40 to 0.07 rad/s (README). The MLP sees
-each step's features independently, so all n increments come from one batched call and only the
-attitude product loops over time.
+latent alone says where the craft is, not what just changed: on the README's per-frame SIGReg
+run, reading the change took the angular-velocity MAE at h = 25 from 0.40 to 0.07 rad/s. The MLP
+sees each step's features independently, so all n increments come from one batched call and
+only the attitude product loops over time.
 
 ``scale`` is fixed at training start to the RMS of the true per-step increments (metres per step
 for dp, fuel ratio per step for dfuel, ...), so the MLP's outputs are of order 1 for every
