@@ -30,12 +30,12 @@ def probe(
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
-    inputs: Annotated[Inputs, typer.Option(
-        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}] (measured best); latent: z_k alone (upstream)")
-    ] = "latent+change",
-    integrator: Annotated[Integrator, typer.Option(
-        help="coasting: zero increments hold the world-frame velocity (measured best); upstream: p += dp, v += dv")
-    ] = "coasting",
+    inputs: Annotated[Optional[Inputs], typer.Option(
+        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}] (measured best); latent: z_k alone (upstream); "
+             "default: upstream's for the paper preset, latent+change otherwise")] = None,
+    integrator: Annotated[Optional[Integrator], typer.Option(
+        help="coasting: zero increments hold the world-frame velocity (measured best); upstream: p += dp, v += dv; "
+             "default: upstream's for the paper preset, coasting otherwise")] = None,
     loss_weights: Annotated[Optional[str], typer.Option(
         help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)")] = None,
     cache_windows: Annotated[Optional[int], typer.Option(
@@ -53,7 +53,9 @@ def probe(
     state at the last context frame; the loss is the MSE of the integrated states.
     """
     from orbitmodel.probe.model import probe_folder
+    from orbitmodel.probe.config import default_probe
     from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe
+    from orbitmodel.train.checkpoint import read_run_config
 
     kind = "state" if state_only else "latent"
     weights = None
@@ -67,7 +69,9 @@ def probe(
                  "(e.g. 1,1,1,1,100)")
     t = run_recipe(run).with_changes(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
                                      weights=weights, cache_windows=cache_windows, num_workers=workers, seed=seed)
-    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value, integrator=integrator.value,
+    default_inputs, default_integrator = default_probe(read_run_config(run).preset.name)
+    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value if inputs else default_inputs,
+                       integrator=integrator.value if integrator else default_integrator,
                        device=device.value, resume=resume, overwrite=overwrite)
     result = train_probe(req)
     typer.echo(f"trained the {kind} probe {result.steps} steps in {result.seconds / 60:.1f} min "

@@ -145,6 +145,12 @@ RECIPES: dict[str, ProbeTrainConfig] = {
 }
 
 
+def default_probe(preset_name: str) -> tuple[str, str]:
+    """(inputs, integrator) of the probe for a Stage I preset: upstream's for ``paper``, the
+    measured best (latent+change, coasting; README) for every other preset."""
+    return ("latent", "upstream") if preset_name == "paper" else ("latent+change", "coasting")
+
+
 def recipe(preset_name: str) -> ProbeTrainConfig:
     """The recipe for a Stage I preset; upstream's for a preset without one."""
     return RECIPES.get(preset_name, RECIPES["paper"])
