@@ -15,6 +15,11 @@ from typing import Callable
 from orbitdata.schema import ACTION_DIM, DEPTH_LOW_SIDE, STATE_DIM
 
 
+def replace_given(config, **changes):
+    """``dataclasses.replace`` with the changes that are not None (unset CLI options)."""
+    return replace(config, **{k: v for k, v in changes.items() if v is not None})
+
+
 @dataclass(frozen=True)
 class ModelConfig:
     """Sizes of the Stage I world model (upstream names in brackets).
@@ -153,13 +158,11 @@ class Preset:
 
     def with_model(self, **changes) -> "Preset":
         """The preset with some model settings replaced (None values are ignored)."""
-        changes = {k: v for k, v in changes.items() if v is not None}
-        return replace(self, model=replace(self.model, **changes))
+        return replace(self, model=replace_given(self.model, **changes))
 
     def with_train(self, **changes) -> "Preset":
         """The preset with some training settings replaced (None values are ignored)."""
-        changes = {k: v for k, v in changes.items() if v is not None}
-        return replace(self, train=replace(self.train, **changes))
+        return replace(self, train=replace_given(self.train, **changes))
 
 
 def _paper() -> Preset:

@@ -53,9 +53,7 @@ def probe(
     state at the last context frame; the loss is the MSE of the integrated states.
     """
     from orbitmodel.probe.model import probe_folder
-    from orbitmodel.probe.config import default_probe
     from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe
-    from orbitmodel.train.checkpoint import read_run_config
 
     kind = "state" if state_only else "latent"
     weights = None
@@ -69,9 +67,8 @@ def probe(
                  "(e.g. 1,1,1,1,100)")
     t = run_recipe(run).with_changes(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
                                      weights=weights, cache_windows=cache_windows, num_workers=workers, seed=seed)
-    default_inputs, default_integrator = default_probe(read_run_config(run).preset.name)
-    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value if inputs else default_inputs,
-                       integrator=integrator.value if integrator else default_integrator,
+    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value if inputs else None,
+                       integrator=integrator.value if integrator else None,
                        device=device.value, resume=resume, overwrite=overwrite)
     result = train_probe(req)
     typer.echo(f"trained the {kind} probe {result.steps} steps in {result.seconds / 60:.1f} min "

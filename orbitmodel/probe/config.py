@@ -5,15 +5,17 @@ frames, loss weights pos 1, vel 1, rot6d 1, w 1, fuel 0.1, AdamW 3e-4, wd 0.01, 
 25 epochs with 3 of warm-up, cosine, clip 1.0, bf16. The ``cpu`` recipe keeps the model, trains
 on a cache of imagined latents to fit a few minutes of a 2-core machine, and weights fuel so that
 it trains at all (measured; see the README). Which latents the MLP reads (``inputs``) and how the
-increments integrate (``integrator``) are ProbeConfig fields; ``orbitmodel probe`` defaults to
-the measured best (latent+change, coasting), upstream's is ``--inputs latent --integrator upstream``.
+increments integrate (``integrator``) are ProbeConfig fields, chosen per preset by
+``default_probe``: upstream's (latent, upstream) for ``paper``, the measured best
+(latent+change, coasting) for the others.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 from orbitdata import schema as S
+from orbitmodel.config import replace_given
 
 KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
 INTEGRATORS = ("upstream", "coasting")
@@ -128,7 +130,7 @@ class ProbeTrainConfig:
 
     def with_changes(self, **changes) -> "ProbeTrainConfig":
         """The config with some settings replaced (None values are ignored)."""
-        return replace(self, **{k: v for k, v in changes.items() if v is not None})
+        return replace_given(self, **changes)
 
 
 # The probe's training recipe for each Stage I preset (by the run's preset name).

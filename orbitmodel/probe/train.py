@@ -33,7 +33,7 @@ from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
 from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
                                     save_cache, subset)
-from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, recipe
+from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, default_probe, recipe
 from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, increments_of
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.train.checkpoint import RunConfig, RunDir, RunError, load_weights, read_run_config
@@ -115,8 +115,8 @@ class ProbeRequest:
     train: ProbeTrainConfig
     kind: str = "latent"
     hidden: int = 256
-    inputs: str = "latent+change"
-    integrator: str = "coasting"
+    inputs: str | None = None  # None: ``default_probe`` of the run's preset
+    integrator: str | None = None  # None: ``default_probe`` of the run's preset
     device: str = "auto"
     resume: bool = False
     overwrite: bool = False
@@ -201,11 +201,13 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         raise ValueError(f"probe kind {req.kind!r}: choose one of {', '.join(KINDS)}")
     meta = read_dataset_meta(req.dataset)
     stage1, world_model, wm_print = load_stage1(req.run, meta)
+    default_inputs, default_integrator = default_probe(stage1.preset.name)
     device = resolve_device(req.device)
     t = req.train
     latent = req.kind == "latent"
     config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
-                         hidden=req.hidden, inputs=req.inputs if latent else "latent", integrator=req.integrator)
+                         hidden=req.hidden, inputs=(req.inputs or default_inputs) if latent else "latent",
+                         integrator=req.integrator or default_integrator)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
         # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting

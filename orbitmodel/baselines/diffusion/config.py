@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, STATE_DIM
+from orbitmodel.config import replace_given
 
 GOAL_DIM = 3  # the goal in the body frame, metres
 PREDICTION_TYPES = ("epsilon", "sample")
@@ -173,8 +174,7 @@ class PolicyPreset:
 
     def with_train(self, **changes) -> "PolicyPreset":
         """The preset with some training settings replaced (None values are ignored)."""
-        changes = {k: v for k, v in changes.items() if v is not None}
-        return replace(self, train=replace(self.train, **changes))
+        return replace(self, train=replace_given(self.train, **changes))
 
 
 def _cpu() -> PolicyPreset:
