@@ -8,7 +8,10 @@
   planned actions of another window (the context's own actions are kept), which shows whether
   the model uses the actions at all.
 * Depth: the depth head on every frame of the windows against ``observation.depth_low``, as MAE
-  in metres, beside predicting the train split's per-cell mean (``meta/stats.json``).
+  in metres, beside predicting the train split's per-cell mean (``meta/stats.json``); and by
+  band of true depth (0-2, 2-5, 5-10 m and beyond), the MAE and the share of cells the head puts
+  at or beyond the planner's 10 m range (cells the planner then does not plan around: *missed*),
+  plus the share of far cells it brings inside that range (*phantom* obstacles).
 * Collapse: the per-dimension std of z and its effective rank, over ``frames`` test frames drawn
   at random from the whole split (their variance also normalises the NMSE).
 """
@@ -26,6 +29,7 @@ from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.data import read_dataset_meta
 from orbitmodel.model.world_model import WorldModel, effective_rank
+from orbitmodel.plan.pilot import PlannerConfig
 from orbitmodel.train.checkpoint import RunError
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
@@ -40,6 +44,46 @@ class RolloutEvalConfig:
     batch: int = 16
     check_h: int = 12  # where the shuffled-action ratio is reported
     frames: int = 4000  # independent test frames for the latent variance and the collapse diagnostics
+    depth_bands: tuple[float, ...] = (2.0, 5.0, 10.0)  # metres: upper edges of the near bands
+    depth_range: float = PlannerConfig.max_range  # metres: cells beyond it are no obstacle to the planner
+
+
+def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=(2.0, 5.0, 10.0), seen_within: float = 10.0) -> dict:
+    """The depth head where the planner needs it: pred, true (...) metres -> per band of true
+    depth [0, e1), [e1, e2), ..., [e_last, inf): cells, MAE and ``missed`` (the share predicted at or
+    beyond ``seen_within``, i.e. dropped by the planner); and ``phantom``, the share of cells truly at
+    or beyond ``seen_within`` that are predicted inside it."""
+    pred, true = pred.flatten().double(), true.flatten().double()
+    bounds = (0.0, *edges, float("inf"))
+    bands = []
+    for lo, hi in zip(bounds[:-1], bounds[1:]):
+        inside = (true >= lo) & (true < hi)
+        n = int(inside.sum())
+        bands.append({"from_m": lo, "to_m": None if hi == float("inf") else hi, "cells": n,
+                      "mae_m": float((pred[inside] - true[inside]).abs().mean()) if n else None,
+                      "missed": float((pred[inside] >= seen_within).double().mean()) if n else None})
+    far = true >= seen_within
+    phantom = float((pred[far] < seen_within).double().mean()) if far.any() else None
+    return {"range_m": seen_within, "bands": bands, "phantom": phantom}
+
+
+def derangement(n: int, seed: int) -> np.ndarray:
+    """A permutation of range(n) without fixed points (n >= 2), from ``seed``.
+
+    Random permutations are redrawn until one has no fixed point (the figures in the README were
+    drawn this way); if the redraws repeat themselves (small n), a random cycle is taken instead.
+    """
+    shuffle, tried = np.random.default_rng(seed + 1).permutation(n), set()
+    while n > 1 and np.any(shuffle == np.arange(n)):
+        redraw = int(shuffle[0]) + seed + 2
+        if redraw in tried:  # the redraws cycle: take the order of a random permutation as one cycle
+            order = np.random.default_rng(seed + 1).permutation(n)
+            shuffle = np.empty(n, dtype=np.int64)
+            shuffle[order] = np.roll(order, -1)
+            break
+        tried.add(redraw)
+        shuffle = np.random.default_rng(redraw).permutation(n)
+    return shuffle
 
 
 def _select(n_total: int, n: int, seed: int, where: str) -> np.ndarray:
@@ -61,11 +105,10 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     windows = load_windows(dataset, split="test", context=cfg.context, horizon=cfg.horizon, columns=list(COLUMNS))
     chosen = _select(len(windows), cfg.windows, cfg.seed, f"the test split of {dataset} (windows of "
                      f"{cfg.context}+{cfg.horizon} frames)")
-    shuffle = np.random.default_rng(cfg.seed + 1).permutation(len(chosen))
-    while len(chosen) > 1 and np.any(shuffle == np.arange(len(chosen))):  # a derangement: never its own actions
-        shuffle = np.random.default_rng(int(shuffle[0]) + cfg.seed + 2).permutation(len(chosen))
+    shuffle = derangement(len(chosen), cfg.seed)  # each window rolls out another window's actions
     m, n = cfg.context, cfg.horizon
     z_true, z_pred, z_shuf, depth_err, depth_base, episodes = [], [], [], [], [], []
+    depth_pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
     all_actions = torch.stack([windows[int(i)][S.ACTION] for i in chosen])  # (N, T, 8)
     for start in range(0, len(chosen), cfg.batch):
         idx = chosen[start:start + cfg.batch]
@@ -83,6 +126,7 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
         pred_depth = model.predict_depth(images)
         depth_err.append((pred_depth - depth).abs().flatten(1).mean(1))
         depth_base.append((stats_mean - depth).abs().flatten(1).mean(1))
+        depth_pairs.append((pred_depth.flatten(), depth.flatten()))
         episodes += [int(b[S.EPISODE_INDEX][0]) for b in batch]
     z_true, z_pred, z_shuf = torch.cat(z_true), torch.cat(z_pred), torch.cat(z_shuf)  # (N, T, D), (N, n, D)
     future = z_true[:, m:]  # (N, n, D)
@@ -102,6 +146,8 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
         "persistence_nmse": curve(persistence / var), "shuffled_nmse": curve(shuffled / var),
         "nmse_per_window": (mse / var).tolist(),
         "depth_mae_m": float(torch.cat(depth_err).mean()), "depth_mean_baseline_mae_m": float(torch.cat(depth_base).mean()),
+        "depth_by_band": depth_by_band(torch.cat([p for p, _ in depth_pairs]), torch.cat([t for _, t in depth_pairs]),
+                                       cfg.depth_bands, cfg.depth_range),
         "z_std": std.tolist(), "z_std_min": float(std.min()), "z_std_median": float(std.median()),
         "effective_rank": effective_rank(flat),
     }
@@ -161,6 +207,19 @@ def write_rollout_report(result: dict, out: Path) -> list[Path]:
     return paths
 
 
+def _band_lines(bands: dict | None) -> list[str]:
+    if not bands:
+        return []
+    rows = [f"  depth by true distance (missed: predicted at or beyond the planner's {bands['range_m']:g} m):"]
+    for b in bands["bands"]:
+        span = f"{b['from_m']:g}-{b['to_m']:g} m" if b["to_m"] is not None else f">= {b['from_m']:g} m"
+        if b["cells"]:
+            rows.append(f"    {span:>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %")
+    if bands["phantom"] is not None:
+        rows.append(f"    far cells predicted inside {bands['range_m']:g} m (phantom obstacles): {100 * bands['phantom']:.1f} %")
+    return rows
+
+
 def summary_lines(result: dict) -> list[str]:
     c = result["checks"]
     h = result["config"]["check_h"]
@@ -175,6 +234,7 @@ def summary_lines(result: dict) -> list[str]:
              f"shuffled / recorded NMSE at h={h}: {c[f'shuffled_over_recorded_nmse_at_h{h}']:.2f}",
              f"depth MAE {result['depth_mae_m']:.3f} m vs mean baseline {result['depth_mean_baseline_mae_m']:.3f} m "
              f"({100 * c['depth_mae_reduction_vs_mean']:.0f} % lower)",
+             *_band_lines(result.get("depth_by_band")),
              f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} test frames; "
              f"z std min {result['z_std_min']:.3f}, median {result['z_std_median']:.3f}"]
     return rows
