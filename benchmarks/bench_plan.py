@@ -10,7 +10,10 @@ collision queries included). Goal: <= 40 ms per control step (25 Hz) on 2 cores.
 
 The sizes are the ``cpu`` preset's; the weights do not change the time, so an untrained
 ``WorldModel`` and ``PhysicsProbe`` are used unless ``--run`` names a trained run with its probe.
-``--sweep`` prints a table over K, H and the replan interval instead.
+``--sweep`` prints a table over K, H and the replan interval instead. ``--floor`` adds the
+predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and through
+``torch.compile`` (needs a C++ compiler): no replan with this predictor and horizon can be
+faster, whatever K, so it says whether the 40 ms goal is reachable by sampling fewer candidates.
 """
 
 from __future__ import annotations
@@ -97,6 +100,42 @@ def report(m: dict) -> str:
             f"{m['replan_p95']:7.1f} ms   [{shares}]")
 
 
+def sequential_floor(args, horizon: int) -> str:
+    """Median ms of rolling ONE candidate H steps through the predictor, eager and compiled."""
+    pilot, _ = make_pilot(args, 2, horizon, 1)
+    model, history = pilot.dynamics.model, pilot.dynamics.history
+    g = torch.Generator().manual_seed(0)
+    z = torch.randn(1, history, model.config.latent_dim, generator=g)
+    actions = torch.rand(1, history - 1 + horizon, 8, generator=g)
+
+    def step(window, mods):  # one imagined step: the predictor on the window, the last frame's change
+        return window[:, -1] + model.pred_projector(model.predictor(window, None, mods)[:, -1])
+
+    def rollout(step_fn):
+        mods = model.predictor.modulations(model.action_encoder(model._norm_action(actions)))
+        zs = list(z.unbind(1))
+        for i in range(horizon):
+            end = history + i
+            start = max(0, end - history)
+            zs.append(step_fn(torch.stack(zs[start:end], 1), [m[:, start:end] for m in mods]))
+        return torch.stack(zs[history:], 1)
+
+    def median_ms(fn, n: int = 9) -> float:
+        fn()
+        times = []
+        for _ in range(n):
+            t = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t)
+        return 1e3 * float(np.median(times))
+
+    eager = median_ms(lambda: rollout(step))
+    compiled_step = torch.compile(step, dynamic=False)
+    compiled = median_ms(lambda: rollout(compiled_step))
+    return (f"sequential floor, K=1 H={horizon} history {history}: {eager:.1f} ms eager, {compiled:.1f} ms with "
+            f"torch.compile ({compiled / horizon:.2f} ms per imagined step)")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--samples", type=int, default=256)
@@ -107,12 +146,15 @@ def main() -> None:
     parser.add_argument("--history", type=int, default=0, help="latents per imagined step (0: the model's 8)")
     parser.add_argument("--run", default=None, help="a trained run with its probe (default: untrained cpu preset)")
     parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
+    parser.add_argument("--floor", action="store_true", help="also time one candidate's H sequential steps")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     print(f"cpu preset, {args.threads} torch thread(s), {os.cpu_count()} cores visible, torch {torch.__version__}")
     with torch.inference_mode():
         if not args.sweep:
-            print(report(measure(args, args.samples, args.horizon, args.replan_every)))
+            print(report(measure(args, args.samples, args.horizon, args.replan_every)), flush=True)
+            if args.floor:
+                print(sequential_floor(args, args.horizon))
             return
         for samples, horizon, every in [(256, 50, 1), (128, 50, 1), (64, 50, 1), (64, 25, 1), (32, 25, 1),
                                         (256, 50, 5), (64, 25, 5)]:

@@ -26,8 +26,8 @@ if [ ! -f "$WM/model.safetensors" ]; then
   if [ -d "$WM/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
   "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$WM" $RESUME
 fi
-# The per-frame SIGReg run (upstream's recipe on the cpu sizes): the README's Stage I comparison,
-# its Table I row, and the run the planner's grid was flown on.
+# The per-frame SIGReg run (upstream's recipe on the cpu sizes): the README's Stage I comparison
+# and its Table I row. The grid below is flown on the cpu run.
 if [ ! -f "$WMF/model.safetensors" ]; then
   if [ -d "$WMF/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
   "$BIN/orbitmodel" train "$DATA" --preset cpu --no-sigreg-pool --lambda-sigreg 0.1 --out "$WMF" $RESUME
@@ -44,7 +44,7 @@ if [ ! -f "$DP/model.safetensors" ]; then
 fi
 "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
 for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth oracle-true-dyn-sensor; do
-  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WMF" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" \
+  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" \
     --json "$OUT/grid/$pilot.json"
 done
 [ -f "$OUT/grid/diffusion.json" ] || "$BIN/orbitdata" fly --pilot diffusion --pilot-option "run=$DP" --image-size 64 "${GRID[@]}" --json "$OUT/grid/diffusion.json"

@@ -32,13 +32,14 @@ def presets() -> None:
 
 
 def _register() -> None:
-    from orbitmodel.cli import closed_loop, evaluate, policy, probe, train
+    from orbitmodel.cli import closed_loop, depth, evaluate, policy, probe, train
 
     train.register(app)
     evaluate.register(eval_app)
     policy.register(app, eval_app)
     closed_loop.register(eval_app)
     probe.register(app, eval_app)
+    depth.register(app)
 
 
 _register()

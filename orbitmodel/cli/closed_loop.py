@@ -13,6 +13,7 @@ from orbitmodel.cli.errors import fail, friendly
 from orbitmodel.plan.pilot import Variant
 
 PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
+DepthHead = Enum("DepthHead", {"auto": "auto", "stage1": "stage1", "refit": "refit"}, type=str)
 VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
 
 
@@ -48,6 +49,8 @@ def closed_loop(
     iterations: Annotated[Optional[int], typer.Option(min=1, help="MPPI iterations per replan [default: 1]")] = None,
     replan_every: Annotated[Optional[int], typer.Option(min=1, help="control steps per replan [default: 1]")] = None,
     memory_frames: Annotated[Optional[int], typer.Option(min=1, help="depth frames kept in the point cloud")] = None,
+    depth_head: Annotated[DepthHead, typer.Option(help="stage1: the head trained with the world model; refit: "
+                                                       "RUN/depth (`orbitmodel depth`); auto: refit if there")] = "auto",
     history: Annotated[Optional[int], typer.Option(min=1, help="latents the world model sees per imagined step "
                                                                "[default: the model's own, 8]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
@@ -71,6 +74,7 @@ def closed_loop(
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
                                      replan_every=replan_every, memory_frames=memory_frames,
                                      history=history).items() if x is not None}
+    options["depth_head"] = depth_head.value
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(variant=Variant(pilot.value), run=run, obstacles=tuple(n_obst), speeds=tuple(v),
                             episodes=episodes, seed=seed, planner=planner_config(**options),

@@ -157,11 +157,13 @@ class WorldModel(nn.Module):
             z = torch.cat([z, (z[:, end - 1] + self.pred_projector(out)).unsqueeze(1)], dim=1)
         return z[:, m:]
 
-    def predict_depth(self, images: torch.Tensor) -> torch.Tensor:
-        """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres."""
+    def predict_depth(self, images: torch.Tensor, head: nn.Module | None = None) -> torch.Tensor:
+        """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres, by ``head`` (a refitted
+        copy of the depth head, ``orbitmodel.train.depth``) or the model's own."""
         B, T = images.shape[:2]
         _, patches = self.encoder(images_to_float(images.flatten(0, 1)))
-        return (self.depth_head(patches) * self.depth_scale).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
+        head = self.depth_head if head is None else head
+        return (head(patches) * self.depth_scale).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
 
     # ---- training ---------------------------------------------------------------------------
     def predict_next(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:

@@ -20,22 +20,40 @@ from orbitmodel.plan.timing import Timings
 
 
 class PredictedDepth:
-    """The depth head on the current frame: observation -> (16, 16) z-depth, metres."""
+    """A depth head on the current frame: observation -> (16, 16) z-depth, metres.
 
-    def __init__(self, model, timings: Timings | None = None):
+    ``head``: the refitted head (``orbitmodel depth``); None for the one trained in Stage I.
+    """
+
+    def __init__(self, model, timings: Timings | None = None, head=None):
         self.model = model.eval()
         self.timings = timings or Timings()
+        self.head = head
+        self.name = "stage1" if head is None else "refit"
 
     @torch.inference_mode()
     def __call__(self, obs: dict) -> np.ndarray:
         with self.timings("depth-head"):
             image = torch.from_numpy(np.ascontiguousarray(obs["image"])).permute(2, 0, 1)[None, None]  # (1, 1, 3, H, W)
-            return self.model.predict_depth(image)[0, 0].numpy()  # (16, 16) metres
+            return self.model.predict_depth(image, self.head)[0, 0].numpy()  # (16, 16) metres
+
+
+def depth_head_for(run: str | Path, model, choice: str):
+    """The refitted depth head for ``choice`` "refit" (RunError if the run has none), "auto" (if
+    there is one) or None ("stage1", or "auto" without a refit)."""
+    from orbitmodel.train.depth import WEIGHTS, depth_folder, load_refit_head
+
+    if choice == "stage1" or (choice == "auto" and not (depth_folder(run) / WEIGHTS).is_file()):
+        return None
+    return load_refit_head(run, model)
 
 
 def sensor_depth(obs: dict) -> np.ndarray:
     """The rendered depth_low: a perfect depth head (the ``oracle-true-dyn-sensor`` variant)."""
     return obs["depth_low"]
+
+
+sensor_depth.name = "sensor"
 
 
 def load_world_model(run: str | Path | None, variant: Variant):
@@ -80,7 +98,8 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
         dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None)
     else:
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
-    depth = {"depth-head": lambda: PredictedDepth(model, timings), "sensor": lambda: sensor_depth,
+    depth = {"depth-head": lambda: PredictedDepth(model, timings, depth_head_for(run, model, config.depth_head)),
+             "sensor": lambda: sensor_depth,
              "true": lambda: None}[variant.obstacles]()
     camera = Camera.from_sim(sim)
     cls = OraclePilot if variant.privileged else PlannerPilot

@@ -81,6 +81,9 @@ class PlannerConfig:
             50 (2 s) by measurement on a validation grid seed (1, not the reported 0): the
             depth-head oracle flew 75.0 / 78.3 / 81.7 / 83.3 / 83.3 % at 1 / 10 / 25 / 50 / 100.
         max_range: metres; depth cells farther than this are not obstacles to plan around.
+        depth_head: which depth head gives the point cloud: "stage1" (trained with the world
+            model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth) or
+            "auto" (the refit when the run has one, else Stage I's).
         footprint: a point's sphere radius in half cell widths at its depth.
         reach: metres of clearance beyond which points are ignored (>= the collision margin).
         rigid_substeps: substeps of the rigid-body model (the simulator's 8 = exact).
@@ -95,6 +98,7 @@ class PlannerConfig:
     history: int = 0
     memory_frames: int = 50
     max_range: float = 10.0
+    depth_head: str = "auto"
     footprint: float = 1.0
     reach: float = 1.0
     rigid_substeps: int = 1
@@ -104,6 +108,8 @@ class PlannerConfig:
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
             raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
+        if self.depth_head not in ("auto", "stage1", "refit"):
+            raise ValueError(f"depth_head={self.depth_head!r}: use 'auto', 'stage1' or 'refit'")
         if self.history < 0:
             raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
         if self.replan_every < 1 or self.memory_frames < 1:
@@ -197,6 +203,7 @@ class PlannerPilot:
         replans = np.array(self.replan_seconds) * 1e3
         return {
             "variant": self.variant.value,
+            "depth_source": getattr(self.depth, "name", self.variant.obstacles),  # stage1, refit, sensor, true
             "replans": len(replans),
             "nonfinite_actions": self.nonfinite_actions,
             "clipped_actions": self.clipped_actions,

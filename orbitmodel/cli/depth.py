@@ -1,0 +1,47 @@
+"""``orbitmodel depth``: refit a run's depth head for the planner (near cells weighted)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from orbitmodel.cli.errors import friendly
+from orbitmodel.train.depth import DepthRefitConfig
+
+_D = DepthRefitConfig()
+
+
+def register(app: typer.Typer) -> None:
+    app.command("depth")(depth)
+
+
+@friendly
+def depth(
+    run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
+    dataset: Annotated[str, typer.Argument(help="the run's orbitdata dataset (train split fitted, test split scored)")],
+    frames: Annotated[int, typer.Option(min=1, help="random training frames encoded once")] = _D.frames,
+    test_frames: Annotated[int, typer.Option(min=1, help="random test frames for the before/after table")] = _D.test_frames,
+    epochs: Annotated[int, typer.Option(min=1)] = _D.epochs,
+    lr: Annotated[float, typer.Option(min=0.0)] = _D.lr,
+    near_weight: Annotated[float, typer.Option(min=0.0, help="extra loss weight of cells nearer than --near-m")] = _D.near_weight,
+    near_m: Annotated[float, typer.Option(min=0.0, help="metres: the planner's range")] = _D.near_m,
+    seed: Annotated[int, typer.Option(min=0)] = _D.seed,
+    overwrite: Annotated[bool, typer.Option(help="replace a refitted head already in RUN/depth")] = False,
+) -> None:
+    """Refit the depth head on the frozen encoder with near cells weighted (written to RUN/depth).
+
+    Stage I's depth loss is mostly about the sky; the planner needs the obstacles within its
+    range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
+    closed-loop` uses RUN/depth when it is there (`--depth-head stage1` for the Stage I head).
+    """
+    from orbitmodel.train.depth import band_lines, depth_folder, refit_depth_head
+
+    cfg = DepthRefitConfig(frames=frames, test_frames=test_frames, epochs=epochs, lr=lr, near_weight=near_weight,
+                           near_m=near_m, seed=seed)
+    result = refit_depth_head(run, dataset, cfg, overwrite=overwrite)
+    for line in band_lines(result):
+        typer.echo(line)
+    s = result["seconds"]
+    typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run)}")

@@ -1,0 +1,179 @@
+"""Refit the depth head for the planner: the run's encoder frozen, the loss weighted towards near cells.
+
+Stage I trains the depth head with upstream's MSE on depth / depth_max. About 96 % of the
+16x16 cells are sky at the far plane (50 m), so that loss is mostly about the sky: on the `cpu`
+run the head places 48 % of the cells truly within 2 m at or beyond the planner's 10 m range,
+and the planner does not plan around what it does not see (``orbitmodel eval rollout`` prints
+these figures). The refit keeps the architecture and starts from the Stage I head, reads the
+frozen encoder's patch tokens of ``frames`` random training frames (encoded once), and minimises
+
+    mean_cells (1 + near_weight [d < near_m]) (pred - d)^2 / depth_max^2
+
+It writes ``RUN/depth/`` (config.json, model.safetensors, eval.json). The latents, and so the
+dynamics and the probe, do not change; the planner uses this head when it is there
+(``PlannerConfig.depth_head``).
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from orbitdata import schema as S
+from orbitmodel.train.checkpoint import CONFIG, WEIGHTS, RunError, _write_json_atomic
+
+FOLDER = "depth"
+EVAL = "eval.json"
+
+
+@dataclass(frozen=True)
+class DepthRefitConfig:
+    """The refit's recipe (defaults: measured on the `cpu` run, README "Plan and fly").
+
+    Args:
+        frames: random training frames whose patch tokens are encoded once.
+        test_frames: random test frames for the before/after comparison.
+        epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
+        near_weight: extra weight of a cell whose true depth is below ``near_m``.
+        near_m: metres; the planner's range (``PlannerConfig.max_range``).
+        seed: frame choice and data order.
+    """
+
+    frames: int = 30000
+    test_frames: int = 4000
+    epochs: int = 8
+    batch_size: int = 256
+    lr: float = 1e-3
+    near_weight: float = 25.0
+    near_m: float = 10.0
+    seed: int = 0
+
+    def __post_init__(self):
+        if min(self.frames, self.test_frames, self.epochs, self.batch_size) < 1:
+            raise ValueError("frames, test_frames, epochs and batch_size must be >= 1")
+        if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
+            raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
+
+
+def depth_folder(run: str | Path) -> Path:
+    return Path(run) / FOLDER
+
+
+def _patches(model, dataset: str, split: str, n: int, seed: int, where: str) -> tuple[torch.Tensor, torch.Tensor]:
+    """Patch tokens (n, P, width) float16 and true depth (n, 16, 16) of n random frames of ``split``."""
+    from orbitdata.load import load_windows
+    from orbitmodel.model.world_model import images_to_float
+
+    frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.DEPTH_LOW])
+    if len(frames) < n:
+        raise RunError(f"the {split} split of {dataset} has {len(frames)} frames, fewer than the {n} asked; "
+                       f"pass {where} {len(frames)} or less")
+    idx = np.sort(np.random.default_rng(seed).choice(len(frames), n, replace=False))
+    tokens, depth = [], []
+    with torch.no_grad():
+        for start in range(0, n, 256):
+            batch = [frames[int(i)] for i in idx[start:start + 256]]
+            _, p = model.encoder(images_to_float(torch.stack([b[S.IMAGE][0] for b in batch])))
+            tokens.append(p.half())
+            depth.append(torch.stack([b[S.DEPTH_LOW][0] for b in batch]))
+    return torch.cat(tokens), torch.cat(depth)
+
+
+def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
+    with torch.no_grad():
+        return torch.cat([head(tokens[s:s + 512].float()) for s in range(0, len(tokens), 512)]) * scale
+
+
+def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(),
+                     overwrite: bool = False) -> dict:
+    """Refit ``run``'s depth head (see the module docstring); returns the before/after evaluation."""
+    from orbitmodel.data import read_dataset_meta
+    from orbitmodel.evaluate.rollout import depth_by_band
+    from orbitmodel.model.world_model import WorldModel
+    from orbitmodel.train.checkpoint import RunDir
+
+    out = depth_folder(run)
+    if (out / WEIGHTS).exists() and not overwrite:
+        raise RunError(f"{out} already holds a refitted depth head; pass --overwrite to fit it again")
+    model = WorldModel.from_pretrained(run)
+    meta = read_dataset_meta(dataset)
+    if meta.image_size != model.config.image_size:
+        raise RunError(f"{run} was trained on {model.config.image_size} px images but {dataset} holds "
+                       f"{meta.image_size} px; refit on a dataset generated with --image-size {model.config.image_size}")
+    start = time.perf_counter()
+    train_x, train_d = _patches(model, dataset, "train", cfg.frames, cfg.seed, "--frames")
+    test_x, test_d = _patches(model, dataset, "test", cfg.test_frames, cfg.seed + 1, "--test-frames")
+    encoded = time.perf_counter() - start
+    scale = float(model.depth_scale)
+    head = copy.deepcopy(model.depth_head).train()
+    for p in head.parameters():
+        p.requires_grad_(True)
+    steps_per_epoch = max(1, cfg.frames // cfg.batch_size)
+    opt = torch.optim.AdamW(head.parameters(), lr=cfg.lr, weight_decay=0.0)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs * steps_per_epoch)
+    g = torch.Generator().manual_seed(cfg.seed)
+    losses = []
+    with torch.enable_grad():
+        for _ in range(cfg.epochs):
+            order = torch.randperm(cfg.frames, generator=g)
+            for s in range(steps_per_epoch):
+                i = order[s * cfg.batch_size:(s + 1) * cfg.batch_size]
+                pred, true = head(train_x[i].float()) * scale, train_d[i]
+                weight = 1 + cfg.near_weight * (true < cfg.near_m).float()
+                loss = (weight * (pred - true) ** 2).mean() / scale**2
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                sched.step()
+            losses.append(float(loss.detach()))
+    head.eval()
+    result = {"run": str(run), "dataset": str(dataset), "config": asdict(cfg),
+              "seconds": {"encode": encoded, "fit": time.perf_counter() - start - encoded}, "epoch_loss": losses}
+    for name, h in (("stage1", model.depth_head), ("refit", head)):
+        pred = _predict(h, test_x, scale)
+        result[name] = {"mae_m": float((pred - test_d).abs().mean()), **depth_by_band(pred, test_d, seen_within=cfg.near_m)}
+    RunDir(out).start({"stage": "depth_refit", "refit": asdict(cfg), "dataset": str(dataset)}, resume=False,
+                      overwrite=True)
+    RunDir(out).save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
+    _write_json_atomic(out / EVAL, result)
+    return result
+
+
+def load_refit_head(run: str | Path, model):
+    """The refitted depth head of ``run`` (a copy of ``model.depth_head`` with its weights), or
+    RunError with the command that makes it."""
+    from orbitmodel.train.checkpoint import load_weights
+
+    folder = depth_folder(run)
+    if not (folder / WEIGHTS).is_file() or not (folder / CONFIG).is_file():
+        raise RunError(f"{run} has no refitted depth head ({folder} is missing); fit one with "
+                       f"`orbitmodel depth {run} DATASET`")
+    head = copy.deepcopy(model.depth_head)
+    try:
+        head.load_state_dict(load_weights(folder))
+    except RuntimeError as err:
+        raise RunError(f"{folder / WEIGHTS} does not fit this run's depth head ({str(err).splitlines()[0]}); "
+                       f"fit it again with `orbitmodel depth {run} DATASET --overwrite`") from None
+    return head.eval()
+
+
+def band_lines(result: dict) -> list[str]:
+    """The before/after table `orbitmodel depth` prints."""
+    rows = [f"depth head on {result['config']['test_frames']} test frames: Stage I -> refit "
+            f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"]
+    before, after = result["stage1"], result["refit"]
+    rows.append(f"  all cells: MAE {before['mae_m']:.2f} -> {after['mae_m']:.2f} m")
+    for b, a in zip(before["bands"], after["bands"]):
+        if b["cells"]:
+            span = f"{b['from_m']:g}-{b['to_m']:g} m" if b["to_m"] is not None else f">= {b['from_m']:g} m"
+            rows.append(f"  {span:>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
+                        f"missed {100 * b['missed']:.1f} -> {100 * a['missed']:.1f} %")
+    if before["phantom"] is not None:
+        rows.append(f"  far cells predicted inside {result['config']['near_m']:g} m: "
+                    f"{100 * before['phantom']:.2f} -> {100 * after['phantom']:.2f} %")
+    return rows

@@ -1,0 +1,79 @@
+"""``orbitmodel depth``: the depth head refitted for the planner, and the planner's choice of head."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from orbitmodel.cli.app import app
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.factory import build_pilot, planner_config
+from orbitmodel.train.checkpoint import RunError
+from orbitmodel.train.depth import DepthRefitConfig, load_refit_head, refit_depth_head
+
+torch.set_num_threads(1)
+runner = CliRunner()
+SMALL = ["--frames", "96", "--test-frames", "32", "--epochs", "12"]
+
+
+@pytest.fixture(scope="module")
+def refit_run(tiny_run, tiny_dataset_master, tmp_path_factory):
+    """A copy of the tiny run with its depth head refitted through the CLI; (run, CLI output)."""
+    run = tmp_path_factory.mktemp("refit") / "tiny"
+    shutil.copytree(tiny_run, run)
+    res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), *SMALL])
+    assert res.exit_code == 0, res.output
+    return run, res.output
+
+
+def test_the_refit_writes_its_head_and_the_before_after_table(refit_run):
+    run, output = refit_run
+    assert "Stage I -> refit" in output and "missed" in output
+    result = json.loads((run / "depth" / "eval.json").read_text())
+    for name in ("stage1", "refit"):
+        assert sum(b["cells"] for b in result[name]["bands"]) == 32 * 256  # every test cell, in one band
+    losses = result["epoch_loss"]
+    assert len(losses) == 12 and losses[-1] < losses[0]  # the near-weighted loss goes down
+    model = WorldModel.from_pretrained(run)
+    head = load_refit_head(run, model)
+    assert any(not torch.equal(a, b) for a, b in zip(head.state_dict().values(), model.depth_head.state_dict().values()))
+    # The Stage I weights are untouched: the latents (and so the dynamics and the probe) do not move.
+    assert torch.equal(WorldModel.from_pretrained(run).depth_head.net[0].weight, model.depth_head.net[0].weight)
+
+
+def test_the_refit_is_reproducible_from_its_seed(refit_run, tiny_dataset_master, tmp_path):
+    run, _ = refit_run
+    again = tmp_path / "again"
+    shutil.copytree(run, again)
+    cfg = DepthRefitConfig(frames=96, test_frames=32, epochs=12)
+    refit_depth_head(again, str(tiny_dataset_master), cfg, overwrite=True)
+    model = WorldModel.from_pretrained(run)
+    a, b = load_refit_head(run, model).state_dict(), load_refit_head(again, model).state_dict()
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_a_second_refit_needs_overwrite_and_too_many_frames_is_one_line(refit_run, tiny_dataset_master):
+    run, _ = refit_run
+    res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), *SMALL])
+    assert res.exit_code == 2 and "--overwrite" in res.output and "Traceback" not in res.output
+    res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), "--frames", "10000000", "--overwrite"])
+    assert res.exit_code == 2 and "--frames" in res.output and len(res.output.strip().splitlines()) == 1
+
+
+def test_the_planner_flies_the_refit_head_when_there_is_one(refit_run, tiny_run):
+    run, _ = refit_run
+    auto, _ = build_pilot("oracle-true-dyn-depth", run, planner_config())
+    stage1, _ = build_pilot("oracle-true-dyn-depth", run, planner_config(depth_head="stage1"))
+    plain, _ = build_pilot("oracle-true-dyn-depth", tiny_run, planner_config())  # no RUN/depth: Stage I's
+    assert (auto.depth.name, stage1.depth.name, plain.depth.name) == ("refit", "stage1", "stage1")
+    assert auto.metadata()["depth_source"] == "refit"
+    image = torch.randint(0, 255, (64, 64, 3), dtype=torch.uint8).numpy()
+    assert not (auto.depth({"image": image}) == stage1.depth({"image": image})).all()
+    with pytest.raises(RunError, match="orbitmodel depth"):
+        build_pilot("oracle-true-dyn-depth", tiny_run, planner_config(depth_head="refit"))
+    with pytest.raises(ValueError, match="depth_head"):
+        planner_config(depth_head="best")
