@@ -20,6 +20,7 @@ VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
 def register(app: typer.Typer) -> None:
     app.command("closed-loop")(closed_loop)
     app.command("figure6")(figure6)
+    app.command("merge")(merge)
 
 
 def _numbers(text: str, kind, flag: str) -> list:
@@ -141,3 +142,26 @@ def figure6(
 
     path = plot_figure6([read_report(p) for p in results], out, title)
     typer.echo(f"wrote {path}")
+
+
+@friendly
+def merge(
+    parts: Annotated[list[Path], typer.Argument(help="JSON tables of one grid flown in parts (disjoint settings)")],
+    json_out: Annotated[Path, typer.Option("--json", help="write the merged table here")],
+) -> None:
+    """Merge a grid flown in parallel, e.g. `--speeds 1` and `--speeds 2` in two processes, into one table."""
+    from orbitmodel.evaluate.closed_loop import merge_reports
+
+    reports = []
+    for path in parts:
+        try:
+            reports.append(json.loads(path.read_text()))
+        except (OSError, json.JSONDecodeError) as err:
+            fail(f"{path}: not a readable grid result ({err}); give the --json tables of eval closed-loop")
+    try:
+        report = merge_reports(reports)
+    except (KeyError, TypeError) as err:
+        fail(f"{parts[0]} and the others are not eval closed-loop --json tables ({type(err).__name__} {err})")
+    json_out.parent.mkdir(parents=True, exist_ok=True)
+    json_out.write_text(json.dumps(report, indent=2) + "\n")
+    print_table(report, max(s["episodes"] for s in report["settings"]))

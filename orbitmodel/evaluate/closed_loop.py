@@ -173,3 +173,39 @@ def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult) -> dict
         "episodes": result.episodes,
     })
     return report
+
+
+def merge_reports(reports: list[dict]) -> dict:
+    """One grid table from grids flown in parallel on disjoint settings (e.g. ``--speeds 1`` and
+    ``--speeds 2`` in two processes; each episode's seed depends only on its setting and index,
+    so the episodes are the ones a single run flies).
+
+    Every part must be the same pilot, grid seed and planner settings. Latency, which the parts
+    summarise separately, becomes the median and p95 over the episodes' own medians.
+    """
+    if len(reports) < 2:
+        raise ValueError("give at least two grid results to merge")
+    first = reports[0]
+    for key in ("pilot", "seed", "planner", "run"):
+        odd = [r for r in reports if r.get(key) != first.get(key)]
+        if odd:
+            raise ValueError(f"the parts differ in {key} ({first.get(key)!r} vs {odd[0].get(key)!r}); merge only "
+                             "parts of one grid flown with the same flags")
+    keys = [(s["obstacles"], s["speed"]) for r in reports for s in r["settings"]]
+    if len(set(keys)) != len(keys):
+        raise ValueError(f"the parts overlap in settings {sorted({k for k in keys if keys.count(k) > 1})}; "
+                         "fly disjoint --obstacles / --speeds")
+    settings = sorted((s for r in reports for s in r["settings"]), key=lambda s: (s["obstacles"], s["speed"]))
+    episodes = [e for r in reports for e in r.get("episodes", [])]
+    merged = {**first, "settings": settings, "episodes": episodes, "merged_from": len(reports)}
+    merged["latency_ms"] = {name: _stats([e[f"{name}_ms_median"] for e in episodes
+                                          if e.get(f"{name}_ms_median") is not None])
+                            for name in ("step", "replan")}
+    merged["latency_ms"]["of"] = "per-episode medians (merged parts)"
+    total = sum(sum(r.get("time_share", {}).values()) for r in reports) or 1.0
+    shares: dict[str, float] = {}
+    for r in reports:
+        for k, v in r.get("time_share", {}).items():
+            shares[k] = shares.get(k, 0.0) + v / total
+    merged["time_share"] = dict(sorted(shares.items()))
+    return merged

@@ -114,3 +114,21 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert "64 px" in one_line_error(runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth",
                                                                "--config", str(toml)]))
     assert "not an orbitmodel run" in one_line_error(runner.invoke(app, base + [str(tmp_path)]))
+
+
+def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
+    common = ["eval", "closed-loop", "--pilot", "oracle-true", "--obstacles", "1", "--episodes", "1",
+              "--samples", "8", "--horizon", "5", "--max-steps", "4"]
+    for name, speeds in (("whole", "1,2"), ("v1", "1"), ("v2", "2")):
+        res = runner.invoke(app, [*common, "--speeds", speeds, "--json", str(tmp_path / f"{name}.json")])
+        assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["eval", "merge", str(tmp_path / "v2.json"), str(tmp_path / "v1.json"),
+                              "--json", str(tmp_path / "merged.json")])
+    assert res.exit_code == 0, res.output
+    whole, merged = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("whole", "merged"))
+    assert merged["settings"] == whole["settings"]  # same seeds per setting: the same episodes
+    same = lambda e: {k: e[k] for k in ("obstacles", "speed", "seed", "outcome", "frames", "fuel_used")}  # noqa: E731
+    assert sorted(map(str, map(same, merged["episodes"]))) == sorted(map(str, map(same, whole["episodes"])))
+    res = runner.invoke(app, ["eval", "merge", str(tmp_path / "v1.json"), str(tmp_path / "whole.json"),
+                              "--json", str(tmp_path / "bad.json")])
+    assert res.exit_code == 2 and "overlap" in res.output and "Traceback" not in res.output
