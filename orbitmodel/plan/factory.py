@@ -53,9 +53,6 @@ def sensor_depth(obs: dict) -> np.ndarray:
     return obs["depth_low"]
 
 
-sensor_depth.name = "sensor"
-
-
 def load_world_model(run: str | Path | None, variant: Variant):
     """The run's world model in eval mode; raises a one-line error when the variant needs one and there is none."""
     from orbitmodel.model.world_model import WorldModel
