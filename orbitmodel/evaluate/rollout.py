@@ -33,6 +33,7 @@ from orbitmodel.plan.pilot import PlannerConfig
 from orbitmodel.train.checkpoint import RunError
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
+DEPTH_BANDS_M = (2.0, 5.0, 10.0)  # metres: upper edges of the near bands of true depth
 
 
 @dataclass(frozen=True)
@@ -44,11 +45,12 @@ class RolloutEvalConfig:
     batch: int = 16
     check_h: int = 12  # where the shuffled-action ratio is reported
     frames: int = 4000  # independent test frames for the latent variance and the collapse diagnostics
-    depth_bands: tuple[float, ...] = (2.0, 5.0, 10.0)  # metres: upper edges of the near bands
+    depth_bands: tuple[float, ...] = DEPTH_BANDS_M
     depth_range: float = PlannerConfig.max_range  # metres: cells beyond it are no obstacle to the planner
 
 
-def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=(2.0, 5.0, 10.0), seen_within: float = 10.0) -> dict:
+def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=DEPTH_BANDS_M,
+                  seen_within: float = PlannerConfig.max_range) -> dict:
     """The depth head where the planner needs it: pred, true (...) metres -> per band of true
     depth [0, e1), [e1, e2), ..., [e_last, inf): cells, MAE and ``missed`` (the share predicted at or
     beyond ``seen_within``, i.e. dropped by the planner); and ``phantom``, the share of cells truly at
@@ -65,6 +67,11 @@ def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=(2.0, 5.0, 10.0)
     far = true >= seen_within
     phantom = float((pred[far] < seen_within).double().mean()) if far.any() else None
     return {"range_m": seen_within, "bands": bands, "phantom": phantom}
+
+
+def band_label(band: dict) -> str:
+    """'0-2 m', ..., '>= 10 m': a band of :func:`depth_by_band`."""
+    return f"{band['from_m']:g}-{band['to_m']:g} m" if band["to_m"] is not None else f">= {band['from_m']:g} m"
 
 
 def derangement(n: int, seed: int) -> np.ndarray:
@@ -212,9 +219,8 @@ def _band_lines(bands: dict | None) -> list[str]:
         return []
     rows = [f"  depth by true distance (missed: predicted at or beyond the planner's {bands['range_m']:g} m):"]
     for b in bands["bands"]:
-        span = f"{b['from_m']:g}-{b['to_m']:g} m" if b["to_m"] is not None else f">= {b['from_m']:g} m"
         if b["cells"]:
-            rows.append(f"    {span:>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %")
+            rows.append(f"    {band_label(b):>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %")
     if bands["phantom"] is not None:
         rows.append(f"    far cells predicted inside {bands['range_m']:g} m (phantom obstacles): {100 * bands['phantom']:.1f} %")
     return rows

@@ -25,6 +25,7 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
+from orbitmodel.plan.pilot import PlannerConfig
 from orbitmodel.train.checkpoint import CONFIG, WEIGHTS, RunError, _write_json_atomic
 
 FOLDER = "depth"
@@ -50,7 +51,7 @@ class DepthRefitConfig:
     batch_size: int = 256
     lr: float = 1e-3
     near_weight: float = 25.0
-    near_m: float = 10.0
+    near_m: float = PlannerConfig.max_range
     seed: int = 0
 
     def __post_init__(self):
@@ -164,14 +165,15 @@ def load_refit_head(run: str | Path, model):
 
 def band_lines(result: dict) -> list[str]:
     """The before/after table `orbitmodel depth` prints."""
+    from orbitmodel.evaluate.rollout import band_label
+
     rows = [f"depth head on {result['config']['test_frames']} test frames: Stage I -> refit "
             f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"]
     before, after = result["stage1"], result["refit"]
     rows.append(f"  all cells: MAE {before['mae_m']:.2f} -> {after['mae_m']:.2f} m")
     for b, a in zip(before["bands"], after["bands"]):
         if b["cells"]:
-            span = f"{b['from_m']:g}-{b['to_m']:g} m" if b["to_m"] is not None else f">= {b['from_m']:g} m"
-            rows.append(f"  {span:>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
+            rows.append(f"  {band_label(b):>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
                         f"missed {100 * b['missed']:.1f} -> {100 * a['missed']:.1f} %")
     if before["phantom"] is not None:
         rows.append(f"  far cells predicted inside {result['config']['near_m']:g} m: "
