@@ -8,8 +8,11 @@
 # (same seeds, none used by the dataset) -> Figure 6. Every step resumes if run again.
 # QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame flights): a
 # ~10 min check that the chain runs, not the README's numbers.
+# Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
+# is the whole invocation's ("total"); steps whose output exists are skipped. The grid flights
+# run two at a time, one torch thread each (how the README's grids were flown): both cores busy.
 set -euo pipefail
-OUT=${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}
+OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}")
 N=${2:-20}
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
@@ -28,38 +31,77 @@ if [ "${QUICK:-0}" = 1 ]; then
   DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20)
 fi
 
-[ -f "$DATA/meta/info.json" ] || "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
-if [ ! -f "$WM/model.safetensors" ]; then
-  if [ -d "$WM/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
-  "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$WM" $RESUME "${STEPS[@]}"
-fi
+TIMES="$OUT/timings.tsv"
+step() {  # step NAME COMMAND...: run it and log its wall time
+  local name=$1 t0=$SECONDS
+  shift
+  "$@"
+  printf '%s\t%d\t%s\n' "$name" $((SECONDS - t0)) "$(date -u +%FT%TZ)" >>"$TIMES"
+}
+JOBS=()
+spawn() { "$@" & JOBS+=($!); }  # start a flight in the background
+join() {  # wait for every spawned flight; fail if any failed
+  local rc=0 pid
+  for pid in "${JOBS[@]}"; do wait "$pid" || rc=$?; done
+  JOBS=()
+  return $rc
+}
+fly_model() {  # fly_model NAME PILOT [OPTIONS...]: a planning pilot on the cpu run -> grid/NAME.json, unless there
+  local json="$OUT/grid/$1.json" pilot=$2
+  shift 2
+  [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
+}
+fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
+  local pilot=$1 json="$OUT/grid/$1.json"
+  shift
+  [ -f "$json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@" --json "$json"
+}
+[ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
+train_wm() {  # train_wm RUN [OPTIONS...]: Stage I on the cpu preset, resuming a cut run
+  local run=$1 resume=()
+  shift
+  [ -f "$run/model.safetensors" ] && return 0
+  [ -d "$run/checkpoints" ] && resume=(--resume)
+  "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$run" "${resume[@]}" "$@" "${STEPS[@]}"
+}
+step train-cpu train_wm "$WM"
 # The per-frame SIGReg run (upstream's recipe on the cpu sizes): the README's Stage I comparison
 # and its Table I row. The grid below is flown on the cpu run.
-if [ ! -f "$WMF/model.safetensors" ]; then
-  if [ -d "$WMF/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
-  "$BIN/orbitmodel" train "$DATA" --preset cpu --no-sigreg-pool --lambda-sigreg 0.1 --out "$WMF" $RESUME "${STEPS[@]}"
-fi
+step train-perframe train_wm "$WMF" --no-sigreg-pool --lambda-sigreg 0.1
 for run in "$WM" "$WMF"; do
-  "$BIN/orbitmodel" eval rollout "$run" "$DATA"
-  [ -f "$run/probe/model.safetensors" ] || "$BIN/orbitmodel" probe "$run" "$DATA" "${PROBE[@]}"
-  [ -f "$run/probe-state/model.safetensors" ] || "$BIN/orbitmodel" probe "$run" "$DATA" --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
-  "$BIN/orbitmodel" eval probe "$run" "$DATA" "${PROBE_EVAL[@]}"
+  name=$(basename "$run")
+  step "rollout-$name" "$BIN/orbitmodel" eval rollout "$run" "$DATA"
+  [ -f "$run/probe/model.safetensors" ] || step "probe-$name" "$BIN/orbitmodel" probe "$run" "$DATA" "${PROBE[@]}"
+  [ -f "$run/probe-state/model.safetensors" ] || step "probe-state-$name" "$BIN/orbitmodel" probe "$run" "$DATA" \
+    --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
+  step "eval-probe-$name" "$BIN/orbitmodel" eval probe "$run" "$DATA" "${PROBE_EVAL[@]}"
 done
-if [ ! -f "$DP/model.safetensors" ]; then
-  if [ -d "$DP/checkpoints" ]; then RESUME=--resume; else RESUME=; fi
-  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" $RESUME "${STEPS[@]}"
-fi
-"$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+train_dp() {
+  local resume=()
+  [ -f "$DP/model.safetensors" ] && return 0
+  [ -d "$DP/checkpoints" ] && resume=(--resume)
+  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" "${resume[@]}" "${STEPS[@]}"
+}
+step train-diffusion train_dp
+step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
 # The depth head refitted for near cells (RUN/depth): the planner and the depth oracle use it.
-[ -f "$WM/depth/model.safetensors" ] || "$BIN/orbitmodel" depth "$WM" "$DATA" "${DEPTH[@]}"
-[ -f "$OUT/grid/oracle-true-dyn-depth-stage1.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" \
-  --pilot oracle-true-dyn-depth --depth-head stage1 "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" --json "$OUT/grid/oracle-true-dyn-depth-stage1.json"
-for pilot in planner oracle-true oracle-learned-dyn oracle-true-dyn-depth oracle-true-dyn-sensor; do
-  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" \
-    --json "$OUT/grid/$pilot.json"
+[ -f "$WM/depth/model.safetensors" ] || step depth-refit "$BIN/orbitmodel" depth "$WM" "$DATA" "${DEPTH[@]}"
+# The grid, two flights at a time: the learned-dynamics pair is the long one.
+learned_pair() { spawn fly_model planner planner; spawn fly_model oracle-learned-dyn oracle-learned-dyn; join; }
+depth_pair() {  # the refitted depth head, and the Stage I head it replaces
+  spawn fly_model oracle-true-dyn-depth oracle-true-dyn-depth
+  spawn fly_model oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
+  join
+}
+rigid_pair() { spawn fly_model oracle-true oracle-true; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join; }
+data_pilots() { spawn fly_data diffusion --pilot-option "run=$DP"; spawn fly_data expert; join; fly_data risky; }
+step grid-learned learned_pair
+step grid-depth depth_pair
+step grid-rigid rigid_pair
+step grid-data data_pilots
+FIG6=()
+for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth oracle-learned-dyn planner diffusion; do
+  FIG6+=("$OUT/grid/$pilot.json")
 done
-[ -f "$OUT/grid/diffusion.json" ] || "$BIN/orbitdata" fly --pilot diffusion --pilot-option "run=$DP" --image-size 64 "${GRID[@]}" --json "$OUT/grid/diffusion.json"
-for pilot in expert risky; do
-  [ -f "$OUT/grid/$pilot.json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" --json "$OUT/grid/$pilot.json"
-done
-"$BIN/orbitmodel" eval figure6 "$OUT"/grid/*.json --out "$OUT/grid/figure6.png"
+step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
+printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
