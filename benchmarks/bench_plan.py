@@ -1,7 +1,7 @@
 """Planning latency of the learned planner (world model + probe + depth head + MPPI) on this CPU.
 
     nice -n 19 python benchmarks/bench_plan.py [--samples 256] [--horizon 50] [--threads 1]
-        [--replan-every 1] [--steps 20] [--sweep] [--run RUN]
+        [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile] [--run RUN]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,
@@ -14,6 +14,8 @@ The sizes are the ``cpu`` preset's; the weights do not change the time, so an un
 predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and through
 ``torch.compile`` (needs a C++ compiler): no replan with this predictor and horizon can be
 faster, whatever K, so it says whether the 40 ms goal is reachable by sampling fewer candidates.
+``--compile`` runs the planner's imagined step through ``torch.compile``; it compiles during the
+untimed warm-up steps that fill the context.
 """
 
 from __future__ import annotations
@@ -53,7 +55,9 @@ def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[Pla
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
     config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every,
-                           history=args.history)
+                           history=args.history, compile=args.compile)
+    if args.compile:
+        model.compile_rollout()
     dynamics = LearnedDynamics(model, probe, timings, history=args.history or None)
     pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings),
                          Camera.from_sim(sim), config, sim, timings)
@@ -147,6 +151,7 @@ def main() -> None:
     parser.add_argument("--run", default=None, help="a trained run with its probe (default: untrained cpu preset)")
     parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
     parser.add_argument("--floor", action="store_true", help="also time one candidate's H sequential steps")
+    parser.add_argument("--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     print(f"cpu preset, {args.threads} torch thread(s), {os.cpu_count()} cores visible, torch {torch.__version__}")

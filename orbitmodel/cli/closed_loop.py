@@ -56,6 +56,8 @@ def closed_loop(
                                                                "[default: the model's own, 8]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
+    compile_rollout: Annotated[bool, typer.Option("--compile", help="torch.compile the world model's imagined step "
+                                                                   "(needs a C++ compiler; ~35 % faster rollouts)")] = False,
     config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
 ) -> None:
     """Fly a planning pilot over the orbitdata fly grid and print the success table.
@@ -76,6 +78,7 @@ def closed_loop(
                                      replan_every=replan_every, memory_frames=memory_frames,
                                      history=history).items() if x is not None}
     options["depth_head"] = depth_head.value
+    options["compile"] = compile_rollout
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(variant=Variant(pilot.value), run=run, obstacles=tuple(n_obst), speeds=tuple(v),
                             episodes=episodes, seed=seed, planner=planner_config(**options),

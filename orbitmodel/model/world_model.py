@@ -99,6 +99,7 @@ class WorldModel(nn.Module):
         self.register_buffer("state_mean", torch.zeros(c.state_dim))
         self.register_buffer("state_std", torch.ones(c.state_dim))
         self.register_buffer("depth_scale", torch.tensor(50.1))  # metres per unit of the depth head
+        self._compiled_step = None  # set by compile_rollout()
         self.initialize_weights()
 
     def initialize_weights(self) -> None:
@@ -149,13 +150,27 @@ class WorldModel(nn.Module):
             raise ValueError(f"actions cover {actions.shape[1]} frames; with {m} context latents give at least {m}")
         cond = self.action_encoder(self._norm_action(actions))  # (B, m-1+n, D)
         mods = self.predictor.modulations(cond)  # each block's AdaLN for every frame, computed once
-        z = z_context
+        step = self._compiled_step or self.imagine_step
+        z = list(z_context.unbind(1))
         for i in range(n):
             end = m + i  # frames [0, end) are known; predict frame `end`
             start = max(0, end - history)
-            out = self.predictor(z[:, start:end], None, [mod[:, start:end] for mod in mods])[:, -1]  # (B, D)
-            z = torch.cat([z, (z[:, end - 1] + self.pred_projector(out)).unsqueeze(1)], dim=1)
-        return z[:, m:]
+            z.append(step(torch.stack(z[start:end], 1), [mod[:, start:end] for mod in mods]))
+        return torch.stack(z[m:], 1)
+
+    def imagine_step(self, window: torch.Tensor, mods: list[torch.Tensor]) -> torch.Tensor:
+        """One imagined step: latents window (B, T, D) and each block's modulations for those T
+        frames -> the latent after the window's last frame (B, D)."""
+        return window[:, -1] + self.pred_projector(self.predictor(window, None, mods)[:, -1])
+
+    def compile_rollout(self) -> "WorldModel":
+        """Make :meth:`rollout` run its imagined step through ``torch.compile`` (inductor; on a CPU
+        it needs a C++ compiler). Same latents to float rounding (~1e-5 on the README's ``cpu``
+        run); on this 2-core CPU the K = 32, H = 50 rollout took 174 -> 114 ms
+        (``benchmarks/bench_plan.py --compile``). The first rollouts of each batch and window
+        size are slow while it compiles. Inference only: the model must be in eval mode."""
+        self._compiled_step = torch.compile(self.imagine_step, dynamic=False)
+        return self
 
     def predict_depth(self, images: torch.Tensor, head: nn.Module | None = None) -> torch.Tensor:
         """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres, by ``head`` (a refitted

@@ -92,6 +92,8 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
     if model is not None:
         sim = camera_for_run(sim, model)
     if variant.learned_dynamics:
+        if config.compile:
+            model.compile_rollout()
         dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None)
     else:
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)

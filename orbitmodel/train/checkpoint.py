@@ -47,7 +47,8 @@ class Checkpoint:
     state: dict
 
 
-def _write_json_atomic(path: Path, data: dict) -> None:
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write ``data`` as sorted, indented JSON through a temporary file, so a reader never sees half of it."""
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
     os.replace(tmp, path)
@@ -94,7 +95,7 @@ class RunDir:
         elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):
             raise RunError(f"{self.path} is not empty and not an orbitmodel run; choose another --out")
         self.path.mkdir(parents=True, exist_ok=True)
-        _write_json_atomic(existing, config)
+        write_json_atomic(existing, config)
 
     # ---- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self, step: int, weights: dict[str, torch.Tensor], state: dict) -> None:

@@ -26,7 +26,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitmodel.plan.pilot import PlannerConfig
-from orbitmodel.train.checkpoint import CONFIG, WEIGHTS, RunError, _write_json_atomic
+from orbitmodel.train.checkpoint import CONFIG, WEIGHTS, RunError, write_json_atomic
 
 FOLDER = "depth"
 EVAL = "eval.json"
@@ -141,7 +141,7 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
     RunDir(out).start({"stage": "depth_refit", "refit": asdict(cfg), "dataset": str(dataset)}, resume=False,
                       overwrite=True)
     RunDir(out).save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
-    _write_json_atomic(out / EVAL, result)
+    write_json_atomic(out / EVAL, result)
     return result
 
 

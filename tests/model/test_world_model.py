@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import shutil
 
 import pytest
 import torch
@@ -144,6 +145,21 @@ def test_a_shorter_rollout_history_is_a_shorter_window():
     assert not torch.allclose(short, full)
     with pytest.raises(ValueError, match="history=0"):
         model.rollout(z, actions[:, :T], history=0)
+
+
+@pytest.mark.skipif(shutil.which("g++") is None and shutil.which("c++") is None,
+                    reason="torch.compile's CPU backend needs a C++ compiler")
+def test_a_compiled_rollout_imagines_the_same_latents():
+    """compile_rollout (the planner's ``compile`` option) changes the speed, not the plan."""
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    with torch.no_grad():
+        z = model.encode(images, states)[:, :2]
+        acts = torch.cat([actions, actions], dim=1)[:, :1 + 7]  # a window that fills, then slides
+        eager = model.rollout(z, acts, history=3)
+        compiled = model.compile_rollout().rollout(z, acts, history=3)
+    assert compiled.shape == eager.shape == (B, 7, model.config.latent_dim)
+    torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
 def test_rollout_refuses_too_few_actions():
