@@ -2,9 +2,10 @@
 
     python benchmarks/check_learned_dynamics.py RUN DATASET [--windows 24] [--history 8 2]
 
-1. On random test windows (context 8, horizon 50), the planner's own path (``LearnedDynamics``:
+1. On random test windows (8 context latents, horizon 50 frames), the planner's own path (``LearnedDynamics``:
    encode each frame, roll the latents out with the recorded actions, integrate with the probe)
-   against the recorded states: position error at h = 1, 10, 25, 50, for each ``--history``.
+   against the recorded states: position error at h = 1, 10, 25, 50 frames, for each ``--history``
+   (a run with ``--frame-step`` s sees every s-th of the (8 - 1) s + 1 context frames).
 2. From one test frame, the learned rollout against the rigid-body model the simulator
    integrates, for thrust sequences MPPI proposes but experts rarely fly (coasting, noise
    around coasting, one thruster pair at full): the gap says how far from its data the world
@@ -43,27 +44,29 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     model, probe = WorldModel.from_pretrained(args.run), load_probe(args.run)
-    windows = load_windows(args.dataset, split="test", context=8, horizon=50, columns=[S.IMAGE, S.STATE, S.ACTION])
+    c = (8 - 1) * model.config.frame_step + 1  # context frames: 8 latents one model step apart
+    windows = load_windows(args.dataset, split="test", context=c, horizon=50, columns=[S.IMAGE, S.STATE, S.ACTION])
     chosen = np.random.default_rng(args.seed).choice(len(windows), min(args.windows, len(windows)), replace=False)
     horizons = (1, 10, 25, 50)
     for history in args.history:
         errors = []
         for i in chosen:
             w = windows[int(i)]
-            pred = observed(model, probe, w, history).rollout(w[S.STATE][7], w[S.ACTION][7:57][None])[0]
-            errors.append((pred[:, :3] - w[S.STATE][8:58, :3]).norm(dim=-1))
+            pred = observed(model, probe, w, history, c).rollout(w[S.STATE][c - 1], w[S.ACTION][c - 1:c + 49][None])[0]
+            errors.append((pred[:, :3] - w[S.STATE][c:c + 50, :3]).norm(dim=-1))
         e = torch.stack(errors)
         print(f"recorded actions, history {history}: position error (m) at h = "
               + ", ".join(f"{h}: {float(e[:, h - 1].mean()):.3f}" for h in horizons) + f" ({len(chosen)} test windows)")
     w = windows[int(chosen[0])]
-    dyn, rigid = observed(model, probe, w, args.history[-1]), RigidBodyDynamics()
+    dyn, rigid = observed(model, probe, w, args.history[-1], c), RigidBodyDynamics()
     g = torch.Generator().manual_seed(args.seed)
     pair = torch.zeros(8)
     pair[:2] = 1.0
     for name, actions in (("coasting (all zero)", torch.zeros(4, 50, 8)),
                           ("N(0, 0.15) around coasting", (0.15 * torch.randn(4, 50, 8, generator=g)).clamp(0, 1)),
                           ("one thruster pair at full", pair.expand(4, 50, 8).clone())):
-        gap = (dyn.rollout(w[S.STATE][7], actions)[..., :3] - rigid.rollout(w[S.STATE][7], actions)[..., :3]).norm(dim=-1)
+        gap = (dyn.rollout(w[S.STATE][c - 1], actions)[..., :3]
+               - rigid.rollout(w[S.STATE][c - 1], actions)[..., :3]).norm(dim=-1)
         print(f"{name}: learned vs rigid-body position gap (m) at h = 25: {float(gap[:, 24].mean()):.3f}, "
               f"h = 50: {float(gap[:, 49].mean()):.3f}")
 

@@ -34,6 +34,11 @@ class ModelConfig:
         pred_depth, pred_heads, pred_mlp, pred_dropout: the AdaLN-Zero causal predictor.
         max_seq_len: learned positional embeddings of the predictor (>= training window).
         history: latents the predictor sees in a rollout (a sliding window).
+        frame_step: frames per predictor step (upstream: 1). With s > 1 the model sees every
+            s-th frame and each step's action is the s thrust commands taken until the next one,
+            concatenated (s x 8; LeWM's and DINO-WM's frameskip of 5): H frames of a plan are
+            H / s sequential predictor calls. Windows, history and horizons then count model
+            steps of s frames each (``orbitmodel.data.load_model_windows``).
         depth_hidden: per-patch depth head MLP width -> hidden -> GELU -> cells.
         sigreg_projections, sigreg_knots: SIGReg's random 1-D projections and quadrature knots.
         sigreg_pool: False (upstream): SIGReg per time step over the batch, averaged, so N = batch
@@ -58,6 +63,7 @@ class ModelConfig:
     pred_dropout: float = 0.1
     max_seq_len: int = 64
     history: int = 8
+    frame_step: int = 1
     depth_hidden: int = 96
     sigreg_projections: int = 512
     sigreg_knots: int = 17
@@ -80,6 +86,8 @@ class ModelConfig:
                 raise ValueError(f"{name}={getattr(self, name)} is not divisible by its {heads} attention heads")
         if self.sigreg_knots % 2 == 0 or self.sigreg_knots < 3:
             raise ValueError(f"sigreg_knots={self.sigreg_knots}: use an odd number >= 3")
+        if self.frame_step < 1:
+            raise ValueError(f"frame_step={self.frame_step}: give 1 (every frame) or more frames per predictor step")
         if not 1 <= self.history <= self.max_seq_len:
             raise ValueError(f"history={self.history} must be in [1, max_seq_len={self.max_seq_len}]")
 
@@ -87,6 +95,11 @@ class ModelConfig:
     def grid(self) -> int:
         """Patches per image side."""
         return self.image_size // self.patch_size
+
+    @property
+    def step_action_dim(self) -> int:
+        """The action of one predictor step: frame_step thrust commands, concatenated."""
+        return self.action_dim * self.frame_step
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from orbitdata import schema as S
+from orbitdata.load.config import IS_PAD
 
 LEVEL_CHOICES = S.LEVELS
 OUTCOME_CHOICES = S.OUTCOMES
@@ -69,3 +70,76 @@ def episode_filter(levels: list[str] | None, outcomes: list[str] | None) -> dict
         chosen[S.OUTCOME] = list(outcomes)
     return chosen or None
 
+
+
+# ---- model steps of several frames (ModelConfig.frame_step) ------------------------------------
+FLAG_KEYS = (S.COLLISION, IS_PAD)  # per-frame flags: a model step has one if any of its frames has
+
+
+def group_actions(actions, frame_step: int):
+    """(..., T s, 8) per-frame thrusts -> (..., T, 8 s): each model step's s thrusts, concatenated
+    in time order (the action a ``frame_step`` = s world model takes per step)."""
+    if frame_step == 1:
+        return actions
+    *lead, frames, dim = actions.shape
+    if frames % frame_step:
+        raise ValueError(f"{frames} actions do not split into steps of {frame_step} frames")
+    return actions.reshape(*lead, frames // frame_step, frame_step * dim)
+
+
+def skip_frames(window: dict, frame_step: int, time_dim: int = 0) -> dict:
+    """A window of T s frames (time on ``time_dim``) -> T model steps of s frames: each step's
+    first frame (image, state, depth, ...), its s actions grouped (:func:`group_actions`), and
+    per-frame flags (collision, padding) set when any of its frames has them."""
+    if frame_step == 1:
+        return window
+    out = {}
+    for key, value in window.items():
+        if key == S.ACTION:
+            out[key] = group_actions(value, frame_step)
+        elif key in FLAG_KEYS:
+            shape = value.shape
+            out[key] = value.reshape(*shape[:time_dim], shape[time_dim] // frame_step, frame_step,
+                                     *shape[time_dim + 1:]).any(time_dim + 1)
+        else:
+            out[key] = value[(slice(None),) * time_dim + (slice(None, None, frame_step),)]
+    return out
+
+
+class ModelStepWindows:
+    """A ``WindowDataset`` of T s frames seen as windows of T model steps (:func:`skip_frames`);
+    the loader's API (len, items, batches, ``sampler``) and its attributes pass through."""
+
+    def __init__(self, frames, frame_step: int):
+        self.frames, self.frame_step = frames, frame_step
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __getitem__(self, i: int) -> dict:
+        return skip_frames(self.frames[i], self.frame_step)
+
+    def __getitems__(self, indices):
+        from orbitdata.load.collate import WindowBatch
+
+        batch = self.frames.__getitems__(indices)
+        return WindowBatch(skip_frames(batch.stacked, self.frame_step, 1)) if len(batch) else batch
+
+    def sampler(self, *args, **kwargs):
+        return self.frames.sampler(*args, **kwargs)
+
+    def __getattr__(self, name):
+        if name == "frames":  # not set yet (unpickling): no recursion
+            raise AttributeError(name)
+        return getattr(self.frames, name)
+
+
+def load_model_windows(source, frame_step: int = 1, context: int = 1, horizon: int = 0, stride: int = 1, **kwargs):
+    """``orbitdata.load_windows`` counted in model steps: windows of ``context + horizon`` steps of
+    ``frame_step`` frames each (``stride`` stays in frames). At ``frame_step`` 1 it is the loader's
+    own dataset, unchanged."""
+    from orbitdata.load import load_windows
+
+    frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride,
+                          **kwargs)
+    return frames if frame_step == 1 else ModelStepWindows(frames, frame_step)

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Reproduce the README's model tables and figures from an empty folder, on a 2-core CPU:
 #   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
-# generate a 64 px dataset -> train the world model (Stage I: the cpu preset, and the per-frame
-# SIGReg variant) -> eval rollout -> train the probe (Stage II) and its state-only reference ->
+# generate a 64 px dataset -> train the world model (Stage I: the cpu preset, the per-frame
+# SIGReg variant, and the cpu preset stepping 5 frames per prediction) -> eval rollout -> train the probe (Stage II) and its state-only reference ->
 # eval probe -> train the Diffusion Policy -> refit the depth head for the planner -> fly the
 # planner, its three MPPI oracles, Diffusion Policy, the expert and the risky pilot on the grid
 # (same seeds, none used by the dataset) -> Figure 6. Every step resumes if run again.
@@ -20,6 +20,7 @@ mkdir -p "$OUT/grid"
 DATA="$OUT/orbit64"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
+WMS="$OUT/wm-cpu-skip5"
 DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
 # MPPI at what this 2-core CPU flies in reasonable time (README, "Plan and fly"); the defaults
@@ -46,11 +47,13 @@ join() {  # wait for every spawned flight; fail if any failed
   JOBS=()
   return $rc
 }
-fly_model() {  # fly_model NAME PILOT [OPTIONS...]: a planning pilot on the cpu run -> grid/NAME.json, unless there
-  local json="$OUT/grid/$1.json" pilot=$2
-  shift 2
-  [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$WM" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
+fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> grid/NAME.json, unless there
+  local run=$1 json="$OUT/grid/$2.json" pilot=$3
+  shift 3
+  mkdir -p "$(dirname "$json")"
+  [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
 }
+fly_model() { fly_run "$WM" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the cpu run
 fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
   local pilot=$1 json="$OUT/grid/$1.json"
   shift
@@ -76,6 +79,10 @@ for run in "$WM" "$WMF"; do
     --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
   step "eval-probe-$name" "$BIN/orbitmodel" eval probe "$run" "$DATA" "${PROBE_EVAL[@]}"
 done
+# The 5-frame-step run (`--frame-step 5`): the planner within the 40 ms budget (README, latency).
+step train-skip5 train_wm "$WMS" --frame-step 5
+[ -f "$WMS/probe/model.safetensors" ] || step probe-wm-cpu-skip5 "$BIN/orbitmodel" probe "$WMS" "$DATA" "${PROBE[@]}"
+step eval-probe-wm-cpu-skip5 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" "${PROBE_EVAL[@]}"
 train_dp() {
   local resume=()
   [ -f "$DP/model.safetensors" ] && return 0
@@ -86,6 +93,7 @@ step train-diffusion train_dp
 step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
 # The depth head refitted for near cells (RUN/depth): the planner and the depth oracle use it.
 [ -f "$WM/depth/model.safetensors" ] || step depth-refit "$BIN/orbitmodel" depth "$WM" "$DATA" "${DEPTH[@]}"
+[ -f "$WMS/depth/model.safetensors" ] || step depth-refit-skip5 "$BIN/orbitmodel" depth "$WMS" "$DATA" "${DEPTH[@]}"
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 learned_pair() { spawn fly_model planner planner; spawn fly_model oracle-learned-dyn oracle-learned-dyn; join; }
 depth_pair() {  # the refitted depth head, and the Stage I head it replaces
@@ -99,6 +107,13 @@ step grid-learned learned_pair
 step grid-depth depth_pair
 step grid-rigid rigid_pair
 step grid-data data_pilots
+skip_pilots() {  # the 5-frame-step run: the planner and the two oracles that split its failures
+  spawn fly_run "$WMS" skip5/planner planner
+  spawn fly_run "$WMS" skip5/oracle-learned-dyn oracle-learned-dyn
+  join
+  fly_run "$WMS" skip5/oracle-true-dyn-depth oracle-true-dyn-depth
+}
+step grid-skip5 skip_pilots
 FIG6=()
 for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth oracle-learned-dyn planner diffusion; do
   FIG6+=("$OUT/grid/$pilot.json")

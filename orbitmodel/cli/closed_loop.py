@@ -46,7 +46,9 @@ def closed_loop(
     video: Annotated[Optional[Path], typer.Option(help="write a video of each episode to this folder")] = None,
     video_format: Annotated[VideoFormat, typer.Option(help="mp4 or gif")] = "mp4",
     samples: Annotated[Optional[int], typer.Option(min=2, help="MPPI samples K [default: 256]")] = None,
-    horizon: Annotated[Optional[int], typer.Option(min=1, help="MPPI horizon H in steps [default: 50]")] = None,
+    horizon: Annotated[Optional[int], typer.Option(
+        min=1, help="MPPI horizon H in control steps (frames), a multiple of the run's --frame-step [default: 50]")
+    ] = None,
     iterations: Annotated[Optional[int], typer.Option(min=1, help="MPPI iterations per replan [default: 1]")] = None,
     replan_every: Annotated[Optional[int], typer.Option(min=1, help="control steps per replan [default: 1]")] = None,
     memory_frames: Annotated[Optional[int], typer.Option(min=1, help="depth frames kept in the point cloud")] = None,

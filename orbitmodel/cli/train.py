@@ -36,6 +36,8 @@ def train(
     sigreg_pool: Annotated[Optional[bool], typer.Option(
         help="SIGReg over every frame of the batch (pool) or per frame over the batch (upstream; default: the preset's)")
     ] = None,
+    frame_step: Annotated[Optional[int], typer.Option(
+        min=1, help="frames per predictor step (upstream 1; 5 makes a 50-frame plan 10 predictor calls)")] = None,
     level: Annotated[Optional[list[Level]], typer.Option(help="train on these levels only (repeatable)")] = None,
     outcome: Annotated[Optional[list[Outcome]], typer.Option(help="train on these outcomes only (repeatable)")] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
@@ -52,7 +54,8 @@ def train(
     from orbitmodel.config import get_preset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
-    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool)
+    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool,
+                                             frame_step=frame_step)
     p = p.with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr, num_workers=workers, seed=seed)
     req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
                         outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,

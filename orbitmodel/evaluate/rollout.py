@@ -27,7 +27,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import load_windows
-from orbitmodel.data import read_dataset_meta
+from orbitmodel.data import load_model_windows, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel, effective_rank
 from orbitmodel.plan.pilot import PlannerConfig
 from orbitmodel.train.checkpoint import RunError
@@ -109,9 +109,11 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
         raise RunError(f"{run} was trained on {model.config.image_size} px images but {dataset} holds "
                        f"{meta.image_size} px; evaluate on a dataset generated with --image-size {model.config.image_size}")
     stats_mean = _depth_mean(dataset)
-    windows = load_windows(dataset, split="test", context=cfg.context, horizon=cfg.horizon, columns=list(COLUMNS))
+    step = model.config.frame_step  # context and horizon count the model's steps of `step` frames
+    windows = load_model_windows(dataset, step, split="test", context=cfg.context, horizon=cfg.horizon,
+                                 columns=list(COLUMNS))
     chosen = _select(len(windows), cfg.windows, cfg.seed, f"the test split of {dataset} (windows of "
-                     f"{cfg.context}+{cfg.horizon} frames)")
+                     f"{cfg.context}+{cfg.horizon} steps of {step} frame{'s' * (step > 1)})")
     shuffle = derangement(len(chosen), cfg.seed)  # each window rolls out another window's actions
     m, n = cfg.context, cfg.horizon
     z_true, z_pred, z_shuf, depth_err, depth_base, episodes = [], [], [], [], [], []
@@ -146,7 +148,7 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     h = cfg.check_h
     std = flat.std(0)
     result = {
-        "run": str(run), "dataset": str(dataset), "config": asdict(cfg), "episodes": episodes,
+        "run": str(run), "dataset": str(dataset), "config": asdict(cfg), "frame_step": step, "episodes": episodes,
         "latent_dim": flat.shape[1], "latent_variance": var, "latent_frames": len(flat),
         "horizons": list(range(1, n + 1)),
         "mse": curve(mse), "nmse": curve(mse / var),
@@ -230,7 +232,8 @@ def summary_lines(result: dict) -> list[str]:
     c = result["checks"]
     h = result["config"]["check_h"]
     rows = [f"latent rollout on {result['config']['windows']} test windows "
-            f"(context {result['config']['context']}, horizon {result['config']['horizon']}):",
+            f"(context {result['config']['context']}, horizon {result['config']['horizon']}"
+            + (f"; h counts steps of {result['frame_step']} frames" if result.get("frame_step", 1) > 1 else "") + "):",
             "   h   NMSE   persistence   shuffled actions"]
     for k in (1, 5, 12, 25, 50):
         if k <= len(result["nmse"]):

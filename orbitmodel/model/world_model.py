@@ -91,7 +91,7 @@ class WorldModel(nn.Module):
         self.encoder = ViT(c)
         self.state_encoder = mlp((c.state_dim, c.state_hidden, c.state_embed))
         self.projector = LinearBN(c.width + c.state_embed, c.latent_dim)
-        self.action_encoder = mlp((c.action_dim, c.action_hidden, c.latent_dim))
+        self.action_encoder = mlp((c.step_action_dim, c.action_hidden, c.latent_dim))
         self.predictor = Predictor(c)
         self.pred_projector = LinearBN(c.latent_dim, c.latent_dim)
         self.depth_head = DepthHead(c)
@@ -135,11 +135,14 @@ class WorldModel(nn.Module):
     def rollout(self, z_context: torch.Tensor, actions: torch.Tensor, history: int | None = None) -> torch.Tensor:
         """Imagine n future latents from m context latents.
 
-        z_context (B, m, D) holds frames t-m+1..t; actions (B, m-1+n, 8) holds the m-1 actions
+        z_context (B, m, D) holds frames t-m+1..t; actions (B, m-1+n, A) holds the m-1 actions
         taken inside the context and then the n planned ones (frames t-m+1..t+n-1). Returns
-        z_future (B, n, D), frames t+1..t+n. Each prediction is fed back, and the predictor sees
-        a sliding window of the last ``history`` latents (default ``config.history``; training
-        covers every shorter context, so a planner may pass fewer to trade accuracy for time).
+        z_future (B, n, D), frames t+1..t+n. Frames and actions are model steps: with
+        ``config.frame_step`` s > 1 a step is s frames and its action the s thrusts taken
+        through it, A = 8 s (``orbitmodel.data.group_actions``). Each prediction is fed back,
+        and the predictor sees a sliding window of the last ``history`` latents (default
+        ``config.history``; training covers every shorter context, so a planner may pass fewer
+        to trade accuracy for time).
         """
         B, m, _ = z_context.shape
         n = actions.shape[1] - m + 1

@@ -106,13 +106,19 @@ class RigidBodyDynamics:
 
 
 class LearnedDynamics:
-    """The world model and its probe: encode each observed frame, keep the last ``history``
-    latents and the actions between them, roll K candidate sequences out in latent space and
-    read the states with the probe.
+    """The world model and its probe: encode each observed frame, keep the latents and actions
+    its next rollout starts from, roll K candidate sequences out in latent space and read the
+    states with the probe.
 
     ``rollout`` imagines from the newest observed frame t: context latents t-m+1..t (m <=
     history; fewer at the start of an episode), the m-1 actions taken between them, then the
     H planned actions; the probe integrates from the observed state at t.
+
+    A world model with ``frame_step`` s > 1 steps s frames at a time: its context latents are
+    frames t, t-s, t-2s, ..., each step's action the s thrusts taken through it, and a plan of
+    H frames (a multiple of s) is H / s predictor calls. The probe gives the state every s
+    frames; the frames in between are interpolated linearly (position, velocity, attitude
+    columns, rates, fuel), so the cost sees one state per frame whatever the model's step.
     """
 
     needs_images = True
@@ -120,6 +126,7 @@ class LearnedDynamics:
     def __init__(self, model, probe: Probe, timings: Timings | None = None, history: int | None = None):
         self.model = model.eval()
         self.probe = probe
+        self.step = int(model.config.frame_step)
         self.history = model.config.history if history is None else int(history)
         if not 1 <= self.history <= model.config.history:
             raise ValueError(f"history={self.history}: the world model rolls out from at most "
@@ -128,8 +135,9 @@ class LearnedDynamics:
         self.reset()
 
     def reset(self) -> None:
-        self._z: deque[torch.Tensor] = deque(maxlen=self.history)  # (D,) each
-        self._actions: deque[torch.Tensor] = deque(maxlen=self.history - 1)  # (8,) each, between frames
+        span = (self.history - 1) * self.step  # frames between the oldest and the newest context latent
+        self._z: deque[torch.Tensor] = deque(maxlen=span + 1)  # (D,) per observed frame
+        self._actions: deque[torch.Tensor] = deque(maxlen=max(span, 1))  # (8,) each, between frames
 
     @torch.inference_mode()
     def observe(self, obs: dict, previous_action: np.ndarray | None) -> None:
@@ -144,22 +152,51 @@ class LearnedDynamics:
             self.reset()
         self._z.append(z)
 
+    def context(self) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The newest frame's context: latents (m, D), oldest first, every ``step``-th frame back
+        from the newest, and the actions between them (m-1, 8 step), or None when m = 1."""
+        s, seen = self.step, len(self._z)
+        m = min(self.history, 1 + (seen - 1) // s)
+        frames = range(seen - 1 - (m - 1) * s, seen, s)
+        z = torch.stack([self._z[i] for i in frames])  # (m, D)
+        if m == 1:
+            return z, None
+        taken = list(self._actions)[-(m - 1) * s:]  # the (m-1) s thrusts since the oldest context frame
+        assert len(taken) == (m - 1) * s, "one action between each pair of observed frames"
+        return z, torch.stack(taken).reshape(m - 1, s * taken[0].shape[-1])
+
     @torch.inference_mode()
     def rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """state0 (16,) observed at the newest frame, actions (K, H, 8) -> states (K, H, 16)."""
         if not self._z:
             raise RuntimeError("observe() a frame before rollout()")
-        K = actions.shape[0]
+        K, H, _ = actions.shape
+        s = self.step
+        if H % s:
+            raise ValueError(f"a plan of {H} frames does not split into the world model's steps of {s} frames; "
+                             f"give a horizon that is a multiple of {s}")
         with self.timings("rollout"):
-            z_ctx = torch.stack(list(self._z))[None].expand(K, -1, -1)  # (K, m, D)
-            taken = list(self._actions)
-            assert len(taken) == len(self._z) - 1, "one action between each pair of context frames"
-            if taken:
-                past = torch.stack(taken)[None].expand(K, -1, -1)  # (K, m-1, 8)
-                actions = torch.cat([past, actions.float()], 1)  # (K, m-1+H, 8)
-            z_future = self.model.rollout(z_ctx, actions.float(), self.history)  # (K, H, D)
+            z, past = self.context()
+            z_ctx = z[None].expand(K, -1, -1)  # (K, m, D)
+            planned = actions.float().reshape(K, H // s, s * actions.shape[-1])  # (K, H / s, 8 s)
+            if past is not None:
+                planned = torch.cat([past[None].expand(K, -1, -1), planned], 1)  # (K, m-1+H/s, 8 s)
+            z_future = self.model.rollout(z_ctx, planned, self.history)  # (K, H / s, D)
         with self.timings("probe"):
-            return self.probe(z_future, state0.float().expand(K, -1), z_ctx[:, -1])  # (K, H, 16)
+            start = state0.float().expand(K, -1)
+            states = self.probe(z_future, start, z_ctx[:, -1])  # (K, H / s, 16)
+            return states if s == 1 else interpolate_frames(start, states, s)
+
+
+def interpolate_frames(state0: torch.Tensor, states: torch.Tensor, step: int) -> torch.Tensor:
+    """States every ``step`` frames -> every frame, linearly: state0 (K, 16) at frame t and states
+    (K, n, 16) at t+step, ..., t+n step -> (K, n step, 16) at t+1..t+n step. The attitude columns
+    are interpolated too and re-orthonormalised."""
+    knots = torch.cat([state0[:, None], states], 1)  # (K, n+1, 16)
+    frac = torch.arange(1, step + 1, dtype=states.dtype, device=states.device) / step  # (step,)
+    a, b = knots[:, :-1, None], knots[:, 1:, None]  # (K, n, 1, 16)
+    out = (a + (b - a) * frac[:, None]).flatten(1, 2)  # (K, n step, 16)
+    return torch.cat([out[..., :6], matrix_to_rot6d(rot6d_to_matrix(out[..., 6:12])), out[..., 12:]], -1)
 
 
 def load_probe(run: str | Path) -> Probe:

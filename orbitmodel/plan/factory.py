@@ -86,12 +86,19 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
 
     Raises RunError (a ValueError) for a run without weights or probe, or with another camera.
     """
+    from orbitmodel.train.checkpoint import RunError
+
     variant = Variant(variant)
     timings = timings or Timings()
     model = load_world_model(run, variant) if variant.needs_model else None
     if model is not None:
         sim = camera_for_run(sim, model)
     if variant.learned_dynamics:
+        step = model.config.frame_step
+        if config.mppi.horizon % step:
+            raise RunError(f"{run} predicts {step} frames per step, so the plan's horizon must be a multiple of "
+                           f"{step} frames (got {config.mppi.horizon}); pass --horizon "
+                           f"{max(step, config.mppi.horizon // step * step)}")
         if config.compile:
             model.compile_rollout()
         dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None)

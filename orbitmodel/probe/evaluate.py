@@ -83,13 +83,22 @@ def select_windows(dataset: str, context: int, horizon: int, count: int, seed: i
 
 @torch.no_grad()
 def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, device) -> dict[str, torch.Tensor]:
-    """Every row's states (K, n, 16) for windows (K, context + n, ...), and the truth."""
-    m = context
+    """Every row's states (K, n, 16) for windows (K, context + n, ...) of frames, and the truth.
+
+    A world model with ``frame_step`` s > 1 encodes every s-th context frame (``context`` = its
+    (m - 1) s + 1 frames), imagines n / s steps, and its probe's states are interpolated to every
+    frame as the planner does (``plan.dynamics.interpolate_frames``)."""
+    from orbitmodel.data import group_actions
+    from orbitmodel.plan.dynamics import interpolate_frames
+
+    m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
-    z = world_model.encode(images[:, :m], states[:, :m])  # (K, m, D)
-    z_future = world_model.rollout(z, actions[:, :m - 1 + n])  # (K, n, D)
-    out = {"truth": states[:, m:m + n].float(), "probe": probe(z_future, states[:, m - 1], z[:, -1]),
-           "constant_velocity": constant_velocity(states[:, m - 1], n, probe.config.dt)}
+    z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
+    z_future = world_model.rollout(z, group_actions(actions[:, :m - 1 + n], s))  # (K, n / s, D)
+    pred = probe(z_future, states[:, m - 1], z[:, -1])  # (K, n / s, 16)
+    out = {"truth": states[:, m:m + n].float(),
+           "probe": pred if s == 1 else interpolate_frames(states[:, m - 1].float(), pred, s),
+           "constant_velocity": constant_velocity(states[:, m - 1], n, S.DT)}
     if state_mlp is not None:
         out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])
     return {k: v.cpu() for k, v in out.items()}
@@ -119,7 +128,9 @@ def markdown(result: dict) -> str:
     """The table: ours beside the paper and the reference rows, one line per quantity and horizon."""
     t = result["table"]
     lines = [f"Physics probe, {result['windows']} collision-free test windows (seed {result['seed']}), "
-             f"context {result['context']}, MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s).",
+             f"context {result['context']}, MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
+             + (f"; the world model steps {result['frame_step']} frames at a time and its probe's states are "
+                "interpolated to every frame, as the planner reads them." if result.get("frame_step", 1) > 1 else "."),
              f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
              f"probe inputs: {result['probe_inputs']}; "
              f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.", "",
@@ -153,7 +164,12 @@ def evaluate_probe(req: EvalRequest) -> dict:
     device = resolve_device(req.device)
     world_model, probe = world_model.to(device), probe.to(device)
     state_mlp = state_mlp.to(device) if state_mlp is not None else None
-    context, n = int(probe_config["train"]["context"]), max(req.horizons)
+    s = world_model.config.frame_step
+    if any(h % s for h in req.horizons):
+        raise RunError(f"{req.run} predicts {s} frames per step; give horizons that are multiples of {s} "
+                       f"(got {', '.join(map(str, req.horizons))})")
+    # the context frames: every s-th of (steps - 1) s + 1, the last one where the probe starts
+    context, n = (int(probe_config["train"]["context"]) - 1) * s + 1, max(req.horizons)
     chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed)
     windows = load_windows(req.dataset, split="test", context=context, horizon=n, stride=1,
                            columns=[S.IMAGE, S.STATE, S.ACTION])
@@ -170,8 +186,9 @@ def evaluate_probe(req: EvalRequest) -> dict:
                       req.horizons)
     table.setdefault("state_mlp", None)
     result = {"run": str(req.run), "dataset": str(req.dataset), "preset": stage1.preset.name,
-              "windows": len(chosen), "seed": req.seed, "context": context, "horizons": list(req.horizons),
-              "dt": probe.config.dt, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
+              "windows": len(chosen), "seed": req.seed, "context": context, "frame_step": s,
+              "horizons": list(req.horizons),
+              "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
               "probe_inputs": probe.config.inputs,
               "integrators": {"probe": probe.config.integrator,
                               **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
@@ -188,5 +205,5 @@ def evaluate_probe(req: EvalRequest) -> dict:
         if collided is not None:
             batch = collate_windows(windows.__getitems__([collided]))
             crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device)}
-        result["files"] += figure5(first, crash, req.dataset, context, probe.config.dt, out)
+        result["files"] += figure5(first, crash, req.dataset, context, S.DT, out)
     return result

@@ -27,8 +27,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from orbitdata import schema as S
-from orbitdata.load import collate_windows, load_windows
-from orbitmodel.data import DatasetMeta, read_dataset_meta
+from orbitdata.load import collate_windows
+from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
 from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
@@ -158,11 +158,11 @@ def check_dataset(meta: DatasetMeta, stage1: RunConfig) -> None:
                        f"{want} px; use a dataset generated with `--image-size {want}` (like {stage1.dataset.source})")
 
 
-def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig) -> torch.Tensor:
+def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1) -> torch.Tensor:
     """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
-    (a seeded draw), the probe's output units."""
-    windows = load_windows(dataset, split="train", context=train.context, horizon=train.horizon,
-                           stride=train.window_stride, columns=[S.STATE])
+    (a seeded draw), the probe's output units; a step is ``frame_step`` frames."""
+    windows = load_model_windows(dataset, frame_step, split="train", context=train.context, horizon=train.horizon,
+                                 stride=train.window_stride, columns=[S.STATE])
     g = torch.Generator().manual_seed(train.seed)
     chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
     states = collate_windows(windows.__getitems__(chosen))[S.STATE]  # (N, T, 16)
@@ -205,8 +205,14 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     device = resolve_device(req.device)
     t = req.train
     latent = req.kind == "latent"
+    frame_step = stage1.preset.model.frame_step
+    if not latent and frame_step > 1:
+        raise RunError(f"{req.run} steps {frame_step} frames per prediction; the state-only reference reads "
+                       "one frame's state and action, so train it on a per-frame run (`orbitmodel train` "
+                       "without --frame-step)")
     config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
-                         hidden=req.hidden, inputs=(req.inputs or default_inputs) if latent else "latent",
+                         hidden=req.hidden, dt=S.DT * frame_step,
+                         inputs=(req.inputs or default_inputs) if latent else "latent",
                          integrator=req.integrator or default_integrator)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
@@ -216,8 +222,8 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     run = RunDir(out)
     run.start(probe_run_config(req.kind, config, t, meta, Path(req.run), wm_print if latent else None),
               resume=req.resume, overwrite=req.overwrite)
-    windows = load_windows(req.dataset, split="train", context=t.context, horizon=t.horizon,
-                           stride=t.window_stride, columns=list(COLUMNS[req.kind]))
+    windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
+                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]))
     data = windows
     if t.cache_windows:
         chosen = subset(len(windows), t.cache_windows, t.seed)
@@ -234,7 +240,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         model.set_normalisation(stage1.dataset.state_mean, stage1.dataset.state_std)
         module = StateObjective(model, t)
     if not req.resume:
-        model.increments.set_scale(increment_scale(req.dataset, t, config))
+        model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step))
     job = ProbeJob(module, model, req.kind, t.context)
     return fit(job, data, LoopSettings.of(t), run, device, resume=req.resume,
                label="probe" if latent else "state-only", on_log=on_log)

@@ -8,9 +8,8 @@ from pathlib import Path
 import torch
 
 from orbitdata import schema as S
-from orbitdata.load import load_windows
 from orbitmodel.config import Preset
-from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
+from orbitmodel.data import DatasetMeta, episode_filter, load_model_windows, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.train.checkpoint import RunDir, RunError
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
@@ -87,9 +86,9 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     rank = int(__import__("os").environ.get("RANK", 0))
     if rank == 0:
         run.start(run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume, overwrite=req.overwrite)
-    windows = load_windows(req.dataset, split="train", context=t.window, horizon=0, stride=t.window_stride,
-                           image_size=image_size, columns=list(COLUMNS),
-                           episodes=episode_filter(list(req.levels), list(req.outcomes)))
+    windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
+                                 horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
+                                 episodes=episode_filter(list(req.levels), list(req.outcomes)))
     torch.manual_seed(t.seed)  # initialisation
     model = WorldModel(req.preset.model)
     model.set_normalisation(meta.state_mean, meta.state_std, meta.depth_max)

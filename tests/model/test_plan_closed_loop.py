@@ -132,3 +132,43 @@ def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
     res = runner.invoke(app, ["eval", "merge", str(tmp_path / "v1.json"), str(tmp_path / "whole.json"),
                               "--json", str(tmp_path / "bad.json")])
     assert res.exit_code == 2 and "overlap" in res.output and "Traceback" not in res.output
+
+
+def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path):
+    """--frame-step 2: Stage I and the probe on steps of 2 frames, the planner imagining a 6-frame
+    plan in 3 predictor calls; a horizon that is not a multiple of 2 is refused before flying."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.probe.config import recipe
+    from orbitmodel.probe.model import PhysicsProbe
+    from orbitmodel.probe.train import ProbeRequest, train_probe
+    from orbitmodel.train.checkpoint import RunError
+    from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+    run = tmp_path / "skip2"
+    preset = get_preset("tiny").with_model(frame_step=2).with_train(max_steps=2)
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=run, device="cpu"))
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), train=recipe("tiny"), hidden=32, device="cpu"))
+    assert PhysicsProbe.from_pretrained(run).config.dt == pytest.approx(0.08)  # two frames of 0.04 s
+    # Table I per frame (the probe's states interpolated between steps), and the latent curves per step
+    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "4",
+                              "--horizon", "6", "--out", str(tmp_path / "eval")])
+    assert res.exit_code == 0, res.output
+    table = json.loads((tmp_path / "eval" / "probe_table.json").read_text())
+    assert table["frame_step"] == 2 and table["context"] == 7  # 4 latents: frames 0, 2, 4, 6
+    assert len(table["table"]["probe"]["position"]["per_step"]) == 6
+    odd = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "5"])
+    assert odd.exit_code == 2 and "multiples of 2" in odd.output
+    res = runner.invoke(app, ["eval", "rollout", str(run), str(tiny_dataset_master), "--windows", "2",
+                              "--horizon", "3", "--out", str(tmp_path / "rollout")])
+    assert res.exit_code == 0, res.output
+    curves = json.loads((tmp_path / "rollout" / "rollout.json").read_text())
+    assert curves["frame_step"] == 2 and len(curves["nmse"]) == 3  # 3 steps of 2 frames
+    req = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
+                            planner=planner_config(samples=8, horizon=6), max_steps=6)
+    report = closed_loop_report(req, fly_closed_loop(req))
+    (episode,) = report["episodes"]
+    assert episode["replans"] == episode["frames"] - 1 and episode["nonfinite_actions"] == 0
+    bad = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
+                            planner=planner_config(samples=8, horizon=5), max_steps=6)
+    with pytest.raises(RunError, match="multiple of 2"):
+        fly_closed_loop(bad)

@@ -162,3 +162,56 @@ def test_learned_dynamics_starts_with_one_frame_and_forgets_on_reset():
     dyn.reset()
     with pytest.raises(RuntimeError):
         dyn.rollout(torch.zeros(16), torch.rand(2, 3, 8))
+
+
+def test_learned_dynamics_with_a_frame_step_sees_every_step_th_frame_and_grouped_actions():
+    model = SpyModel(get_preset("tiny").with_model(frame_step=3).model).eval()
+    dyn = LearnedDynamics(model, stand_in_probe, history=3)
+    rng = np.random.default_rng(0)
+    taken, latents = [], []
+    for t in range(9):  # frames 0..8; the context is frames 2, 5, 8
+        obs = {"image": rng.integers(0, 255, (64, 64, 3), dtype=np.uint8), "state": np.zeros(16, np.float32)}
+        dyn.observe(obs, None if t == 0 else taken[-1])
+        with torch.no_grad():
+            latents.append(model.encode(torch.from_numpy(obs["image"]).permute(2, 0, 1)[None, None],
+                                        torch.zeros(1, 1, 16))[0, 0])
+        taken.append(rng.uniform(0, 1, 8).astype(np.float32))
+    plan = torch.rand(4, 6, 8)  # H = 6 frames = 2 predictor steps
+    states = dyn.rollout(torch.zeros(16), plan)
+    assert states.shape == (4, 6, 16)
+    z_context, actions = model.seen
+    assert torch.allclose(z_context[0], torch.stack([latents[2], latents[5], latents[8]]), atol=1e-6)
+    assert actions.shape == (4, 2 + 2, 24)  # 2 steps between the context frames, then the plan's 2
+    assert torch.allclose(actions[0, 0], torch.tensor(np.concatenate(taken[2:5])))  # thrusts of frames 2, 3, 4
+    assert torch.allclose(actions[0, 1], torch.tensor(np.concatenate(taken[5:8])))
+    assert torch.equal(actions[:, 2:], plan.reshape(4, 2, 24))
+    with pytest.raises(ValueError, match="multiple of 3"):
+        dyn.rollout(torch.zeros(16), torch.rand(4, 5, 8))
+    # at the start of an episode the context holds the frames one step apart that exist: frame 3, not 1..3
+    dyn.reset()
+    for t in range(4):
+        dyn.observe({"image": np.zeros((64, 64, 3), np.uint8), "state": np.zeros(16, np.float32)},
+                    None if t == 0 else taken[t - 1])
+    dyn.rollout(torch.zeros(16), plan)
+    assert model.seen[0].shape[1] == 2 and model.seen[1].shape[1] == 1 + 2  # frames 0 and 3
+
+
+def test_interpolated_frames_pass_through_the_predicted_states():
+    from orbitmodel.plan.dynamics import interpolate_frames
+
+    R = so3_exp(torch.tensor([[0.0, 0.0, 0.3], [0.0, 0.0, 0.6]]))
+    state0 = torch.zeros(1, 16)
+    state0[0, 6:12] = matrix_to_rot6d(torch.eye(3))
+    states = torch.zeros(1, 2, 16)
+    states[0, :, 0] = torch.tensor([1.0, 3.0])  # x at frames t+2 and t+4
+    states[0, :, 6:12] = matrix_to_rot6d(R)
+    out = interpolate_frames(state0, states, 2)  # (1, 4, 16) at t+1..t+4
+    assert torch.allclose(out[0, :, 0], torch.tensor([0.5, 1.0, 2.0, 3.0]))
+    assert torch.allclose(out[0, 1::2], states[0], atol=1e-6)  # the predicted states unchanged
+    R_mid = rot6d_to_matrix(out[0, 0, 6:12])
+    assert torch.allclose(R_mid @ R_mid.T, torch.eye(3), atol=1e-5)  # still a rotation
+    assert abs(float(so3_log_angle(R_mid)) - 0.15) < 0.01  # about half of the first step's turn
+
+
+def so3_log_angle(R: torch.Tensor) -> torch.Tensor:
+    return torch.arccos(((R.diagonal().sum() - 1) / 2).clamp(-1, 1))

@@ -178,3 +178,23 @@ def test_sigreg_flags_override_the_preset_and_land_in_the_run_config(tiny_datase
     model = read_run_config(run).preset.model
     assert (model.lambda_sigreg, model.sigreg_pool) == (0.7, True)
     assert not get_preset("tiny").model.sigreg_pool  # the preset itself is untouched
+
+
+def test_model_step_windows_take_every_step_th_frame_and_group_its_actions(tiny_dataset_master):
+    from orbitdata import schema as S
+    from orbitdata.load import collate_windows, load_windows
+    from orbitmodel.data import load_model_windows
+
+    cols = [S.IMAGE, S.STATE, S.ACTION, S.COLLISION]
+    frames = load_windows(tiny_dataset_master, context=8, horizon=4, stride=3, columns=cols)
+    steps = load_model_windows(tiny_dataset_master, 2, context=4, horizon=2, stride=3, columns=cols)
+    assert len(steps) == len(frames) and len(steps.episodes) == len(frames.episodes)
+    raw, item = frames[1], steps[1]
+    assert torch.equal(item[S.IMAGE], raw[S.IMAGE][::2]) and torch.equal(item[S.STATE], raw[S.STATE][::2])
+    assert item[S.ACTION].shape == (6, 16)
+    assert torch.equal(item[S.ACTION][2], torch.cat([raw[S.ACTION][4], raw[S.ACTION][5]]))
+    assert torch.equal(item[S.COLLISION], raw[S.COLLISION].view(6, 2).any(1))
+    batch = collate_windows(steps.__getitems__([0, 1]))  # the batched path gives the same windows
+    assert torch.equal(batch[S.ACTION][1], item[S.ACTION]) and torch.equal(batch[S.IMAGE][1], item[S.IMAGE])
+    assert load_model_windows(tiny_dataset_master, 1, context=8, horizon=4, stride=3, columns=cols).__class__ \
+        is frames.__class__  # one frame per step: the loader's own dataset
