@@ -59,7 +59,7 @@ def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[Pla
     if args.compile:
         model.compile_rollout()
     dynamics = LearnedDynamics(model, probe, timings, history=args.history or None)
-    pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings),
+    pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings, frames=dynamics.frames),
                          Camera.from_sim(sim), config, sim, timings)
     return pilot, timings
 

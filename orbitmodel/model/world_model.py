@@ -180,8 +180,17 @@ class WorldModel(nn.Module):
         copy of the depth head, ``orbitmodel.train.depth``) or the model's own."""
         B, T = images.shape[:2]
         _, patches = self.encoder(images_to_float(images.flatten(0, 1)))
-        head = self.depth_head if head is None else head
-        return (head(patches) * self.depth_scale).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
+        return self.depth_from_patches(patches, head).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
+
+    # ---- one encoder pass, two readings (the planner encodes each frame once) ------------------
+    def depth_from_patches(self, patches: torch.Tensor, head: nn.Module | None = None) -> torch.Tensor:
+        """The ViT's patch tokens (N, P, width) -> depth (N, 16, 16) metres (``predict_depth``'s head)."""
+        return (self.depth_head if head is None else head)(patches) * self.depth_scale
+
+    def latent_from_cls(self, cls: torch.Tensor, states: torch.Tensor) -> torch.Tensor:
+        """The ViT's CLS features (N, width) and raw states (N, 16) -> z (N, D) (``encode``'s projection)."""
+        s = self.state_encoder((states - self.state_mean) / self.state_std)  # (N, embed)
+        return self.projector(torch.cat([cls, s], dim=-1))
 
     # ---- training ---------------------------------------------------------------------------
     def predict_next(self, z: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
@@ -213,8 +222,7 @@ class WorldModel(nn.Module):
     def _encode(self, images: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         B, T = images.shape[:2]
         cls, patches = self.encoder(images_to_float(images.flatten(0, 1)))  # (B*T, width), (B*T, P, width)
-        s = self.state_encoder(((states - self.state_mean) / self.state_std).flatten(0, 1))  # (B*T, embed)
-        z = self.projector(torch.cat([cls, s], dim=-1))  # (B*T, D)
+        z = self.latent_from_cls(cls, states.flatten(0, 1))  # (B*T, D)
         return z.view(B, T, -1), patches
 
     @staticmethod

@@ -20,6 +20,7 @@ import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
+from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.rotation import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.timing import Timings
 
@@ -123,9 +124,11 @@ class LearnedDynamics:
 
     needs_images = True
 
-    def __init__(self, model, probe: Probe, timings: Timings | None = None, history: int | None = None):
+    def __init__(self, model, probe: Probe, timings: Timings | None = None, history: int | None = None,
+                 frames: FrameEncoder | None = None):
         self.model = model.eval()
         self.probe = probe
+        self.frames = frames or FrameEncoder(self.model)  # share it with the depth head: one ViT pass a frame
         self.step = int(model.config.frame_step)
         self.history = model.config.history if history is None else int(history)
         if not 1 <= self.history <= model.config.history:
@@ -143,9 +146,9 @@ class LearnedDynamics:
     def observe(self, obs: dict, previous_action: np.ndarray | None) -> None:
         """Encode the new frame; ``previous_action`` led to it from the last observed frame."""
         with self.timings("encode"):
-            image = torch.from_numpy(np.ascontiguousarray(obs["image"])).permute(2, 0, 1)[None, None]  # (1, 1, 3, H, W)
-            state = torch.as_tensor(obs["state"], dtype=torch.float32)[None, None]  # (1, 1, 16)
-            z = self.model.encode(image, state)[0, 0]  # (D,)
+            cls, _ = self.frames(obs["image"])  # (1, width)
+            state = torch.as_tensor(obs["state"], dtype=torch.float32)[None]  # (1, 16)
+            z = self.model.latent_from_cls(cls, state)[0]  # (D,)
         if previous_action is not None and len(self._z):
             self._actions.append(torch.as_tensor(previous_action, dtype=torch.float32))
         elif len(self._z):  # a gap in the action record: the old context no longer leads here

@@ -14,6 +14,7 @@ import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, load_probe
+from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
@@ -23,19 +24,23 @@ class PredictedDepth:
     """A depth head on the current frame: observation -> (16, 16) z-depth, metres.
 
     ``head``: the refitted head (``orbitmodel depth``); None for the one trained in Stage I.
+    ``frames``: the encoder pass shared with the learned dynamics (``plan.frames``): the frame's
+    ViT pass is then timed under "encode", where the dynamics ran it first, and "depth-head" is
+    the head alone.
     """
 
-    def __init__(self, model, timings: Timings | None = None, head=None):
+    def __init__(self, model, timings: Timings | None = None, head=None, frames: FrameEncoder | None = None):
         self.model = model.eval()
         self.timings = timings or Timings()
         self.head = head
+        self.frames = frames or FrameEncoder(self.model)
         self.name = "stage1" if head is None else "refit"
 
     @torch.inference_mode()
     def __call__(self, obs: dict) -> np.ndarray:
         with self.timings("depth-head"):
-            image = torch.from_numpy(np.ascontiguousarray(obs["image"])).permute(2, 0, 1)[None, None]  # (1, 1, 3, H, W)
-            return self.model.predict_depth(image, self.head)[0, 0].numpy()  # (16, 16) metres
+            _, patches = self.frames(obs["image"])  # (1, P, width)
+            return self.model.depth_from_patches(patches, self.head)[0].numpy()  # (16, 16) metres
 
 
 def depth_head_for(run: str | Path, model, choice: str):
@@ -91,8 +96,10 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
     variant = Variant(variant)
     timings = timings or Timings()
     model = load_world_model(run, variant) if variant.needs_model else None
+    frames = None
     if model is not None:
         sim = camera_for_run(sim, model)
+        frames = FrameEncoder(model)  # one ViT pass per frame for the dynamics and the depth head
     if variant.learned_dynamics:
         step = model.config.frame_step
         if config.mppi.horizon % step:
@@ -101,10 +108,11 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
                            f"{max(step, config.mppi.horizon // step * step)}")
         if config.compile:
             model.compile_rollout()
-        dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None)
+        dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None, frames=frames)
     else:
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
-    depth = {"depth-head": lambda: PredictedDepth(model, timings, depth_head_for(run, model, config.depth_head)),
+    depth = {"depth-head": lambda: PredictedDepth(model, timings, depth_head_for(run, model, config.depth_head),
+                                                  frames),
              "sensor": lambda: sensor_depth,
              "true": lambda: None}[variant.obstacles]()
     camera = Camera.from_sim(sim)

@@ -156,3 +156,27 @@ def test_the_true_oracle_flies_an_easy_episode_to_the_goal():
     assert result.outcome == "success", result.outcome
     meta = result.pilot_info
     assert meta["replans"] == result.length - 1 and meta["nonfinite_actions"] == 0 and meta["clipped_actions"] == 0
+
+
+def test_the_dynamics_and_the_depth_head_share_one_encoder_pass_per_frame():
+    from orbitmodel.plan.frames import FrameEncoder
+
+    model = WorldModel(get_preset("tiny").model).eval()
+    calls = []
+    model.encoder.register_forward_hook(lambda *_: calls.append(1))
+    frames = FrameEncoder(model)
+    dyn = LearnedDynamics(model, stand_in_probe, frames=frames)
+    depth = PredictedDepth(model, frames=frames)
+    rng = np.random.default_rng(0)
+    image = rng.integers(0, 255, (64, 64, 3), dtype=np.uint8)
+    state = rng.normal(size=16).astype(np.float32)
+    dyn.observe({"image": image, "state": state}, None)
+    got = depth({"image": image})
+    assert len(calls) == 1  # one ViT pass for the latent and the depth map
+    with torch.no_grad():  # the same numbers as encoding the frame for each reading
+        x = torch.from_numpy(image).permute(2, 0, 1)[None, None]
+        assert torch.equal(dyn._z[-1], model.encode(x, torch.from_numpy(state)[None, None])[0, 0])
+        assert np.array_equal(got, model.predict_depth(x)[0, 0].numpy())
+    image[:8] = 0  # the same buffer holding a new frame is encoded again
+    depth({"image": image})
+    assert len(calls) == 4  # + the two reference passes above + this one
