@@ -1,16 +1,20 @@
 #!/usr/bin/env bash
-# Reproduce the README's model tables and figures from an empty folder, on a 2-core CPU:
+# Reproduce the README's model results from an empty folder, on a 2-core CPU:
 #   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
-# generate a 64 px dataset -> train the world model (Stage I: the cpu preset, the per-frame
-# SIGReg variant, and the cpu preset stepping 5 frames per prediction) -> eval rollout -> train the probe (Stage II) and its state-only reference ->
-# eval probe -> train the Diffusion Policy -> refit the depth head for the planner -> fly the
-# planner, its three MPPI oracles, Diffusion Policy, the expert and the risky pilot on the grid
-# (same seeds, none used by the dataset) -> Figure 6. Every step resumes if run again.
+# The headline chain: generate a 64 px dataset -> train the world model (the cpu preset stepping
+# 5 frames per prediction, the run the planner flies) -> eval rollout -> train the probe (Stage II)
+# -> eval probe -> refit the depth head -> train and evaluate the Diffusion Policy -> fly the
+# planner, its three MPPI oracles (and the depth oracle on the Stage I head), Diffusion Policy, the
+# expert and the risky pilot on the grid (same seeds, none used by the dataset) -> Figure 6.
+# ALL=1 adds the per-frame-predictor comparisons of the README: the cpu preset and upstream's
+# per-frame SIGReg recipe (Stage I, probes and their state-only reference, eval), and the planner,
+# learned-dynamics and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
 # QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame flights): a
-# ~10 min check that the chain runs, not the README's numbers.
+# check that the chain runs, not the README's numbers.
+# Every step resumes if run again (steps whose output exists are skipped; training resumes).
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
-# is the whole invocation's ("total"); steps whose output exists are skipped. The grid flights
-# run two at a time, one torch thread each (how the README's grids were flown): both cores busy.
+# is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each
+# (how the README's grids were flown): both cores busy.
 set -euo pipefail
 OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}")
 N=${2:-20}
@@ -18,18 +22,20 @@ cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
 mkdir -p "$OUT/grid"
 DATA="$OUT/orbit64"
+WMS="$OUT/wm-cpu-skip5"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
-WMS="$OUT/wm-cpu-skip5"
 DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
-# MPPI at what this 2-core CPU flies in reasonable time (README, "Plan and fly"); the defaults
-# (K 256, H 50, 8 latents of history) are for a faster machine.
-PLAN=(--samples 32 --horizon 50 --history 2)
-EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=()
+# MPPI at what this 2-core CPU flies within 40 ms a control step on the 5-frame-step run (README,
+# "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
+PLAN=(--samples 32 --horizon 50 --history 1)
+# The per-frame cpu run's grid (ALL=1) as the README flew it: 2 latents of history.
+PLAN_PERFRAME=(--samples 32 --horizon 50 --history 2)
+EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=()
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
-  DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20)
+  DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2)
 fi
 
 TIMES="$OUT/timings.tsv"
@@ -53,13 +59,12 @@ fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> g
   mkdir -p "$(dirname "$json")"
   [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
 }
-fly_model() { fly_run "$WM" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the cpu run
+fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
 fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
   local pilot=$1 json="$OUT/grid/$1.json"
   shift
   [ -f "$json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@" --json "$json"
 }
-[ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
 train_wm() {  # train_wm RUN [OPTIONS...]: Stage I on the cpu preset, resuming a cut run
   local run=$1 resume=()
   shift
@@ -67,22 +72,23 @@ train_wm() {  # train_wm RUN [OPTIONS...]: Stage I on the cpu preset, resuming a
   [ -d "$run/checkpoints" ] && resume=(--resume)
   "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$run" "${resume[@]}" "$@" "${STEPS[@]}"
 }
-step train-cpu train_wm "$WM"
-# The per-frame SIGReg run (upstream's recipe on the cpu sizes): the README's Stage I comparison
-# and its Table I row. The grid below is flown on the cpu run.
-step train-perframe train_wm "$WMF" --no-sigreg-pool --lambda-sigreg 0.1
-for run in "$WM" "$WMF"; do
+probe_and_eval() {  # probe_and_eval RUN ROLLOUT_HORIZON: eval rollout, the probe, eval probe
+  local run=$1 horizon=$2 name
   name=$(basename "$run")
-  step "rollout-$name" "$BIN/orbitmodel" eval rollout "$run" "$DATA"
+  step "rollout-$name" "$BIN/orbitmodel" eval rollout "$run" "$DATA" --horizon "$horizon" "${ROLLOUT[@]}"
   [ -f "$run/probe/model.safetensors" ] || step "probe-$name" "$BIN/orbitmodel" probe "$run" "$DATA" "${PROBE[@]}"
-  [ -f "$run/probe-state/model.safetensors" ] || step "probe-state-$name" "$BIN/orbitmodel" probe "$run" "$DATA" \
-    --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
   step "eval-probe-$name" "$BIN/orbitmodel" eval probe "$run" "$DATA" "${PROBE_EVAL[@]}"
-done
-# The 5-frame-step run (`--frame-step 5`): the planner within the 40 ms budget (README, latency).
+}
+refit() {  # refit RUN: the depth head refitted for the planner (RUN/depth), unless there
+  [ -f "$1/depth/model.safetensors" ] || step "depth-refit-$(basename "$1")" "$BIN/orbitmodel" depth "$1" "$DATA" "${DEPTH[@]}"
+}
+
+[ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
+# The 5-frame-step run (`--frame-step 5`): 10 predictor calls imagine 50 frames, which keeps the
+# planner within 40 ms a control step here (README, latency). Rollout horizon in model steps.
 step train-skip5 train_wm "$WMS" --frame-step 5
-[ -f "$WMS/probe/model.safetensors" ] || step probe-wm-cpu-skip5 "$BIN/orbitmodel" probe "$WMS" "$DATA" "${PROBE[@]}"
-step eval-probe-wm-cpu-skip5 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" "${PROBE_EVAL[@]}"
+probe_and_eval "$WMS" 10
+refit "$WMS"
 train_dp() {
   local resume=()
   [ -f "$DP/model.safetensors" ] && return 0
@@ -91,9 +97,6 @@ train_dp() {
 }
 step train-diffusion train_dp
 step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
-# The depth head refitted for near cells (RUN/depth): the planner and the depth oracle use it.
-[ -f "$WM/depth/model.safetensors" ] || step depth-refit "$BIN/orbitmodel" depth "$WM" "$DATA" "${DEPTH[@]}"
-[ -f "$WMS/depth/model.safetensors" ] || step depth-refit-skip5 "$BIN/orbitmodel" depth "$WMS" "$DATA" "${DEPTH[@]}"
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 learned_pair() { spawn fly_model planner planner; spawn fly_model oracle-learned-dyn oracle-learned-dyn; join; }
 depth_pair() {  # the refitted depth head, and the Stage I head it replaces
@@ -107,16 +110,31 @@ step grid-learned learned_pair
 step grid-depth depth_pair
 step grid-rigid rigid_pair
 step grid-data data_pilots
-skip_pilots() {  # the 5-frame-step run: the planner and the two oracles that split its failures
-  spawn fly_run "$WMS" skip5/planner planner
-  spawn fly_run "$WMS" skip5/oracle-learned-dyn oracle-learned-dyn
-  join
-  fly_run "$WMS" skip5/oracle-true-dyn-depth oracle-true-dyn-depth
-}
-step grid-skip5 skip_pilots
 FIG6=()
 for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth oracle-learned-dyn planner diffusion; do
   FIG6+=("$OUT/grid/$pilot.json")
 done
 step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
+
+if [ "${ALL:-0}" = 1 ]; then
+  # The per-frame predictor: the cpu preset (pooled SIGReg) and upstream's per-frame SIGReg recipe.
+  step train-cpu train_wm "$WM"
+  step train-perframe train_wm "$WMF" --no-sigreg-pool --lambda-sigreg 0.1
+  for run in "$WM" "$WMF"; do  # the state-only reference first: eval probe puts it beside the probe
+    [ -f "$run/probe-state/model.safetensors" ] || step "probe-state-$(basename "$run")" "$BIN/orbitmodel" probe "$run" "$DATA" \
+      --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
+    probe_and_eval "$run" 50
+  done
+  refit "$WM"
+  PLAN=("${PLAN_PERFRAME[@]}")
+  fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}"; }
+  cpu_learned() { spawn fly_cpu planner planner; spawn fly_cpu oracle-learned-dyn oracle-learned-dyn; join; }
+  cpu_depth() {
+    spawn fly_cpu oracle-true-dyn-depth oracle-true-dyn-depth
+    spawn fly_cpu oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
+    join
+  }
+  step grid-cpu-learned cpu_learned
+  step grid-cpu-depth cpu_depth
+fi
 printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
