@@ -29,9 +29,7 @@ DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
 # MPPI at what this 2-core CPU flies within 40 ms a control step on the 5-frame-step run (README,
 # "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
-PLAN=(--samples 32 --horizon 50 --history 1)
-# The per-frame cpu run's grid (ALL=1) as the README flew it: 2 latents of history.
-PLAN_PERFRAME=(--samples 32 --horizon 50 --history 2)
+PLAN=(--samples 32 --horizon 50 --history 2)
 EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=()
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
@@ -126,7 +124,6 @@ if [ "${ALL:-0}" = 1 ]; then
     probe_and_eval "$run" 50
   done
   refit "$WM"
-  PLAN=("${PLAN_PERFRAME[@]}")
   fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}"; }
   cpu_learned() { spawn fly_cpu planner planner; spawn fly_cpu oracle-learned-dyn oracle-learned-dyn; join; }
   cpu_depth() {
