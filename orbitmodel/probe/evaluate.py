@@ -142,7 +142,9 @@ def markdown(result: dict) -> str:
             lines.append(f"| {q.replace('_', ' ')} ({unit}) | {h} | {_cell(t['probe'], q, h)} | "
                          f"{'-' if paper is None else f'{paper:.4f}'} | {_cell(t.get('state_mlp'), q, h)} | "
                          f"{_cell(t['constant_velocity'], q, h)} |")
-    if t.get("state_mlp") is None:
+    if t.get("state_mlp") is None and result.get("frame_step", 1) > 1:
+        lines += ["", "No state-only row: that reference is per frame and is not trained for a frame-step run."]
+    elif t.get("state_mlp") is None:
         lines += ["", f"The state-only row needs `orbitmodel probe {result['run']} DATASET --state-only` first."]
     return "\n".join(lines) + "\n"
 

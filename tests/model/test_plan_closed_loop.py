@@ -156,6 +156,8 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
     table = json.loads((tmp_path / "eval" / "probe_table.json").read_text())
     assert table["frame_step"] == 2 and table["context"] == 7  # 4 latents: frames 0, 2, 4, 6
     assert len(table["table"]["probe"]["position"]["per_step"]) == 6
+    note = (tmp_path / "eval" / "probe_table.md").read_text()  # no advice to train what is refused here
+    assert "not trained for a frame-step run" in note and "--state-only` first" not in note
     odd = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "5"])
     assert odd.exit_code == 2 and "multiples of 2" in odd.output
     res = runner.invoke(app, ["eval", "rollout", str(run), str(tiny_dataset_master), "--windows", "2",
