@@ -9,9 +9,10 @@
 # ALL=1 adds the per-frame-predictor comparisons of the README: the cpu preset and upstream's
 # per-frame SIGReg recipe (Stage I, probes and their state-only reference, eval), and the planner,
 # learned-dynamics and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
-# QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame flights): a
+# QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame planner flights): a
 # check that the chain runs, not the README's numbers.
-# Every step resumes if run again (steps whose output exists are skipped; training resumes).
+# Every step resumes if run again: training, probes, refits and flights whose output exists are
+# skipped (training resumes from its checkpoints); the evaluations re-run (seconds each).
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
 # is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each
 # (how the README's grids were flown): both cores busy.
@@ -27,7 +28,7 @@ WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
 GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
-# MPPI at what this 2-core CPU flies within 40 ms a control step on the 5-frame-step run (README,
+# MPPI at what plans within 40 ms a control step on the 5-frame-step run, 2 threads (README,
 # "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
 PLAN=(--samples 32 --horizon 50 --history 2)
 EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=()

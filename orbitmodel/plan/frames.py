@@ -21,13 +21,13 @@ class FrameEncoder:
 
     def __init__(self, model):
         self.model = model
-        self._key: bytes | None = None
+        self._key: tuple | None = None
         self._out: tuple[torch.Tensor, torch.Tensor] | None = None
 
     @torch.inference_mode()
     def __call__(self, image: np.ndarray) -> tuple[torch.Tensor, torch.Tensor]:
         raw = np.ascontiguousarray(image)
-        key = raw.tobytes()
+        key = (raw.shape, raw.dtype.str, raw.tobytes())
         if key != self._key:
             x = torch.from_numpy(raw).permute(2, 0, 1)[None]  # (1, 3, H, W)
             self._out = self.model.encoder(images_to_float(x))
