@@ -97,16 +97,17 @@ train_dp() {
 step train-diffusion train_dp
 step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
-learned_pair() { spawn fly_model planner planner; spawn fly_model oracle-learned-dyn oracle-learned-dyn; join; }
+# learned_pair FLY / depth_pair FLY: FLY is fly_model (the planner's run) or fly_cpu (ALL=1's cpu run)
+learned_pair() { spawn "$1" planner planner; spawn "$1" oracle-learned-dyn oracle-learned-dyn; join; }
 depth_pair() {  # the refitted depth head, and the Stage I head it replaces
-  spawn fly_model oracle-true-dyn-depth oracle-true-dyn-depth
-  spawn fly_model oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
+  spawn "$1" oracle-true-dyn-depth oracle-true-dyn-depth
+  spawn "$1" oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
   join
 }
 rigid_pair() { spawn fly_model oracle-true oracle-true; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join; }
 data_pilots() { spawn fly_data diffusion --pilot-option "run=$DP"; spawn fly_data expert; join; fly_data risky; }
-step grid-learned learned_pair
-step grid-depth depth_pair
+step grid-learned learned_pair fly_model
+step grid-depth depth_pair fly_model
 step grid-rigid rigid_pair
 step grid-data data_pilots
 FIG6=()
@@ -126,13 +127,7 @@ if [ "${ALL:-0}" = 1 ]; then
   done
   refit "$WM"
   fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}"; }
-  cpu_learned() { spawn fly_cpu planner planner; spawn fly_cpu oracle-learned-dyn oracle-learned-dyn; join; }
-  cpu_depth() {
-    spawn fly_cpu oracle-true-dyn-depth oracle-true-dyn-depth
-    spawn fly_cpu oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
-    join
-  }
-  step grid-cpu-learned cpu_learned
-  step grid-cpu-depth cpu_depth
+  step grid-cpu-learned learned_pair fly_cpu
+  step grid-cpu-depth depth_pair fly_cpu
 fi
 printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
