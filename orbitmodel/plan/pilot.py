@@ -16,8 +16,8 @@ oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 ==========================  ==================  ======================  ===========
 
 Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
-planner never sees the obstacle list. The classes follow ``orbitdata.fly.Pilot`` by duck typing
-(``name``, ``privileged``, ``needs_images``, ``reset``, ``act``, ``metadata``).
+planner never sees the obstacle list. The classes are ``orbitdata.fly.Pilot`` subclasses, so
+``orbitdata fly --pilot planner --pilot-option run=RUN`` flies them too.
 """
 
 from __future__ import annotations
@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 import torch
 
+from orbitdata.fly import Pilot
 from orbitdata.seeding import rng
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
@@ -146,7 +147,7 @@ class Replan:
     cost: float
 
 
-class PlannerPilot:
+class PlannerPilot(Pilot):
     """MPPI on a dynamics model, around obstacles it sees. Never told where the obstacles are.
 
     Args:

@@ -64,6 +64,24 @@ def test_a_tiny_closed_loop_episode_runs_end_to_end(probed_run, tmp_path):
     json.dumps(report)  # serialisable as it is
 
 
+def test_the_planner_flies_through_orbitdatas_registry(probed_run):
+    """`orbitdata fly --pilot planner --pilot-option run=RUN`: the entry point gives an
+    orbitdata.fly.Pilot, and option strings become the planner's config."""
+    import dataclasses
+
+    from orbitdata.config import GenerationConfig
+    from orbitdata.fly import Pilot, fly_grid, make_pilot
+
+    base = GenerationConfig()
+    sim = dataclasses.replace(base.sim, camera=dataclasses.replace(base.sim.camera, image_size=64), max_steps=4)
+    config = dataclasses.replace(base, sim=sim)
+    options = dict(run=str(probed_run), samples="8", horizon="5", memory_frames="3")
+    pilot = make_pilot("planner", config, **options)
+    assert isinstance(pilot, Pilot) and pilot.config.mppi.samples == 8 and pilot.config.memory_frames == 3
+    (cell,) = fly_grid("planner", [1], [1.0], 1, config=config, **options)
+    assert cell.episodes == 1 and cell.success + cell.collision + cell.timeout + cell.out_of_fuel == 1
+
+
 def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path):
     out = tmp_path / "planner.json"
     res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
