@@ -52,6 +52,9 @@ def closed_loop(
     iterations: Annotated[Optional[int], typer.Option(min=1, help="MPPI iterations per replan [default: 1]")] = None,
     replan_every: Annotated[Optional[int], typer.Option(min=1, help="control steps per replan [default: 1]")] = None,
     memory_frames: Annotated[Optional[int], typer.Option(min=1, help="depth frames kept in the point cloud")] = None,
+    support: Annotated[Optional[int], typer.Option(
+        min=0, max=8, help="keep a depth cell only with this many of its 8 neighbours at a similar depth (0: off) "
+                           "[default: 1]")] = None,
     depth_head: Annotated[DepthHead, typer.Option(help="stage1: the head trained with the world model; refit: "
                                                        "RUN/depth (`orbitmodel depth`); auto: refit if there")] = "auto",
     history: Annotated[Optional[int], typer.Option(min=1, help="latents the world model sees per imagined step "
@@ -78,7 +81,7 @@ def closed_loop(
     n_obst, v = _numbers(obstacles, int, "--obstacles"), _numbers(speeds, float, "--speeds")
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
                                      replan_every=replan_every, memory_frames=memory_frames,
-                                     history=history).items() if x is not None}
+                                     history=history, support=support).items() if x is not None}
     options["depth_head"] = depth_head.value
     options["compile"] = compile_rollout
     torch.set_num_threads(threads)

@@ -75,17 +75,39 @@ class Camera:
         return 2 * math.tan(math.radians(self.fovy_deg) / 2) / side
 
 
+def supported_cells(depth: np.ndarray, near: np.ndarray, support: int, tolerance: float = 0.3) -> np.ndarray:
+    """(16, 16) bool: the ``near`` cells with at least ``support`` of their 8 neighbours also
+    ``near`` and at a depth within ``tolerance`` (a fraction of the cell's own depth) of theirs.
+
+    A surface covers neighbouring cells at similar depths; a lone cell is more likely a stray
+    prediction of the depth head (a "phantom" in the sky, or a smear behind a near obstacle).
+    """
+    d = np.where(near, depth, np.nan)
+    padded = np.pad(d, 1, constant_values=np.nan)
+    count = np.zeros(depth.shape, int)
+    rows, cols = depth.shape
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy or dx:
+                other = padded[1 + dy:1 + dy + rows, 1 + dx:1 + dx + cols]
+                count += np.abs(other - d) <= tolerance * d  # NaN compares False
+    return near & (count >= support)
+
+
 def depth_to_points(depth: np.ndarray, state: np.ndarray, camera: Camera, max_range: float = 20.0,
-                    footprint: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                    footprint: float = 1.0, support: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Back-project a (16, 16) z-depth map (metres) seen from ``state`` into world points.
 
     Cells at or beyond ``min(max_range, 0.99 far)`` (no return, or too far to matter) and
-    non-finite cells are dropped. Returns points (N, 3) metres, world frame relative to the
-    start, and radii (N,) metres: ``footprint`` x half the cell's width at its depth, so the
-    spheres of neighbouring cells touch and a seen surface has no holes.
+    non-finite cells are dropped, and with ``support`` > 0 the cells without that many
+    neighbours at a similar depth (:func:`supported_cells`). Returns points (N, 3) metres, world
+    frame relative to the start, and radii (N,) metres: ``footprint`` x half the cell's width at
+    its depth, so the spheres of neighbouring cells touch and a seen surface has no holes.
     """
     depth = np.asarray(depth, dtype=np.float64)
     keep = np.isfinite(depth) & (depth > 0) & (depth < min(max_range, 0.99 * camera.far))
+    if support:
+        keep = supported_cells(depth, keep, support)
     d = depth[keep]  # (N,)
     body = np.asarray(camera.position) + d[:, None] * camera.cell_rays(depth.shape[0])[keep]  # (N, 3)
     s = np.asarray(state, dtype=np.float64)

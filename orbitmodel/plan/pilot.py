@@ -86,6 +86,10 @@ class PlannerConfig:
             model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth) or
             "auto" (the refit when the run has one, else Stage I's).
         footprint: a point's sphere radius in half cell widths at its depth.
+        support: keep a depth cell only if this many of its 8 neighbours are at a similar depth
+            (``obstacles.supported_cells``; 0: keep every cell within ``max_range``). 1 by
+            measurement on the validation grid seed 1: with the refitted head of the 5-frame-step
+            run the planner flew 86.7 / 95.0 / 91.7 % at 0 / 1 / 2 (README "Plan and fly").
         reach: metres of clearance beyond which points are ignored (>= the collision margin).
         rigid_substeps: substeps of the rigid-body model (the simulator's 8 = exact).
         replan_every: control steps between replans (in between, the plan's next step runs).
@@ -104,6 +108,7 @@ class PlannerConfig:
     max_range: float = 10.0
     depth_head: str = "auto"
     footprint: float = 1.0
+    support: int = 1
     reach: float = 1.0
     rigid_substeps: int = 1
     replan_every: int = 1
@@ -117,6 +122,8 @@ class PlannerConfig:
             raise ValueError(f"depth_head={self.depth_head!r}: use 'auto', 'stage1' or 'refit'")
         if self.history < 0:
             raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
+        if not 0 <= self.support <= 8:
+            raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
         if self.reach < self.cost.margin + self.cost.hull_radius:
@@ -244,7 +251,7 @@ class PlannerPilot(Pilot):
         depth = self.depth(obs)  # (16, 16) metres; the depth head times itself
         with self.timings("points"):
             points, radii = depth_to_points(depth, obs["state"], self.camera, self.config.max_range,
-                                            self.config.footprint)
+                                            self.config.footprint, self.config.support)
             self.memory.add(points, radii)
             cloud = self.memory.cloud(self.config.reach)
         self.cloud_sizes.append(len(cloud))

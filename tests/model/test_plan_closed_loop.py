@@ -86,10 +86,11 @@ def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path)
     out = tmp_path / "planner.json"
     res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
                               "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--samples", "8",
-                              "--horizon", "5", "--max-steps", "4", "--json", str(out)])
+                              "--horizon", "5", "--max-steps", "4", "--support", "3", "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
     report = json.loads(out.read_text())
+    assert report["planner"]["support"] == 3 and report["planner"]["mppi"]["samples"] == 8
     assert [(s["obstacles"], s["speed"]) for s in report["settings"]] == [(1, 1.0), (1, 2.0)]
     # Each episode was streamed as it landed; a grid stopped early is read back from that stream.
     streamed = read_report(tmp_path / "planner.episodes.jsonl")

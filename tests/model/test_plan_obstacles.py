@@ -81,6 +81,24 @@ def test_far_cells_are_dropped():
     assert len(points) == 1
 
 
+def test_support_drops_lone_cells_and_keeps_surfaces():
+    cam = Camera.from_sim(SimConfig())
+    state = make_state(np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), 1.0)
+    depth = np.full((16, 16), 50.1)
+    depth[5:8, 5:8] = 3.0  # a surface: nine cells at one depth
+    depth[12, 2] = 4.0  # a lone cell in the sky
+    depth[0, 0], depth[0, 1] = 2.0, 2.5  # two neighbours within 30 % of each other's depth
+    depth[15, 14], depth[15, 15] = 2.0, 6.0  # two neighbours at very different depths
+    every, _ = depth_to_points(depth, state, cam, max_range=10.0)
+    kept, radii = depth_to_points(depth, state, cam, max_range=10.0, support=1)
+    assert len(every) == 14 and len(kept) == 11 and len(radii) == 11
+    on_surface = depth_to_points(np.where(depth == 3.0, 3.0, 50.1), state, cam, max_range=10.0)[0]
+    assert all(np.isclose(kept, p).all(1).any() for p in on_surface)
+    corners_and_centre, _ = depth_to_points(depth, state, cam, max_range=10.0, support=3)
+    assert len(corners_and_centre) == 9  # each cell of the 3x3 block has >= 3 neighbours in it
+    assert len(depth_to_points(depth, state, cam, max_range=10.0, support=8)[0]) == 1  # its centre
+
+
 SHAPES = [
     Obstacle("sphere", (1.0, 2.0, 0.5), (0.7, 0, 0)),
     Obstacle("box", (0.0, -1.0, 1.0), (0.4, 0.6, 0.3), _quat((0.9, 0.2, -0.3, 0.1))),

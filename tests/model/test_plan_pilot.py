@@ -180,3 +180,11 @@ def test_the_dynamics_and_the_depth_head_share_one_encoder_pass_per_frame():
     image[:8] = 0  # the same buffer holding a new frame is encoded again
     depth({"image": image})
     assert len(calls) == 4  # + the two reference passes above + this one
+
+
+@pytest.mark.parametrize("bad", [dict(support=9), dict(support=-1), dict(memory_frames=0), dict(replan_every=0),
+                                 dict(depth_head="best"), dict(noise="colour")])
+def test_a_planner_config_out_of_range_is_refused_by_name(bad):
+    (key,) = bad
+    with pytest.raises(ValueError, match=key):
+        PlannerConfig(**bad)
