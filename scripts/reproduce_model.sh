@@ -78,8 +78,10 @@ probe_and_eval() {  # probe_and_eval RUN ROLLOUT_HORIZON: eval rollout, the prob
   [ -f "$run/probe/model.safetensors" ] || step "probe-$name" "$BIN/orbitmodel" probe "$run" "$DATA" "${PROBE[@]}"
   step "eval-probe-$name" "$BIN/orbitmodel" eval probe "$run" "$DATA" "${PROBE_EVAL[@]}"
 }
-refit() {  # refit RUN: the depth head refitted for the planner (RUN/depth), unless there
-  [ -f "$1/depth/model.safetensors" ] || step "depth-refit-$(basename "$1")" "$BIN/orbitmodel" depth "$1" "$DATA" "${DEPTH[@]}"
+refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RUN/depth), unless there
+  local run=$1
+  shift
+  [ -f "$run/depth/model.safetensors" ] || step "depth-refit-$(basename "$run")" "$BIN/orbitmodel" depth "$run" "$DATA" "$@" "${DEPTH[@]}"
 }
 
 [ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
@@ -125,8 +127,10 @@ if [ "${ALL:-0}" = 1 ]; then
       --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
     probe_and_eval "$run" 50
   done
-  refit "$WM"
-  fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}"; }
+  # The README's cpu-run rows were flown before the refit's recipe grew (30,000 frames x 8 epochs)
+  # and before the planner's neighbour filter (--support 0); these pin what they were.
+  refit "$WM" --frames 30000 --epochs 8
+  fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}" --support 0; }
   step grid-cpu-learned learned_pair fly_cpu
   step grid-cpu-depth depth_pair fly_cpu
 fi
