@@ -81,6 +81,10 @@ def supported_cells(depth: np.ndarray, near: np.ndarray, support: int, tolerance
 
     A surface covers neighbouring cells at similar depths; a lone cell is more likely a stray
     prediction of the depth head (a "phantom" in the sky, or a smear behind a near obstacle).
+    The tolerance is relative to each cell's own depth, so it is one-sided: of two lone
+    neighbours at 2.0 and 2.8 m, the farther one is kept and the nearer one is not (0.8 m is
+    within 30 % of 2.8 m, not of 2.0 m). Border cells have fewer neighbours (5, corners 3), so a
+    ``support`` above 3 drops the image's corners and above 5 its whole border.
     """
     d = np.where(near, depth, np.nan)
     padded = np.pad(d, 1, constant_values=np.nan)

@@ -99,6 +99,17 @@ def test_support_drops_lone_cells_and_keeps_surfaces():
     assert len(depth_to_points(depth, state, cam, max_range=10.0, support=8)[0]) == 1  # its centre
 
 
+def test_support_neither_wraps_around_the_image_nor_counts_cells_out_of_range():
+    cam = Camera.from_sim(SimConfig())
+    state = make_state(np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), 1.0)
+    depth = np.full((16, 16), 50.1)
+    depth[0, 7], depth[15, 7] = 3.0, 3.0  # neighbours only if the grid wrapped around
+    depth[8, 0], depth[8, 15] = 3.0, 3.0
+    depth[4, 4], depth[4, 5] = 9.5, 10.5  # similar depths, but the second is beyond max_range
+    assert len(depth_to_points(depth, state, cam, max_range=10.0)[0]) == 5
+    assert len(depth_to_points(depth, state, cam, max_range=10.0, support=1)[0]) == 0
+
+
 SHAPES = [
     Obstacle("sphere", (1.0, 2.0, 0.5), (0.7, 0, 0)),
     Obstacle("box", (0.0, -1.0, 1.0), (0.4, 0.6, 0.3), _quat((0.9, 0.2, -0.3, 0.1))),

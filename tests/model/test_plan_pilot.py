@@ -137,6 +137,19 @@ def test_nan_and_out_of_range_thrusts_never_reach_the_simulator():
     assert meta["nonfinite_actions"] == 1 and meta["clipped_actions"] == 1
 
 
+@pytest.mark.parametrize("support, expected", [(0, 10), (1, 9)])
+def test_the_pilot_plans_around_supported_depth_cells_only(support, expected):
+    pilot = sensor_planner(dataclasses.replace(SMALL, support=support))
+    pilot.reset(Task((5.0, 0, 0), 0.5, (0.0, 0, 0), 0))
+    depth = np.full((16, 16), 50.1, np.float32)
+    depth[6:9, 6:9] = 3.0  # a surface ahead: nine cells
+    depth[2, 12] = 4.0  # one stray cell, no neighbour near its depth
+    obs = {"state": np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32), "depth_low": depth}
+    pilot.act(obs)
+    assert pilot.cloud_sizes == [expected]
+    assert pilot.metadata()["points_median"] == expected
+
+
 def test_an_episode_is_a_function_of_its_seed():
     runs, model = [], WorldModel(get_preset("tiny").model).eval()
     for _ in range(2):
