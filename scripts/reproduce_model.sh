@@ -5,7 +5,8 @@
 # 5 frames per prediction, the run the planner flies) -> eval rollout -> train the probe (Stage II)
 # -> eval probe -> refit the depth head -> train and evaluate the Diffusion Policy -> fly the
 # planner, its three MPPI oracles (and the depth oracle on the Stage I head), Diffusion Policy, the
-# expert and the risky pilot on the grid (same seeds, none used by the dataset) -> Figure 6.
+# expert and the risky pilot on the grid (same seeds, none used by the dataset) -> Figure 6 -> the
+# planner, three oracles and the references again on a second held-out grid seed (OUT/grid/seed2).
 # ALL=1 adds the per-frame-predictor comparisons of the README: the cpu preset and upstream's
 # per-frame SIGReg recipe (Stage I, probes and their state-only reference, eval), and the planner,
 # learned-dynamics and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
@@ -27,7 +28,7 @@ WMS="$OUT/wm-cpu-skip5"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
-GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0)
+GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0) GDIR="$OUT/grid"  # the flights' grid and folder
 # MPPI at what plans within 40 ms a control step on the 5-frame-step run, 2 threads (README,
 # "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
 PLAN=(--samples 32 --horizon 50 --history 2)
@@ -53,14 +54,15 @@ join() {  # wait for every spawned flight; fail if any failed
   return $rc
 }
 fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> grid/NAME.json, unless there
-  local run=$1 json="$OUT/grid/$2.json" pilot=$3
+  local run=$1 json="$GDIR/$2.json" pilot=$3
   shift 3
   mkdir -p "$(dirname "$json")"
   [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
 }
 fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
 fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
-  local pilot=$1 json="$OUT/grid/$1.json"
+  local pilot=$1 json="$GDIR/$1.json"
+  mkdir -p "$GDIR"
   shift
   [ -f "$json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@" --json "$json"
 }
@@ -117,6 +119,16 @@ for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-dep
   FIG6+=("$OUT/grid/$pilot.json")
 done
 step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
+# A second held-out grid seed (README, "A second held-out grid seed"): the planner, the oracles
+# that tell its losses apart, and the references, in OUT/grid/seed2/.
+GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 2) GDIR="$OUT/grid/seed2"
+seed2_rest() {
+  spawn fly_model oracle-true-dyn-depth oracle-true-dyn-depth; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join
+  spawn fly_data expert; spawn fly_data risky; join
+}
+step grid-seed2-learned learned_pair fly_model
+step grid-seed2-rest seed2_rest
+GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0) GDIR="$OUT/grid"
 
 if [ "${ALL:-0}" = 1 ]; then
   # The per-frame predictor: the cpu preset (pooled SIGReg) and upstream's per-frame SIGReg recipe.
