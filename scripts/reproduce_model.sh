@@ -22,13 +22,16 @@ OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER
 N=${2:-20}
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
-mkdir -p "$OUT/grid"
 DATA="$OUT/orbit64"
 WMS="$OUT/wm-cpu-skip5"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
-GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0) GDIR="$OUT/grid"  # the flights' grid and folder
+use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folder of their JSON
+  GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed "$1") GDIR=$2
+  mkdir -p "$GDIR"
+}
+use_grid 0 "$OUT/grid"
 # MPPI at what plans within 40 ms a control step on the 5-frame-step run, 2 threads (README,
 # "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
 PLAN=(--samples 32 --horizon 50 --history 2)
@@ -62,7 +65,6 @@ fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> g
 fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
 fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
   local pilot=$1 json="$GDIR/$1.json"
-  mkdir -p "$GDIR"
   shift
   [ -f "$json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@" --json "$json"
 }
@@ -121,14 +123,14 @@ done
 step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
 # A second held-out grid seed (README, "A second held-out grid seed"): the planner, the oracles
 # that tell its losses apart, and the references, in OUT/grid/seed2/.
-GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 2) GDIR="$OUT/grid/seed2"
+use_grid 2 "$OUT/grid/seed2"
 seed2_rest() {
   spawn fly_model oracle-true-dyn-depth oracle-true-dyn-depth; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join
   spawn fly_data expert; spawn fly_data risky; join
 }
 step grid-seed2-learned learned_pair fly_model
 step grid-seed2-rest seed2_rest
-GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed 0) GDIR="$OUT/grid"
+use_grid 0 "$OUT/grid"
 
 if [ "${ALL:-0}" = 1 ]; then
   # The per-frame predictor: the cpu preset (pooled SIGReg) and upstream's per-frame SIGReg recipe.

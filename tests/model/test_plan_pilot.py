@@ -27,6 +27,8 @@ from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Vari
 torch.set_num_threads(1)
 SIM = SimConfig(camera=CameraConfig(image_size=64), max_steps=8)
 SMALL = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=5))
+# (16,) state: at the origin, at rest, identity attitude (rot6d), full tank
+AT_REST = np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32)
 
 
 def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor) -> torch.Tensor:
@@ -128,7 +130,7 @@ def test_nan_and_out_of_range_thrusts_never_reach_the_simulator():
         pilot.mppi.nominal = torch.tensor([[float("nan"), 1.5, -0.2, 0.5, 0, 0, 0, 0]] * 5)
 
     pilot._replan = lambda obs: broken(None, None)
-    obs = {"state": np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32),
+    obs = {"state": AT_REST,
            "depth_low": np.full((16, 16), 50.1, np.float32)}
     action = pilot.act(obs)
     assert np.isfinite(action).all() and action.min() >= 0 and action.max() <= 1
@@ -144,7 +146,7 @@ def test_the_pilot_plans_around_supported_depth_cells_only(support, expected):
     depth = np.full((16, 16), 50.1, np.float32)
     depth[6:9, 6:9] = 3.0  # a surface ahead: nine cells
     depth[2, 12] = 4.0  # one stray cell, no neighbour near its depth
-    obs = {"state": np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32), "depth_low": depth}
+    obs = {"state": AT_REST, "depth_low": depth}
     pilot.act(obs)
     assert pilot.cloud_sizes == [expected]
     assert pilot.metadata()["points_median"] == expected
