@@ -1,15 +1,17 @@
 """Planning latency of the learned planner (world model + probe + depth head + MPPI) on this CPU.
 
-    nice -n 19 python benchmarks/bench_plan.py [--samples 256] [--horizon 50] [--threads 1]
-        [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile] [--run RUN]
+    python benchmarks/bench_plan.py [--run RUN] [--planner paper|cpu] [--samples K] [--horizon H]
+        [--history N] [--threads 2] [--replan-every 1] [--steps 30] [--sweep] [--floor] [--compile]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,
 rolling the K candidates out through the predictor, in the probe, and in the cost (points and
 collision queries included). Goal: <= 40 ms per control step (25 Hz) on 2 cores.
 
-The sizes are the ``cpu`` preset's; the weights do not change the time, so an untrained
-``WorldModel`` and ``PhysicsProbe`` are used unless ``--run`` names a trained run with its probe.
+The planner is the ``--planner`` preset (``orbitmodel.plan.config``), with --samples, --horizon
+and --history changing single settings. The world model is ``--run``'s (with its probe); without
+one, an untrained model and probe of the ``--preset`` sizes (default ``cpu-step5``, the flown
+run's): the weights do not change the time.
 ``--sweep`` prints a table over K, H and the replan interval instead. ``--floor`` adds the
 predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and through
 ``torch.compile`` (needs a C++ compiler): no replan with this predictor and horizon can be
@@ -29,36 +31,34 @@ import torch
 
 from orbitdata.fly.pilot import Task
 from orbitdata.sim.config import CameraConfig, SimConfig
-from orbitmodel.config import get_preset
+from orbitmodel.config import PRESETS, get_preset
 from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.config import PLANNER_PRESETS, planner_config
 from orbitmodel.plan.dynamics import LearnedDynamics
 from orbitmodel.plan.factory import PredictedDepth
-from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera
-from orbitmodel.plan.pilot import PlannerConfig, PlannerPilot, Variant
+from orbitmodel.plan.pilot import PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.probe import PhysicsProbe
-from orbitmodel.probe.config import ProbeConfig
+from orbitmodel.probe.train import probe_config
 
 
-def make_pilot(args, samples: int, horizon: int, replan_every: int) -> tuple[PlannerPilot, Timings]:
-    preset = get_preset("cpu")
+def make_pilot(args, samples: int | None, horizon: int | None, replan_every: int) -> tuple[PlannerPilot, Timings]:
     if args.run:
-        from orbitmodel.plan.dynamics import load_probe
-
         model = WorldModel.from_pretrained(args.run)
-        probe = load_probe(args.run)
+        probe = PhysicsProbe.from_pretrained(args.run, world_model=model.fingerprint)
     else:
+        preset = get_preset(args.preset)
         torch.manual_seed(0)
         model = WorldModel(preset.model).eval()
-        probe = PhysicsProbe(ProbeConfig(latent_dim=preset.model.latent_dim)).eval()
+        probe = PhysicsProbe(probe_config(preset.probe, "latent", preset.model.latent_dim, preset.model.frame_step))
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
-    config = PlannerConfig(mppi=MPPIConfig(samples=samples, horizon=horizon), replan_every=replan_every,
-                           history=args.history, compile=args.compile)
+    changes = {k: v for k, v in dict(samples=samples, horizon=horizon, history=args.history).items() if v is not None}
+    config = planner_config(args.planner, replan_every=replan_every, compile=args.compile, **changes)
     if args.compile:
         model.compile_rollout()
-    dynamics = LearnedDynamics(model, probe, timings, history=args.history or None)
+    dynamics = LearnedDynamics(model, probe.eval(), timings, history=config.history or None)
     pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings, frames=dynamics.frames),
                          Camera.from_sim(sim), config, sim, timings)
     return pilot, timings
@@ -91,7 +91,8 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
     wall = time.perf_counter() - start
     steps, replans = 1e3 * np.array(pilot.step_seconds), 1e3 * np.array(pilot.replan_seconds)
     phases = timings.snapshot()
-    return {"samples": samples, "horizon": horizon, "replan_every": replan_every, "history": pilot.dynamics.history,
+    return {"samples": pilot.config.mppi.samples, "horizon": pilot.config.mppi.horizon, "replan_every": replan_every,
+            "history": pilot.dynamics.history,
             "step_median": np.median(steps), "step_p95": np.percentile(steps, 95),
             "replan_median": np.median(replans) if len(replans) else float("nan"),
             "replan_p95": np.percentile(replans, 95) if len(replans) else float("nan"),
@@ -105,9 +106,10 @@ def report(m: dict) -> str:
             f"{m['replan_p95']:7.1f} ms   [{shares}]")
 
 
-def sequential_floor(args, horizon: int) -> str:
+def sequential_floor(args, horizon: int | None) -> str:
     """Median ms of rolling ONE candidate H steps through the predictor, eager and compiled."""
     pilot, _ = make_pilot(args, 2, horizon, 1)
+    horizon = pilot.config.mppi.horizon
     model, history = pilot.dynamics.model, pilot.dynamics.history
     steps = horizon // model.config.frame_step  # predictor calls for H frames
     g = torch.Generator().manual_seed(0)
@@ -144,19 +146,23 @@ def sequential_floor(args, horizon: int) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--samples", type=int, default=256)
-    parser.add_argument("--horizon", type=int, default=50)
+    parser.add_argument("--planner", choices=list(PLANNER_PRESETS), default="paper", help="planner preset")
+    parser.add_argument("--samples", type=int, default=None, help="MPPI samples K (default: the preset's)")
+    parser.add_argument("--horizon", type=int, default=None, help="MPPI horizon H in frames (default: the preset's)")
     parser.add_argument("--replan-every", type=int, default=1)
     parser.add_argument("--steps", type=int, default=20, help="control steps timed (after the context fills)")
     parser.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
-    parser.add_argument("--history", type=int, default=0, help="latents per imagined step (0: the model's 8)")
-    parser.add_argument("--run", default=None, help="a trained run with its probe (default: untrained cpu preset)")
+    parser.add_argument("--history", type=int, default=None, help="latents per imagined step (default: the preset's)")
+    parser.add_argument("--run", default=None, help="a trained run with its probe (default: an untrained --preset)")
+    parser.add_argument("--preset", choices=list(PRESETS), default="cpu-step5", help="world-model sizes without --run")
     parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
     parser.add_argument("--floor", action="store_true", help="also time one candidate's H sequential steps")
     parser.add_argument("--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    print(f"cpu preset, {args.threads} torch thread(s), {os.cpu_count()} cores visible, torch {torch.__version__}")
+    model = args.run or f"untrained {args.preset} preset"
+    print(f"{model}, planner {args.planner}, {args.threads} torch thread(s), {os.cpu_count()} cores visible, "
+          f"torch {torch.__version__}")
     with torch.inference_mode():
         if not args.sweep:
             print(report(measure(args, args.samples, args.horizon, args.replan_every)), flush=True)

@@ -23,7 +23,8 @@ import torch
 from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, load_probe
+from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
+from orbitmodel.probe import PhysicsProbe
 
 
 def observed(model, probe, window: dict, history: int, context: int = 8) -> LearnedDynamics:
@@ -43,7 +44,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
     torch.set_num_threads(1)
-    model, probe = WorldModel.from_pretrained(args.run), load_probe(args.run)
+    model = WorldModel.from_pretrained(args.run)
+    probe = PhysicsProbe.from_pretrained(args.run, world_model=model.fingerprint)
     c = (8 - 1) * model.config.frame_step + 1  # context frames: 8 latents one model step apart
     windows = load_windows(args.dataset, split="test", context=c, horizon=50, columns=[S.IMAGE, S.STATE, S.ACTION])
     chosen = np.random.default_rng(args.seed).choice(len(windows), min(args.windows, len(windows)), replace=False)

@@ -1,10 +1,12 @@
-"""Typed configs for the world model and its training, and the named presets the CLI lists.
+"""Typed configs of the world model family and the named presets the CLI lists.
 
 A preset is a one-line factory (DiT's ``DiT_models`` style) returning a :class:`Preset`: the
-model's sizes and the training recipe that goes with them. ``paper`` is upstream
-Orbit-Planner's Stage I at 224 px (for a GPU); ``cpu`` is the same family scaled to train on a
-2-core machine from a 64 px dataset in under an hour (sizes chosen by measurement, see the
-README); ``tiny`` is for tests.
+model's sizes, the Stage I training recipe, and the Stage II probe recipe that goes with them,
+so that a run records every choice it was made with (``RUN/config.json``) and no later stage
+picks a default by the preset's name. ``paper`` is upstream Orbit-Planner's Stage I at 224 px
+(for a GPU); ``cpu`` is the same family scaled to train on a 2-core machine from a 64 px dataset
+in under an hour (sizes chosen by measurement, ``docs/model.md``); ``cpu-step5`` is ``cpu``
+stepping 5 frames per prediction, the run the planner flies; ``tiny`` is for tests.
 """
 
 from __future__ import annotations
@@ -150,24 +152,137 @@ class TrainConfig:
             raise ValueError(f"warmup={self.warmup} is a fraction of the run in [0, 1)")
 
 
+KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
+INTEGRATORS = ("upstream", "coasting")
+INPUTS = ("latent", "latent+change")  # what the latent probe's MLP reads per step
+
+
+@dataclass(frozen=True)
+class ProbeTrainConfig:
+    """How Stage II trains; the loop's fields (see ``train.loop.LoopSettings``) plus the windows
+    and the loss (upstream: windows of 8 + 12 frames, weights pos 1, vel 1, rot6d 1, w 1, fuel
+    0.1, AdamW 3e-4, wd 0.01, batch 256, 25 epochs with 3 of warm-up, cosine, clip 1.0).
+
+    Args:
+        context, horizon, window_stride: windows of ``context + horizon`` model steps,
+            ``window_stride`` frames apart; the probe integrates from the last context step.
+        weights: loss weights of (position, velocity, rot6d, angular velocity, fuel) MSE.
+        cache_windows: 0: every step runs the frozen world model on its batch (upstream). N > 0:
+            train on a seeded subset of N windows whose imagined latents are computed once and
+            kept (see ``probe.cache``); the state-only reference then trains on the same N.
+        scale_windows: training windows whose true increments set the output scale.
+        batch_size ... seed: as in Stage I's TrainConfig.
+    """
+
+    context: int = 8
+    horizon: int = 12
+    window_stride: int = 1
+    weights: tuple[float, float, float, float, float] = (1.0, 1.0, 1.0, 1.0, 0.1)
+    cache_windows: int = 0
+    scale_windows: int = 2048
+    batch_size: int = 256
+    lr: float = 3e-4
+    min_lr: float = 0.0
+    weight_decay: float = 0.01
+    betas: tuple[float, float] = (0.9, 0.999)
+    epochs: int = 25
+    max_steps: int = 0
+    warmup: float = 0.12  # 3 of 25 epochs
+    grad_clip: float = 1.0
+    num_workers: int = 4
+    log_every: int = 10
+    save_every: int = 500
+    seed: int = 42
+
+    def __post_init__(self):
+        if self.context < 1 or self.horizon < 1:
+            raise ValueError(f"context={self.context}, horizon={self.horizon}: both must be >= 1")
+        if len(self.weights) != 5:
+            raise ValueError(f"weights={self.weights}: give 5 (position, velocity, rot6d, w, fuel)")
+        if self.cache_windows < 0:
+            raise ValueError(f"cache_windows={self.cache_windows}: give 0 (no cache) or a number of windows")
+        if self.epochs < 1 or self.max_steps < 0 or self.batch_size < 1:
+            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}, batch_size={self.batch_size}: "
+                             "give epochs >= 1, max_steps >= 0, batch_size >= 1")
+        object.__setattr__(self, "weights", tuple(self.weights))
+        object.__setattr__(self, "betas", tuple(self.betas))
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ProbeTrainConfig":
+        return cls(**d)
+
+    def with_changes(self, **changes) -> "ProbeTrainConfig":
+        """The config with some settings replaced (None values are ignored)."""
+        return replace_given(self, **changes)
+
+
+@dataclass(frozen=True)
+class ProbeRecipe:
+    """The Stage II probe that goes with a Stage I preset: what its MLP reads, how its increments
+    integrate, its size, and how it trains (``orbitmodel probe`` flags override each).
+
+    Args:
+        inputs: "latent" (upstream): the MLP reads z_k. "latent+change": it reads
+            [z_k, z_k - z_{k-1}] (the world model predicts the change of z, and the increments are
+            about change).
+        integrator: "upstream": p' = p + dp, v' = v + dv. "coasting": zero increments hold the
+            world-frame velocity and the position follows it (see ``probe.integrator``).
+        hidden, layers: ``layers`` hidden layers of ``hidden`` units with GELU, then 10 outputs.
+        train: see :class:`ProbeTrainConfig`.
+    """
+
+    inputs: str = "latent"
+    integrator: str = "upstream"
+    hidden: int = 256
+    layers: int = 2
+    train: ProbeTrainConfig = field(default_factory=ProbeTrainConfig)
+
+    def __post_init__(self):
+        if self.inputs not in INPUTS:
+            raise ValueError(f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)}")
+        if self.integrator not in INTEGRATORS:
+            raise ValueError(f"integrator {self.integrator!r}: choose one of {', '.join(INTEGRATORS)}")
+        if self.layers < 1 or self.hidden < 1:
+            raise ValueError(f"layers={self.layers}, hidden={self.hidden}: give at least one hidden layer")
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ProbeRecipe":
+        return cls(**{**d, "train": ProbeTrainConfig.from_dict(d["train"])})
+
+    def with_changes(self, inputs: str | None = None, integrator: str | None = None, **train) -> "ProbeRecipe":
+        """The recipe with some settings replaced (None values are ignored); ``train`` names
+        :class:`ProbeTrainConfig` fields."""
+        return replace(replace_given(self, inputs=inputs, integrator=integrator), train=self.train.with_changes(**train))
+
+
 @dataclass(frozen=True)
 class Preset:
-    """A model size and the training recipe that goes with it."""
+    """A model size, its Stage I training recipe and its Stage II probe recipe."""
 
     name: str
     description: str
     model: ModelConfig
     train: TrainConfig = field(default_factory=TrainConfig)
+    probe: ProbeRecipe = field(default_factory=ProbeRecipe)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
     @classmethod
     def from_dict(cls, d: dict) -> "Preset":
+        """A preset as a run's config.json holds it. A run written before presets carried their
+        probe recipe gets the recipe of the built-in preset of its name (upstream's for others)."""
         train = dict(d["train"])
         train["betas"] = tuple(train["betas"])
+        if "probe" in d:
+            probe = ProbeRecipe.from_dict(d["probe"])
+        else:
+            probe = PRESETS[d["name"]]().probe if d["name"] in PRESETS else ProbeRecipe()
         return cls(name=d["name"], description=d["description"], model=ModelConfig(**d["model"]),
-                   train=TrainConfig(**train))
+                   train=TrainConfig(**train), probe=probe)
 
     def with_model(self, **changes) -> "Preset":
         """The preset with some model settings replaced (None values are ignored)."""
@@ -180,21 +295,34 @@ class Preset:
 
 def _paper() -> Preset:
     return Preset("paper", "upstream Stage I: ViT-tiny/14 at 224 px, latent 256, 6-block predictor (a GPU)",
-                  ModelConfig(), TrainConfig())
+                  ModelConfig(), TrainConfig(), ProbeRecipe())
 
 
 def _cpu() -> Preset:
-    # SIGReg pooled over the batch's 32 x 16 frames at weight 0.2, not upstream's per frame at 0.1:
-    # at 32 windows per step the per-frame statistic barely sees anisotropy and the latents lose
-    # rank (measured on the same data and budget, README: effective rank 42.9 per frame at 0.1,
-    # 61.7 pooled at 0.1, 68.3 pooled at 0.2). Upstream's choice: --no-sigreg-pool --lambda-sigreg 0.1.
+    # SIGReg pooled over the batch's 32 x 16 frames at weight 0.2, not upstream's per frame at
+    # 0.1: at 32 windows per step the per-frame statistic barely sees anisotropy and the latents
+    # lose rank (docs/model.md). Upstream's choice: --no-sigreg-pool --lambda-sigreg 0.1.
     model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
                         state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
                         depth_hidden=64, sigreg_projections=256, sigreg_pool=True, lambda_sigreg=0.2)
     train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
                         epochs=100, max_steps=1000, warmup=0.05, num_workers=0, log_every=10, save_every=100)
+    # The probe reads latent changes and integrates by coasting; fuel weighs 100, not 0.1 (fuel
+    # moves ~1e-4 per step, so at 0.1 its MSE gets no gradient to speak of); it trains 60 epochs
+    # on a cache of 10,240 imagined windows (docs/model.md gives the ablation behind each).
+    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", train=ProbeTrainConfig(
+        window_stride=3, weights=(1.0, 1.0, 1.0, 1.0, 100.0), cache_windows=10240, batch_size=128, lr=1e-3,
+        min_lr=1e-5, epochs=60, warmup=0.05, num_workers=0, log_every=20, save_every=200))
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
-                  "4-block predictor, SIGReg pooled over the batch; < 60 min", model, train)
+                  "4-block predictor, SIGReg pooled over the batch; < 60 min", model, train, probe)
+
+
+def _cpu_step5() -> Preset:
+    # Five frames per predictor step (LeWM's and DINO-WM's frameskip): a 50-frame plan is 10
+    # predictor calls, which keeps the planner within a control period on a 2-core CPU.
+    cpu = _cpu()
+    return replace(cpu.with_model(frame_step=5), name="cpu-step5",
+                   description="the cpu preset stepping 5 frames per prediction: the run the planner flies")
 
 
 def _tiny() -> Preset:
@@ -203,10 +331,13 @@ def _tiny() -> Preset:
                         pred_dropout=0.1, max_seq_len=16, history=4, depth_hidden=16, sigreg_projections=32)
     train = TrainConfig(window=6, window_stride=3, batch_size=4, lr=3e-3, min_lr=1e-4, epochs=2, max_steps=0,
                         warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0)
-    return Preset("tiny", "a few thousand parameters, for tests", model, train)
+    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", hidden=32, train=ProbeTrainConfig(
+        context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4, lr=3e-3, epochs=2,
+        warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0))
+    return Preset("tiny", "a few thousand parameters, for tests", model, train, probe)
 
 
-PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "tiny": _tiny}
+PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "cpu-step5": _cpu_step5, "tiny": _tiny}
 
 
 def get_preset(name: str) -> Preset:

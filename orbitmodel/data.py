@@ -14,9 +14,6 @@ import numpy as np
 from orbitdata import schema as S
 from orbitdata.load.config import IS_PAD
 
-LEVEL_CHOICES = S.LEVELS
-OUTCOME_CHOICES = S.OUTCOMES
-
 
 @dataclass(frozen=True)
 class DatasetMeta:
@@ -69,7 +66,6 @@ def episode_filter(levels: list[str] | None, outcomes: list[str] | None) -> dict
     if outcomes:
         chosen[S.OUTCOME] = list(outcomes)
     return chosen or None
-
 
 
 # ---- model steps of several frames (ModelConfig.frame_step) ------------------------------------

@@ -1,29 +1,31 @@
 #!/usr/bin/env bash
-# Reproduce the README's model results from an empty folder, on a 2-core CPU:
+# Reproduce the model results (docs/results.md) from an empty folder, on a 2-core CPU:
 #   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
-# The headline chain: generate a 64 px dataset -> train the world model (the cpu preset stepping
-# 5 frames per prediction, the run the planner flies) -> eval rollout -> train the probe (Stage II)
-# -> eval probe -> refit the depth head -> train and evaluate the Diffusion Policy -> fly the
-# planner, its three MPPI oracles (and the depth oracle on the Stage I head), Diffusion Policy, the
-# expert and the risky pilot on the grid (same seeds, none used by the dataset) -> Figure 6 -> the
-# planner, three oracles and the references again on a second held-out grid seed (OUT/grid/seed2).
-# ALL=1 adds the per-frame-predictor comparisons of the README: the cpu preset and upstream's
-# per-frame SIGReg recipe (Stage I, probes and their state-only reference, eval), and the planner,
-# learned-dynamics and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
-# QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame planner flights): a
-# check that the chain runs, not the README's numbers.
-# Every step resumes if run again: training, probes, refits and flights whose output exists are
-# skipped (training resumes from its checkpoints); the evaluations re-run (seconds each).
+# The headline chain: generate a 64 px dataset -> train the world model (preset cpu-step5, the run
+# the planner flies) -> eval rollout -> train the probe (Stage II) -> eval probe -> refit the depth
+# head -> train and evaluate the Diffusion Policy -> fly the planner (planner preset cpu), its MPPI
+# oracles (and the depth oracle on the Stage I head), the Diffusion Policy, the expert and the risky
+# pilot on the grid (same seeds, none used by the dataset) -> Figure 6 -> the planner, oracles and
+# references again on a second grid seed (OUT/grid/seed2).
+# ALL=1 adds the per-frame-predictor comparisons: the cpu preset and upstream's per-frame SIGReg
+# recipe (Stage I, probes and their state-only reference, eval), and the planner, learned-dynamics
+# and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
+# QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame flights): a check
+# that the chain runs, not the reported numbers.
+# Every step resumes if run again: training, probes and refits whose output exists are skipped
+# (training resumes from its checkpoints); the evaluations re-run (seconds each). A grid is flown
+# again unless its JSON records ("command") exactly the command that would fly it now, so a
+# changed flag, preset or run re-flies it.
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
-# is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each
-# (how the README's grids were flown): both cores busy.
+# is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each:
+# both cores busy.
 set -euo pipefail
 OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}")
 N=${2:-20}
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
 DATA="$OUT/orbit64"
-WMS="$OUT/wm-cpu-skip5"
+WMS="$OUT/wm-cpu-step5"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
@@ -32,9 +34,6 @@ use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folde
   mkdir -p "$GDIR"
 }
 use_grid 0 "$OUT/grid"
-# MPPI at what plans within 40 ms a control step on the 5-frame-step run, 2 threads (README,
-# "Plan and fly"); the defaults (K 256, H 50, 8 latents of history) are for a faster machine.
-PLAN=(--samples 32 --horizon 50 --history 2)
 EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=()
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
@@ -56,24 +55,46 @@ join() {  # wait for every spawned flight; fail if any failed
   JOBS=()
   return $rc
 }
-fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> grid/NAME.json, unless there
-  local run=$1 json="$GDIR/$2.json" pilot=$3
-  shift 3
+flown_by() {  # flown_by JSON COMMAND...: true when JSON exists and records exactly COMMAND
+  [ -f "$1" ] && "$BIN/python" - "$@" <<'PY'
+import json, sys
+sys.exit(0 if json.load(open(sys.argv[1])).get("command") == sys.argv[2:] else 1)
+PY
+}
+fly() {  # fly JSON COMMAND...: COMMAND --json JSON, then record COMMAND in JSON; skipped if JSON was flown by it
+  local json=$1
+  shift
   mkdir -p "$(dirname "$json")"
-  [ -f "$json" ] || "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" "${PLAN[@]}" "${GRID[@]}" "${FLIGHT[@]}" "$@" --json "$json"
+  flown_by "$json" "$@" && return 0
+  "$@" --json "$json"
+  "$BIN/python" - "$json" "$@" <<'PY'
+import json, sys
+report = json.load(open(sys.argv[1]))
+report["command"] = sys.argv[2:]
+open(sys.argv[1], "w").write(json.dumps(report, indent=2) + "\n")
+PY
+}
+fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> grid/NAME.json
+  local run=$1 name=$2 pilot=$3
+  shift 3
+  fly "$GDIR/$name.json" "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" --planner cpu "${GRID[@]}" \
+    "${FLIGHT[@]}" "$@"
 }
 fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
-fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot, unless its JSON exists
-  local pilot=$1 json="$GDIR/$1.json"
+fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.json
+  local pilot=$1
   shift
-  [ -f "$json" ] || "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@" --json "$json"
+  fly "$GDIR/$pilot.json" "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@"
 }
-train_wm() {  # train_wm RUN [OPTIONS...]: Stage I on the cpu preset, resuming a cut run
-  local run=$1 resume=()
-  shift
+fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
+  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}"
+}
+train_wm() {  # train_wm RUN PRESET [OPTIONS...]: Stage I, resuming a cut run
+  local run=$1 preset=$2 resume=()
+  shift 2
   [ -f "$run/model.safetensors" ] && return 0
   [ -d "$run/checkpoints" ] && resume=(--resume)
-  "$BIN/orbitmodel" train "$DATA" --preset cpu --out "$run" "${resume[@]}" "$@" "${STEPS[@]}"
+  "$BIN/orbitmodel" train "$DATA" --preset "$preset" --out "$run" "${resume[@]}" "$@" "${STEPS[@]}"
 }
 probe_and_eval() {  # probe_and_eval RUN ROLLOUT_HORIZON: eval rollout, the probe, eval probe
   local run=$1 horizon=$2 name
@@ -89,16 +110,16 @@ refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RU
 }
 
 [ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
-# The 5-frame-step run (`--frame-step 5`): 10 predictor calls imagine 50 frames, which keeps the
-# planner within 40 ms a control step here (README, latency). Rollout horizon in model steps.
-step train-skip5 train_wm "$WMS" --frame-step 5
+# The flown run: preset cpu-step5 steps 5 frames per prediction, so 10 predictor calls imagine a
+# 50-frame plan. Rollout horizon in model steps.
+step train-step5 train_wm "$WMS" cpu-step5
 probe_and_eval "$WMS" 10
 refit "$WMS"
 train_dp() {
   local resume=()
   [ -f "$DP/model.safetensors" ] && return 0
   [ -d "$DP/checkpoints" ] && resume=(--resume)
-  "$BIN/orbitmodel" train-policy "$DATA" --policy diffusion --preset cpu --out "$DP" "${resume[@]}" "${STEPS[@]}"
+  "$BIN/orbitmodel" train-policy "$DATA" --preset cpu --out "$DP" "${resume[@]}" "${STEPS[@]}"
 }
 step train-diffusion train_dp
 step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
@@ -111,7 +132,7 @@ depth_pair() {  # the refitted depth head, and the Stage I head it replaces
   join
 }
 rigid_pair() { spawn fly_model oracle-true oracle-true; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join; }
-data_pilots() { spawn fly_data diffusion --pilot-option "run=$DP"; spawn fly_data expert; join; fly_data risky; }
+data_pilots() { spawn fly_policy; spawn fly_data expert; join; fly_data risky; }
 step grid-learned learned_pair fly_model
 step grid-depth depth_pair fly_model
 step grid-rigid rigid_pair
@@ -121,8 +142,7 @@ for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-dep
   FIG6+=("$OUT/grid/$pilot.json")
 done
 step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
-# A second held-out grid seed (README, "A second held-out grid seed"): the planner, the oracles
-# that tell its losses apart, and the references, in OUT/grid/seed2/.
+# A second grid seed: the planner, the oracles that tell its losses apart, and the references.
 use_grid 2 "$OUT/grid/seed2"
 seed2_rest() {
   spawn fly_model oracle-true-dyn-depth oracle-true-dyn-depth; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join
@@ -134,15 +154,15 @@ use_grid 0 "$OUT/grid"
 
 if [ "${ALL:-0}" = 1 ]; then
   # The per-frame predictor: the cpu preset (pooled SIGReg) and upstream's per-frame SIGReg recipe.
-  step train-cpu train_wm "$WM"
-  step train-perframe train_wm "$WMF" --no-sigreg-pool --lambda-sigreg 0.1
+  step train-cpu train_wm "$WM" cpu
+  step train-perframe train_wm "$WMF" cpu --no-sigreg-pool --lambda-sigreg 0.1
   for run in "$WM" "$WMF"; do  # the state-only reference first: eval probe puts it beside the probe
     [ -f "$run/probe-state/model.safetensors" ] || step "probe-state-$(basename "$run")" "$BIN/orbitmodel" probe "$run" "$DATA" \
       --state-only --batch-size 512 --lr 0.002 "${PROBE[@]}"
     probe_and_eval "$run" 50
   done
-  # The README's cpu-run rows were flown before the refit's recipe grew (30,000 frames x 8 epochs)
-  # and before the planner's neighbour filter (--support 0); these pin what they were.
+  # The cpu-run rows (docs/results.md) were flown with the 30,000-frame x 8-epoch refit and
+  # without the planner's neighbour filter (--support 0); these pin what they were.
   refit "$WM" --frames 30000 --epochs 8
   fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}" --support 0; }
   step grid-cpu-learned learned_pair fly_cpu

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 from orbitdata.schema import DT
 
+G0 = 9.80665  # m/s^2, standard gravity (defines specific impulse)
+
 
 @dataclass(frozen=True)
 class CubeSatConfig:
@@ -36,6 +38,11 @@ class CubeSatConfig:
         """
         dry_inertia = self.dry_mass * (2 * self.half_size) ** 2 / 6.0
         return self.dry_mass + fuel_kg, dry_inertia + 0.4 * fuel_kg * self.tank_radius**2
+
+    @property
+    def mass_flow_per_thrust(self) -> float:
+        """kg/s of propellant per unit of normalised thrust (a full command of ``max_thrust``)."""
+        return self.max_thrust / (self.isp * G0)
 
     @property
     def bounding_radius(self) -> float:

@@ -38,9 +38,6 @@ from orbitdata.sim.render import CameraRenderer, pool_depth
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitdata.state import make_state
 
-G0 = 9.80665  # m/s^2, standard gravity (defines specific impulse)
-
-
 def validate_action(action) -> np.ndarray:
     """Return ``action`` as float64 (8,) or raise ValueError saying what is wrong."""
     a = np.asarray(action, dtype=np.float64)
@@ -64,7 +61,7 @@ class CubeSatEnv:
         self.wrench_matrix = wrench_matrix(sim.cubesat)  # (6, 8) body frame
         sat = sim.cubesat
         self.body_radius = sat.bounding_radius  # m
-        self._mdot_per_thrust = sat.max_thrust / (sat.isp * G0)  # kg/s per unit thrust
+        self._mdot_per_thrust = sat.mass_flow_per_thrust  # kg/s per unit thrust
         self._renderer: CameraRenderer | None = None
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None

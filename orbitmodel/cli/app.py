@@ -18,17 +18,26 @@ app.add_typer(eval_app, name="eval")
 
 @app.command("presets")
 def presets() -> None:
-    """List the model presets with their sizes."""
+    """List the world-model presets (sizes, frame step, probe recipe) and the planner presets."""
     from orbitmodel.config import PRESETS
     from orbitmodel.model.world_model import WorldModel
+    from orbitmodel.plan.config import PLANNER_PRESETS
 
+    typer.echo("world model (orbitmodel train --preset NAME):")
     for name, factory in PRESETS.items():
         p = factory()
-        m = p.model
-        typer.echo(f"{name:6s} {WorldModel(m).num_parameters() / 1e6:6.2f}M params  {m.image_size} px, "
+        m, probe = p.model, p.probe
+        typer.echo(f"  {name:9s} {WorldModel(m).num_parameters() / 1e6:6.2f}M params  {m.image_size} px, "
                    f"patch {m.patch_size}, ViT {m.depth}x{m.width}, latent {m.latent_dim}, "
-                   f"predictor {m.pred_depth}x{m.latent_dim}; window {p.train.window}, batch {p.train.batch_size}"
-                   f"\n       {p.description}")
+                   f"predictor {m.pred_depth}x{m.latent_dim}, {m.frame_step} frame(s) a step; window "
+                   f"{p.train.window}, batch {p.train.batch_size}; probe {probe.inputs}, {probe.integrator}, "
+                   f"{probe.train.epochs} epochs\n            {p.description}")
+    typer.echo("planner (orbitmodel eval closed-loop --planner NAME):")
+    for name, factory in PLANNER_PRESETS.items():
+        c = factory()
+        history = c.history or "the model's"
+        typer.echo(f"  {name:9s} K {c.mppi.samples}, H {c.mppi.horizon} frames, history {history}, "
+                   f"{c.memory_frames} frames of depth points, support {c.support}")
 
 
 def _register() -> None:

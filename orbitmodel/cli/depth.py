@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from orbitmodel.cli.errors import friendly
-from orbitmodel.train.depth import DepthRefitConfig
+from orbitmodel.plan.depth_refit import DepthRefitConfig
 
 _D = DepthRefitConfig()
 
@@ -36,12 +36,13 @@ def depth(
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
     closed-loop` uses RUN/depth when it is there (`--depth-head stage1` for the Stage I head).
     """
-    from orbitmodel.train.depth import band_lines, depth_folder, refit_depth_head
+    from orbitmodel.plan.depth_bands import comparison_lines
+    from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head
 
     cfg = DepthRefitConfig(frames=frames, test_frames=test_frames, epochs=epochs, lr=lr, near_weight=near_weight,
                            near_m=near_m, seed=seed)
     result = refit_depth_head(run, dataset, cfg, overwrite=overwrite)
-    for line in band_lines(result):
+    for line in comparison_lines(result):
         typer.echo(line)
     s = result["seconds"]
     typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run)}")

@@ -1,4 +1,5 @@
-"""One-line errors: the library raises, only the CLI exits (2 for bad input, as for usage)."""
+"""One-line errors: the library raises, only the CLI exits (2 for bad input, as for usage; 1 for a
+missing optional dependency or a failing disk)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,8 @@ import functools
 import sys
 
 import typer
+
+from orbitmodel.extras import MissingExtra
 
 BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError)
 
@@ -27,6 +30,8 @@ def friendly(func):
         except KeyboardInterrupt:
             typer.secho("interrupted; run the same command with --resume to continue", err=True)
             sys.exit(130)
+        except MissingExtra as exc:
+            fail(str(exc), code=1)
         except BAD_INPUT as exc:
             fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
         except OSError as exc:

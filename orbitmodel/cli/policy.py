@@ -11,9 +11,8 @@ import typer
 
 from orbitmodel.baselines.diffusion.config import POLICY_PRESETS
 from orbitmodel.cli.errors import friendly
-from orbitmodel.cli.train import Device, Level, Outcome
+from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
-PolicyName = Enum("PolicyName", {"diffusion": "diffusion"}, type=str)
 PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
 Split = Enum("Split", {"test": "test", "train": "train"}, type=str)
 
@@ -27,7 +26,6 @@ def register(app: typer.Typer, eval_app: typer.Typer) -> None:
 def train_policy(
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset folder")],
     out: Annotated[Path, typer.Option("--out", help="run folder to write (checkpoints, metrics, config)")],
-    policy: Annotated[PolicyName, typer.Option(help="the policy family")] = "diffusion",
     preset: Annotated[PolicyPresetName, typer.Option(help="policy size and recipe: cpu or tiny")] = "cpu",
     epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
@@ -56,9 +54,7 @@ def train_policy(
                         levels=tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS,
                         outcomes=tuple(o.value for o in outcome or ()), device=device.value, resume=resume,
                         overwrite=overwrite)
-    result = train(req)
-    typer.echo(f"trained {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} windows/s, "
-               f"{100 * result.data_wait:.1f} % waiting for data); weights in {out}")
+    echo_trained("the policy", train(req), out)
 
 
 @friendly

@@ -9,8 +9,9 @@ from typing import Annotated, Optional
 import typer
 
 from orbitmodel.cli.errors import fail, friendly
-from orbitmodel.cli.train import Device
-from orbitmodel.probe.config import INPUTS, INTEGRATORS
+from orbitmodel.cli.train import Device, echo_trained
+from orbitmodel.config import INPUTS, INTEGRATORS
+from orbitmodel.extras import MissingExtra
 
 Integrator = Enum("Integrator", {name: name for name in INTEGRATORS}, type=str)
 Inputs = Enum("Inputs", {name: name for name in INPUTS}, type=str)
@@ -26,16 +27,16 @@ def probe(
     run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset: a local folder or a Hub repo id")],
     state_only: Annotated[bool, typer.Option(help="train the state-only reference MLP (RUN/probe-state) instead")] = False,
-    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the recipe of the run's preset)")] = None,
+    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the probe recipe of the run's preset)")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
     inputs: Annotated[Optional[Inputs], typer.Option(
-        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}] (measured best); latent: z_k alone (upstream); "
-             "default: upstream's for the paper preset, latent+change otherwise")] = None,
+        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}]; latent: z_k alone (upstream) "
+             "[default: the probe recipe of the run's preset]")] = None,
     integrator: Annotated[Optional[Integrator], typer.Option(
-        help="coasting: zero increments hold the world-frame velocity (measured best); upstream: p += dp, v += dv; "
-             "default: upstream's for the paper preset, coasting otherwise")] = None,
+        help="coasting: zero increments hold the world-frame velocity; upstream: p += dp, v += dv "
+             "[default: the probe recipe of the run's preset]")] = None,
     loss_weights: Annotated[Optional[str], typer.Option(
         help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)")] = None,
     cache_windows: Annotated[Optional[int], typer.Option(
@@ -65,14 +66,13 @@ def probe(
         if len(weights) != 5 or min(weights) < 0:
             fail(f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
                  "(e.g. 1,1,1,1,100)")
-    t = run_recipe(run).with_changes(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
-                                     weights=weights, cache_windows=cache_windows, num_workers=workers, seed=seed)
-    req = ProbeRequest(run=run, dataset=dataset, train=t, kind=kind, inputs=inputs.value if inputs else None,
-                       integrator=integrator.value if integrator else None,
-                       device=device.value, resume=resume, overwrite=overwrite)
-    result = train_probe(req)
-    typer.echo(f"trained the {kind} probe {result.steps} steps in {result.seconds / 60:.1f} min "
-               f"({result.windows_per_s:.1f} windows/s); weights in {probe_folder(run, kind)}")
+    recipe = run_recipe(run).with_changes(
+        inputs=inputs.value if inputs else None, integrator=integrator.value if integrator else None, epochs=epochs,
+        max_steps=max_steps, batch_size=batch_size, lr=lr, weights=weights, cache_windows=cache_windows,
+        num_workers=workers, seed=seed)
+    req = ProbeRequest(run=run, dataset=dataset, recipe=recipe, kind=kind, device=device.value, resume=resume,
+                       overwrite=overwrite)
+    echo_trained(f"the {kind} probe", train_probe(req), probe_folder(run, kind))
 
 
 @friendly
@@ -94,7 +94,7 @@ def eval_probe(
                       horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures)
     try:
         result = evaluate_probe(req)
-    except ImportError as err:
-        fail(f"{err} (or pass --no-figures)")
+    except MissingExtra as err:
+        fail(f"{err}, or pass --no-figures", code=1)
     typer.echo(markdown(result))
     typer.echo("wrote " + ", ".join(result["files"]))

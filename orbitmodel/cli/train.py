@@ -22,6 +22,12 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train)
 
 
+def echo_trained(what: str, result, where) -> None:
+    """The one line every training command ends with (``train.loop.FitResult``)."""
+    typer.echo(f"trained {what} {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} "
+               f"windows/s, {100 * result.data_wait:.1f} % waiting for data); weights in {where}")
+
+
 @friendly
 def train(
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset: a local folder or a Hub repo id")],
@@ -60,6 +66,4 @@ def train(
     req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
                         outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,
                         resume=resume, overwrite=overwrite)
-    result = train_world_model(req)
-    typer.echo(f"trained {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} windows/s, "
-               f"{100 * result.data_wait:.1f} % waiting for data); weights in {out}")
+    echo_trained("the world model", train_world_model(req), out)

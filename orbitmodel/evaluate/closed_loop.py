@@ -1,9 +1,12 @@
-"""Closed loop: fly a planning pilot over the ``orbitdata fly`` grid and record every episode.
+"""Closed loop: fly a planning pilot, or a trained policy, over the ``orbitdata fly`` grid and
+record every episode.
 
 The grid is orbitdata's (obstacle count x initial speed, ``orbitdata.seeding.grid_seed``), so
-the planner, its oracles, the expert and the risky pilot fly exactly the same episodes. None of
-those seeds generated a training episode: :func:`check_unseen_seeds` checks it against the run's
-dataset before flying.
+the planner, its oracles, the Diffusion Policy, the expert and the risky pilot fly exactly the
+same episodes. None of those seeds generated a training episode: :func:`check_unseen_seeds`
+checks it against the run's dataset before flying. A run folder is flown as what it holds: a
+Stage I run by the planning pilot of ``variant``, a policy run (``orbitmodel train-policy``) by
+its own pilot.
 """
 
 from __future__ import annotations
@@ -20,9 +23,12 @@ from orbitdata.seeding import episode_seed, grid_seed
 from orbitdata.sim.env import CubeSatEnv
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
 from orbitdata.fly.rollout import fly_episode
-from orbitmodel.plan.factory import build_pilot
-from orbitmodel.plan.pilot import PlannerConfig, Variant
+from orbitmodel.kinematics import FUEL, P
+from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.plan.factory import build_pilot, camera_for_run
+from orbitmodel.plan.pilot import Variant
 from orbitmodel.plan.timing import Timings
+from orbitmodel.runs import POLICY, RunDir, RunError, stage_of
 
 
 @dataclass(frozen=True)
@@ -30,11 +36,11 @@ class ClosedLoopRequest:
     """One grid flight.
 
     Args:
-        variant: the planning pilot (see ``orbitmodel.plan.pilot``).
-        run: the Stage I run folder (world model, probe, dataset facts); optional for the
-            rigid-body oracles, which then skip the unseen-seed check.
+        variant: the planning pilot (see ``orbitmodel.plan.pilot``); a policy run flies its own.
+        run: the Stage I run folder (world model, probe, dataset facts), or a policy run;
+            optional for the rigid-body oracles, which then skip the unseen-seed check.
         obstacles, speeds, episodes, seed: the grid, as ``orbitdata fly``.
-        planner: the pilot's settings.
+        planner: the planning pilot's settings; ``planner_preset`` names the preset they start from.
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
@@ -47,6 +53,7 @@ class ClosedLoopRequest:
     episodes: int = 20
     seed: int = 0
     planner: PlannerConfig = field(default_factory=PlannerConfig)
+    planner_preset: str = "paper"
     config: GenerationConfig = field(default_factory=GenerationConfig)
     max_steps: int | None = None
     video_dir: Path | None = None
@@ -85,11 +92,36 @@ def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
     goal = np.asarray(result.scenario.goal)
     return {"obstacles": n, "speed": v, "episode": k, "seed": seed, "outcome": result.outcome,
             "frames": int(result.length), "min_clearance_m": float(result.min_clearance.min()),
-            "goal_distance_m": float(np.linalg.norm(result.states[-1, 0:3] - goal)),
-            "fuel_used": float(result.states[0, 15] - result.states[-1, 15]), **result.pilot_info}
+            "goal_distance_m": float(np.linalg.norm(result.states[-1, P] - goal)),
+            "fuel_used": float(result.states[0, FUEL.start] - result.states[-1, FUEL.start]), **result.pilot_info}
 
 
 EpisodeHook = Callable[[CellResult, dict], None]
+
+
+def load_pilot(req: "ClosedLoopRequest", planner: PlannerConfig, sim, timings: Timings):
+    """(pilot, simulator settings, pilot name) for ``req``: the run's policy for a policy run,
+    else the planning pilot of ``req.variant``."""
+    if req.run is not None and stage_of(req.run) == POLICY:
+        from orbitmodel.baselines.diffusion.pilot import load_policy_pilot
+
+        if req.variant != Variant.PLANNER:
+            raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
+        pilot = load_policy_pilot(req.run)
+        return pilot, camera_for_run(sim, pilot.policy), pilot.name
+    pilot, sim = build_pilot(req.variant, req.run, planner, sim, timings)
+    return pilot, sim, req.variant.value
+
+
+def run_dataset(run: Path):
+    """The dataset facts (``DatasetMeta``) a Stage I or policy run recorded."""
+    from orbitmodel.data import DatasetMeta
+
+    raw = RunDir(run).read_config()
+    try:
+        return DatasetMeta.from_dict(raw["dataset"])
+    except (KeyError, TypeError) as err:
+        raise RunError(f"{run}/config.json records no dataset facts ({err}); train the run again") from None
 
 
 class ClosedLoop:
@@ -106,15 +138,17 @@ class ClosedLoop:
         self.req = req
         self.seeds = grid_seeds(req.obstacles, req.speeds, req.episodes, req.seed)
         if req.run is not None:
-            from orbitmodel.train.checkpoint import read_run_config
-
-            meta = read_run_config(req.run).dataset
+            meta = run_dataset(req.run)
             check_unseen_seeds([s for *_, s in self.seeds], meta.root_seed, sum(meta.episodes.values()))
         self.timings = Timings()
         planner = dataclasses.replace(req.planner, record=req.video_dir is not None)
-        self.pilot, sim = build_pilot(req.variant, req.run, planner, req.config.sim, self.timings)
+        self.pilot, sim, self.name = load_pilot(req, planner, req.config.sim, self.timings)
         self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
                                        max_steps=req.max_steps or sim.max_steps)
+
+    def report(self, result: ClosedLoopResult) -> dict:
+        """:func:`closed_loop_report` of this flight."""
+        return closed_loop_report(self.req, result, None if self.name == self.req.variant.value else self.name)
 
     def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
         req, pilot = self.req, self.pilot
@@ -135,13 +169,13 @@ class ClosedLoop:
                 cell.add(result.outcome)
                 record = episode_record(n, v, k, seed, result)
                 out.episodes.append(record)
-                out.step_ms += [1e3 * s for s in pilot.step_seconds]
-                out.replan_ms += [1e3 * s for s in pilot.replan_seconds]
+                out.step_ms += [1e3 * s for s in getattr(pilot, "step_seconds", [])]
+                out.replan_ms += [1e3 * s for s in getattr(pilot, "replan_seconds", [])]
                 if req.video_dir is not None:
                     from orbitmodel.evaluate.video import write_episode_video
 
-                    name = f"{req.variant.value}-obst{n}-v{v:g}-ep{k:03d}-{result.outcome}{req.video_format}"
-                    write_episode_video(Path(req.video_dir) / name, frames, result, pilot.replans)
+                    name = f"{self.name}-obst{n}-v{v:g}-ep{k:03d}-{result.outcome}{req.video_format}"
+                    write_episode_video(Path(req.video_dir) / name, frames, result, getattr(pilot, "replans", []))
                 if on_episode:
                     on_episode(cell, record)
         finally:
@@ -161,13 +195,17 @@ def _stats(values: list[float]) -> dict:
     return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 
-def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult) -> dict:
-    """``orbitdata fly --json``'s table (pilot, seed, settings) plus episodes, settings, latency."""
-    report = grid_report(req.variant.value, req.seed, result.cells)
+def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: str | None = None) -> dict:
+    """``orbitdata fly --json``'s table (pilot, seed, settings) plus episodes, settings, latency;
+    ``pilot``: the name of a pilot that is not a planning variant (a policy run's), which has no
+    planner settings."""
+    planning = pilot is None
+    report = grid_report(req.variant.value if planning else pilot, req.seed, result.cells)
     total = sum(result.timings.values()) or 1.0
     report.update({
         "run": None if req.run is None else str(req.run),
-        "planner": dataclasses.asdict(req.planner),
+        "planner_preset": req.planner_preset if planning else None,
+        "planner": dataclasses.asdict(req.planner) if planning else None,
         "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
         "time_share": {k: v / total for k, v in sorted(result.timings.items())},
         "episodes": result.episodes,

@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 from orbitdata.schema import OUTCOMES
+from orbitmodel.extras import pyplot
 
 
 def read_report(path: str | Path) -> dict:
@@ -80,13 +81,7 @@ def success_table(reports: list[dict]) -> tuple[list[tuple[int, float]], dict[st
 
 def plot_figure6(reports: list[dict], out: str | Path, title: str | None = None) -> Path:
     """Grouped bars (settings + average) per pilot, written to ``out`` (PNG)."""
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise ImportError("Figure 6 needs matplotlib: pip install 'orbitdata[viz]'") from None
+    plt = pyplot()
     settings, rates = success_table(reports)
     labels = [f"{n} obst.\n{v:g} m/s" for n, v in settings] + ["average"]
     width = 0.8 / len(rates)

@@ -6,22 +6,13 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _plt():
-    try:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise RuntimeError("figures need matplotlib: pip install 'orbitdata[viz]'") from None
-    return plt
+from orbitmodel.extras import pyplot
 
 
 def plot_rollout(result: dict, path: Path) -> None:
     """Figure 3: NMSE of the latent rollout vs horizon, one thin line per window, the mean bold,
     with persistence and shuffled actions beside it."""
-    plt = _plt()
+    plt = pyplot()
     h = np.array(result["horizons"])
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, log in zip(axes, (False, True)):
@@ -45,7 +36,7 @@ def plot_rollout(result: dict, path: Path) -> None:
 
 def plot_depth(examples: list, result: dict, path: Path) -> None:
     """Figure 4: test frames, their 16x16 depth and the depth head's prediction (metres)."""
-    plt = _plt()
+    plt = pyplot()
     if not examples:
         return
     fig, axes = plt.subplots(3, len(examples), figsize=(2.2 * len(examples), 6.6), squeeze=False)

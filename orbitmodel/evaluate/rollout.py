@@ -29,11 +29,11 @@ from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.data import load_model_windows, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel, effective_rank
-from orbitmodel.plan.pilot import PlannerConfig
-from orbitmodel.train.checkpoint import RunError
+from orbitmodel.plan.config import MAX_RANGE
+from orbitmodel.plan.depth_bands import DEPTH_BANDS_M, band_lines, depth_by_band
+from orbitmodel.runs import RunError, check_image_size
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
-DEPTH_BANDS_M = (2.0, 5.0, 10.0)  # metres: upper edges of the near bands of true depth
 
 
 @dataclass(frozen=True)
@@ -46,32 +46,7 @@ class RolloutEvalConfig:
     check_h: int = 12  # where the shuffled-action ratio is reported
     frames: int = 4000  # independent test frames for the latent variance and the collapse diagnostics
     depth_bands: tuple[float, ...] = DEPTH_BANDS_M
-    depth_range: float = PlannerConfig.max_range  # metres: cells beyond it are no obstacle to the planner
-
-
-def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=DEPTH_BANDS_M,
-                  seen_within: float = PlannerConfig.max_range) -> dict:
-    """The depth head where the planner needs it: pred, true (...) metres -> per band of true
-    depth [0, e1), [e1, e2), ..., [e_last, inf): cells, MAE and ``missed`` (the share predicted at or
-    beyond ``seen_within``, i.e. dropped by the planner); and ``phantom``, the share of cells truly at
-    or beyond ``seen_within`` that are predicted inside it."""
-    pred, true = pred.flatten().double(), true.flatten().double()
-    bounds = (0.0, *edges, float("inf"))
-    bands = []
-    for lo, hi in zip(bounds[:-1], bounds[1:]):
-        inside = (true >= lo) & (true < hi)
-        n = int(inside.sum())
-        bands.append({"from_m": lo, "to_m": None if hi == float("inf") else hi, "cells": n,
-                      "mae_m": float((pred[inside] - true[inside]).abs().mean()) if n else None,
-                      "missed": float((pred[inside] >= seen_within).double().mean()) if n else None})
-    far = true >= seen_within
-    phantom = float((pred[far] < seen_within).double().mean()) if far.any() else None
-    return {"range_m": seen_within, "bands": bands, "phantom": phantom}
-
-
-def band_label(band: dict) -> str:
-    """'0-2 m', ..., '>= 10 m': a band of :func:`depth_by_band`."""
-    return f"{band['from_m']:g}-{band['to_m']:g} m" if band["to_m"] is not None else f">= {band['from_m']:g} m"
+    depth_range: float = MAX_RANGE  # metres: cells beyond it are no obstacle to the planner
 
 
 def derangement(n: int, seed: int) -> np.ndarray:
@@ -104,10 +79,7 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     """Every figure of the rollout evaluation, as one JSON-able dict (curves per window included)."""
     torch.set_grad_enabled(False)
     model = WorldModel.from_pretrained(run)
-    meta = read_dataset_meta(dataset)
-    if meta.image_size != model.config.image_size:
-        raise RunError(f"{run} was trained on {model.config.image_size} px images but {dataset} holds "
-                       f"{meta.image_size} px; evaluate on a dataset generated with --image-size {model.config.image_size}")
+    check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
     stats_mean = _depth_mean(dataset)
     step = model.config.frame_step  # context and horizon count the model's steps of `step` frames
     windows = load_model_windows(dataset, step, split="test", context=cfg.context, horizon=cfg.horizon,
@@ -216,18 +188,6 @@ def write_rollout_report(result: dict, out: Path) -> list[Path]:
     return paths
 
 
-def _band_lines(bands: dict | None) -> list[str]:
-    if not bands:
-        return []
-    rows = [f"  depth by true distance (missed: predicted at or beyond the planner's {bands['range_m']:g} m):"]
-    for b in bands["bands"]:
-        if b["cells"]:
-            rows.append(f"    {band_label(b):>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %")
-    if bands["phantom"] is not None:
-        rows.append(f"    far cells predicted inside {bands['range_m']:g} m (phantom obstacles): {100 * bands['phantom']:.1f} %")
-    return rows
-
-
 def summary_lines(result: dict) -> list[str]:
     c = result["checks"]
     h = result["config"]["check_h"]
@@ -243,7 +203,7 @@ def summary_lines(result: dict) -> list[str]:
              f"shuffled / recorded NMSE at h={h}: {c[f'shuffled_over_recorded_nmse_at_h{h}']:.2f}",
              f"depth MAE {result['depth_mae_m']:.3f} m vs mean baseline {result['depth_mean_baseline_mae_m']:.3f} m "
              f"({100 * c['depth_mae_reduction_vs_mean']:.0f} % lower)",
-             *_band_lines(result.get("depth_by_band")),
+             *band_lines(result.get("depth_by_band")),
              f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} test frames; "
              f"z std min {result['z_std_min']:.3f}, median {result['z_std_median']:.3f}"]
     return rows

@@ -11,6 +11,7 @@ import numpy as np
 from orbitdata.schema import FPS
 from orbitdata.viz.topdown import PlaneMap
 from orbitdata.viz.video import write_video
+from orbitmodel.kinematics import P
 
 IMAGINED = (255, 210, 60)  # RGB: the imagined path
 BELIEVED = (230, 80, 230)  # RGB: the obstacle points
@@ -27,7 +28,7 @@ def draw_belief(img: np.ndarray, view: PlaneMap, path: np.ndarray, points: np.nd
 
 def episode_frames(frames: list[np.ndarray], result, replans: list, side: int = 256) -> list[np.ndarray]:
     """One (side, 2 side, 3) RGB frame per camera frame: camera | map with path and belief."""
-    positions = result.states[:, 0:3]
+    positions = result.states[:, P]
     view = PlaneMap(result.scenario, side, positions)
     base = view.background()
     by_step = sorted(replans, key=lambda r: r.step)

@@ -27,9 +27,11 @@ from torch import nn
 
 from orbitdata.schema import DEPTH_LOW_SIDE
 from orbitmodel.config import ModelConfig
+from orbitmodel.model.normalise import NormalisedStates
 from orbitmodel.model.predictor import Predictor
 from orbitmodel.model.sigreg import sigreg
 from orbitmodel.model.vit import ViT
+from orbitmodel.runs import RunError, fingerprint, load_run
 
 
 def mlp(dims: tuple[int, ...]) -> nn.Sequential:
@@ -79,7 +81,7 @@ def images_to_float(images: torch.Tensor) -> torch.Tensor:
     return images.float() / 255.0 if images.dtype == torch.uint8 else images.float()
 
 
-class WorldModel(nn.Module):
+class WorldModel(NormalisedStates, nn.Module):
     """Orbit-Planner's Stage I model. Build it from a :class:`ModelConfig`, or load a trained one
     with :meth:`from_pretrained`. Inference methods expect ``model.eval()`` (BatchNorm running
     statistics); wrap them in ``torch.no_grad()`` unless you need gradients.
@@ -96,8 +98,7 @@ class WorldModel(nn.Module):
         self.pred_projector = LinearBN(c.latent_dim, c.latent_dim)
         self.depth_head = DepthHead(c)
         # Normalisation of the raw dataset values (set from meta/stats.json before training).
-        self.register_buffer("state_mean", torch.zeros(c.state_dim))
-        self.register_buffer("state_std", torch.ones(c.state_dim))
+        self.register_state_stats(c.state_dim)
         self.register_buffer("depth_scale", torch.tensor(50.1))  # metres per unit of the depth head
         self._compiled_step = None  # set by compile_rollout()
         self.initialize_weights()
@@ -123,8 +124,7 @@ class WorldModel(nn.Module):
 
     def set_normalisation(self, state_mean, state_std, depth_scale: float) -> None:
         """Take the dataset's state mean/std (16,) and depth range (metres) from meta/stats.json."""
-        self.state_mean.copy_(torch.as_tensor(state_mean, dtype=torch.float32))
-        self.state_std.copy_(torch.as_tensor(state_std, dtype=torch.float32).clamp(min=1e-3))
+        self.set_state_stats(state_mean, state_std)
         self.depth_scale.fill_(float(depth_scale))
 
     # ---- the three public operations --------------------------------------------------------
@@ -168,16 +168,15 @@ class WorldModel(nn.Module):
 
     def compile_rollout(self) -> "WorldModel":
         """Make :meth:`rollout` run its imagined step through ``torch.compile`` (inductor; on a CPU
-        it needs a C++ compiler). Same latents to float rounding (~1e-5 on the README's ``cpu``
-        run); on this 2-core CPU the K = 32, H = 50 rollout took 174 -> 114 ms
-        (``benchmarks/bench_plan.py --compile``). The first rollouts of each batch and window
-        size are slow while it compiles. Inference only: the model must be in eval mode."""
+        it needs a C++ compiler). Same latents to float rounding; ``benchmarks/bench_plan.py
+        --compile`` measures the speed-up. The first rollouts of each batch and window size are
+        slow while it compiles. Inference only: the model must be in eval mode."""
         self._compiled_step = torch.compile(self.imagine_step, dynamic=False)
         return self
 
     def predict_depth(self, images: torch.Tensor, head: nn.Module | None = None) -> torch.Tensor:
         """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres, by ``head`` (a refitted
-        copy of the depth head, ``orbitmodel.train.depth``) or the model's own."""
+        copy of the depth head, ``orbitmodel.plan.depth_refit``) or the model's own."""
         B, T = images.shape[:2]
         _, patches = self.encoder(images_to_float(images.flatten(0, 1)))
         return self.depth_from_patches(patches, head).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
@@ -189,7 +188,7 @@ class WorldModel(nn.Module):
 
     def latent_from_cls(self, cls: torch.Tensor, states: torch.Tensor) -> torch.Tensor:
         """The ViT's CLS features (N, width) and raw states (N, 16) -> z (N, D) (``encode``'s projection)."""
-        s = self.state_encoder((states - self.state_mean) / self.state_std)  # (N, embed)
+        s = self.state_encoder(self.normalise_states(states))  # (N, embed)
         return self.projector(torch.cat([cls, s], dim=-1))
 
     # ---- training ---------------------------------------------------------------------------
@@ -232,13 +231,21 @@ class WorldModel(nn.Module):
     # ---- persistence ------------------------------------------------------------------------
     @classmethod
     def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "WorldModel":
-        """Load a trained model from a run folder (``orbitmodel train --out RUN``), in eval mode."""
-        from orbitmodel.train.checkpoint import load_weights, read_run_config
+        """Load a trained model from a run folder (``orbitmodel train --out RUN``), in eval mode.
 
-        run = read_run_config(path)
-        model = cls(run.preset.model)
-        model.load_state_dict(load_weights(path))
-        model.run_info = run.dataset
+        ``model.run`` keeps the run's config (preset, dataset facts) and ``model.fingerprint``
+        the weights' identity, which every sub-run (probe, depth refit) records."""
+        run = load_run(path)
+        model = cls(run.config.preset.model)
+        try:
+            model.load_state_dict(run.weights)
+        except RuntimeError as err:
+            raise RunError(f"{path}: the weights do not fit the model its config.json describes "
+                           f"({str(err).splitlines()[1].strip() if len(str(err).splitlines()) > 1 else err}); "
+                           "train the run again") from None
+        model.run = run.config
+        model.run_info = run.config.dataset
+        model.fingerprint = fingerprint(run.weights)
         return model.to(device).eval()
 
     def num_parameters(self) -> int:

@@ -1,10 +1,14 @@
 """Planning: MPPI over thrust sequences on imagined futures (``orbitmodel.plan``).
 
-    from orbitmodel.plan import MPPI, MPPIConfig, PlannerConfig, Variant, build_pilot
+    from orbitmodel.plan import MPPI, MPPIConfig, PlannerConfig, Variant, build_pilot, planner_config
 
+* :mod:`~orbitmodel.plan.config`: PlannerConfig and the named planner presets (``paper``, ``cpu``);
 * :mod:`~orbitmodel.plan.mppi`: the sampler, generic over a cost ``(K, H, 8) -> (K,)``;
 * :mod:`~orbitmodel.plan.dynamics`: the world model + probe, and the rigid-body oracle;
+* :mod:`~orbitmodel.plan.frames`: one encoder pass per observed frame, shared by dynamics and depth;
 * :mod:`~orbitmodel.plan.obstacles`: depth -> world points, and the true obstacles (oracles);
+* :mod:`~orbitmodel.plan.depth_refit`: the depth head refitted for near cells (``orbitmodel depth``),
+  scored by :mod:`~orbitmodel.plan.depth_bands`;
 * :mod:`~orbitmodel.plan.cost`: collision, progress, effort, spin, heading, speed;
 * :mod:`~orbitmodel.plan.pilot`: the pilots (``orbitdata.fly`` interface) and their variants;
 * :mod:`~orbitmodel.plan.factory`: a pilot from a run folder.
@@ -23,13 +27,16 @@ _LAZY = {
     "PointCloud": "orbitmodel.plan.obstacles",
     "TrueObstacles": "orbitmodel.plan.obstacles",
     "depth_to_points": "orbitmodel.plan.obstacles",
-    "PlannerConfig": "orbitmodel.plan.pilot",
+    "PlannerConfig": "orbitmodel.plan.config",
+    "PLANNER_PRESETS": "orbitmodel.plan.config",
+    "planner_config": "orbitmodel.plan.config",
+    "DepthRefitConfig": "orbitmodel.plan.depth_refit",
+    "refit_depth_head": "orbitmodel.plan.depth_refit",
     "PlannerPilot": "orbitmodel.plan.pilot",
     "OraclePilot": "orbitmodel.plan.pilot",
     "Variant": "orbitmodel.plan.pilot",
     "build_pilot": "orbitmodel.plan.factory",
     "pilot_factory": "orbitmodel.plan.factory",
-    "planner_config": "orbitmodel.plan.factory",
 }
 
 

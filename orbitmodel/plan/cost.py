@@ -15,11 +15,12 @@ steps before it reaches the goal (the episode ends there, so nothing after count
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Protocol
 
 import torch
+
+from orbitmodel.kinematics import HULL_RADIUS, P, V, W
 
 
 class ObstacleField(Protocol):
@@ -32,7 +33,7 @@ class CostConfig:
     """Weights (cost units per the unit named) and the geometry of the collision ramp.
 
     Args:
-        hull_radius: metres, the bounding sphere of the 0.1 m cube (sqrt(3) x 0.05).
+        hull_radius: metres, the bounding sphere of the 1U hull (orbitdata's ``CubeSatConfig``).
         margin: metres of clearance beyond the hull where the collision ramp starts.
         collision, crash, progress, terminal, effort, spin, heading, speed: the weights above.
         max_speed: m/s above which the speed term applies.
@@ -40,7 +41,7 @@ class CostConfig:
             (a little inside it, so the plan does not graze the edge).
     """
 
-    hull_radius: float = math.sqrt(3) * 0.05
+    hull_radius: float = HULL_RADIUS
     margin: float = 0.4
     collision: float = 20.0
     crash: float = 200.0
@@ -72,8 +73,8 @@ def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Ten
     """states (K, H, 16), actions (K, H, 8) thrust in [0,1], goal (3,) metres -> cost (K,) and its terms."""
     c = config
     H = states.shape[1]
-    p = states[..., 0:3]  # (K, H, 3) metres, world
-    v = states[..., 3:6]  # (K, H, 3) m/s, body
+    p = states[..., P]  # (K, H, 3) metres, world
+    v = states[..., V]  # (K, H, 3) m/s, body
     dist = (p - goal).norm(dim=-1)  # (K, H) metres
     arrived = torch.cummax((dist < c.goal_fraction * goal_radius).int(), 1).values.bool()  # (K, H)
     # The step that arrives still counts (it must be collision-free); the ones after do not.
@@ -86,7 +87,7 @@ def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Ten
         "progress": c.progress * (dist * live).sum(1) / H,
         "terminal": c.terminal * dist[:, -1] * (~arrived[:, -1]).float(),
         "effort": c.effort * (actions.sum(-1) * live).sum(1) / H,
-        "spin": c.spin * ((states[..., 12:15] ** 2).sum(-1) * live).sum(1) / H,
+        "spin": c.spin * ((states[..., W] ** 2).sum(-1) * live).sum(1) / H,
         "heading": c.heading * ((1 - v[..., 0] / speed.clamp(min=0.1)) * live).sum(1) / H,
         "speed": c.speed * ((speed - c.max_speed).clamp(min=0) ** 2 * live).sum(1) / H,
     }

@@ -12,7 +12,6 @@ states after each action (frames t+1..t+H), in the dataset's convention (``orbit
 from __future__ import annotations
 
 from collections import deque
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -20,11 +19,9 @@ import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, interpolate_frames, matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.frames import FrameEncoder
-from orbitmodel.plan.rotation import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.timing import Timings
-
-G0 = 9.80665  # m/s^2, defines specific impulse (as orbitdata.sim.env)
 
 # probe(z_future (B, n, D), state0 (B, 16), z_last (B, D)) -> states (B, n, 16), frames t+1..t+n:
 # the PhysicsProbe's API; z_last, the latent of frame t, is what a probe reading latent changes
@@ -54,7 +51,7 @@ class RigidBodyDynamics:
         fine = sim.substeps // substeps  # simulator steps folded into each of ours
         self._fold = (fine - 1) / (2 * fine)
         self.W = torch.tensor(wrench_matrix(cubesat), dtype=torch.float32)  # (6, 8) [N; N m] per unit thrust
-        self.mdot = cubesat.max_thrust / (cubesat.isp * G0)  # kg/s per unit thrust
+        self.mdot = cubesat.mass_flow_per_thrust  # kg/s per unit thrust
         self.timings = timings or Timings()
 
     def reset(self) -> None:
@@ -75,17 +72,17 @@ class RigidBodyDynamics:
         K, H, _ = actions.shape
         n, h = self.substeps, self.dt / self.substeps
         s0 = state0.float().expand(K, -1)
-        R0 = rot6d_to_matrix(s0[:, 6:12])  # (K, 3, 3) body -> world
+        R0 = rot6d_to_matrix(s0[:, ROT])  # (K, 3, 3) body -> world
         # Fuel: once the tank is empty it stays empty, so the fuel at each step's start is the
         # clamped running sum; the step that empties it is scaled to what was left (as the env).
         burn = actions.sum(-1) * (self.mdot * self.dt)  # (K, H) kg per step at full command
-        fuel = (s0[:, 15:16] * self.cubesat.fuel_mass - (torch.cumsum(burn, 1) - burn)).clamp(min=0.0)  # (K, H) kg
+        fuel = (s0[:, FUEL] * self.cubesat.fuel_mass - (torch.cumsum(burn, 1) - burn)).clamp(min=0.0)  # (K, H) kg
         scale = (fuel / burn.clamp(min=1e-12)).clamp(max=1.0)  # (K, H)
         mass, inertia = self.cubesat.mass_properties(fuel)  # (K, H) each, held over the step
         wrench = (actions * scale[..., None]) @ self.W.T  # (K, H, 6) body frame
         accel = (wrench[..., :3] / mass[..., None]).repeat_interleave(n, 1)  # (K, H n, 3) m/s^2, body
         alpha = (wrench[..., 3:] / inertia[..., None]).repeat_interleave(n, 1)  # (K, H n, 3) rad/s^2, body
-        w = s0[:, None, 12:15] + torch.cumsum(alpha * h, 1)  # (K, H n, 3) after each substep
+        w = s0[:, None, W] + torch.cumsum(alpha * h, 1)  # (K, H n, 3) after each substep
         # The simulator's fine steps inside one of ours turn by sum_i w_i h/f = (w - c alpha h) h
         # and move by (v - c a h) h, with c = (f - 1) / 2f: the same scheme, summed exactly.
         turn = so3_exp((w - self._fold * h * alpha) * h)  # (K, H n, 3, 3)
@@ -93,12 +90,12 @@ class RigidBodyDynamics:
         for j in range(H * n):
             Rs.append(Rs[-1] @ turn[:, j])
         R = torch.stack(Rs, 1)  # (K, H n + 1, 3, 3): R[:, j] at the start of substep j
-        v0 = (R0 @ s0[:, 3:6, None]).squeeze(-1)  # (K, 3) m/s, world
+        v0 = (R0 @ s0[:, V, None]).squeeze(-1)  # (K, 3) m/s, world
         # ... and push along the attitude they pass through: R (I + c h [w]x) to first order.
         accel = accel + self._fold * h * torch.linalg.cross(w, accel, dim=-1)
         accel_world = (R[:, :-1] @ accel[..., None]).squeeze(-1)  # (K, H n, 3)
         v = v0[:, None] + torch.cumsum(accel_world * h, 1)  # (K, H n, 3) m/s, world
-        p = s0[:, None, 0:3] + torch.cumsum((v - self._fold * h * accel_world) * h, 1)  # (K, H n, 3) metres, world
+        p = s0[:, None, P] + torch.cumsum((v - self._fold * h * accel_world) * h, 1)  # (K, H n, 3) metres, world
         end = slice(n - 1, None, n)  # the last substep of each control step
         R_end = R[:, n::n]  # (K, H, 3, 3)
         v_body = (R_end.transpose(-1, -2) @ v[:, end, :, None]).squeeze(-1)  # (K, H, 3)
@@ -189,25 +186,3 @@ class LearnedDynamics:
             start = state0.float().expand(K, -1)
             states = self.probe(z_future, start, z_ctx[:, -1])  # (K, H / s, 16)
             return states if s == 1 else interpolate_frames(start, states, s)
-
-
-def interpolate_frames(state0: torch.Tensor, states: torch.Tensor, step: int) -> torch.Tensor:
-    """States every ``step`` frames -> every frame, linearly: state0 (K, 16) at frame t and states
-    (K, n, 16) at t+step, ..., t+n step -> (K, n step, 16) at t+1..t+n step. The attitude columns
-    are interpolated too and re-orthonormalised."""
-    knots = torch.cat([state0[:, None], states], 1)  # (K, n+1, 16)
-    frac = torch.arange(1, step + 1, dtype=states.dtype, device=states.device) / step  # (step,)
-    a, b = knots[:, :-1, None], knots[:, 1:, None]  # (K, n, 1, 16)
-    out = (a + (b - a) * frac[:, None]).flatten(1, 2)  # (K, n step, 16)
-    return torch.cat([out[..., :6], matrix_to_rot6d(rot6d_to_matrix(out[..., 6:12])), out[..., 12:]], -1)
-
-
-def load_probe(run: str | Path) -> Probe:
-    """The physics probe trained on ``run`` (``orbitmodel probe RUN`` writes ``RUN/probe/``)."""
-    from orbitmodel.probe import PhysicsProbe
-    from orbitmodel.train.checkpoint import RunError
-
-    folder = Path(run) / "probe"
-    if not folder.is_dir():
-        raise RunError(f"{run} has no physics probe ({folder} is missing); train one with `orbitmodel probe {run}`")
-    return PhysicsProbe.from_pretrained(run).eval()

@@ -13,11 +13,16 @@ import numpy as np
 import torch
 
 from orbitdata.sim.config import SimConfig
-from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, load_probe
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.config import PlannerConfig, planner_config
+from orbitmodel.plan.depth_refit import refit_head_for
+from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.obstacles import Camera
-from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Variant
+from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
+from orbitmodel.probe import PhysicsProbe
+from orbitmodel.runs import RunError
 
 
 class PredictedDepth:
@@ -43,16 +48,6 @@ class PredictedDepth:
             return self.model.depth_from_patches(patches, self.head)[0].numpy()  # (16, 16) metres
 
 
-def depth_head_for(run: str | Path, model, choice: str):
-    """The refitted depth head for ``choice`` "refit" (RunError if the run has none), "auto" (if
-    there is one) or None ("stage1", or "auto" without a refit)."""
-    from orbitmodel.train.depth import WEIGHTS, depth_folder, load_refit_head
-
-    if choice == "stage1" or (choice == "auto" and not (depth_folder(run) / WEIGHTS).is_file()):
-        return None
-    return load_refit_head(run, model)
-
-
 def sensor_depth(obs: dict) -> np.ndarray:
     """The rendered depth_low: a perfect depth head (the ``oracle-true-dyn-sensor`` variant)."""
     return obs["depth_low"]
@@ -60,8 +55,6 @@ def sensor_depth(obs: dict) -> np.ndarray:
 
 def load_world_model(run: str | Path | None, variant: Variant):
     """The run's world model in eval mode; raises a one-line error when the variant needs one and there is none."""
-    from orbitmodel.model.world_model import WorldModel
-
     if run is None:
         raise ValueError(f"pilot {variant.value} plans with the world model: give the run folder (RUN)")
     return WorldModel.from_pretrained(run)
@@ -73,8 +66,6 @@ def camera_for_run(sim: SimConfig, model) -> SimConfig:
     The camera of ``sim`` must be the default one or already the run's: a checkpoint trained at
     another size or field of view would see different images (raises RunError).
     """
-    from orbitmodel.train.checkpoint import RunError
-
     size, fovy = model.config.image_size, float(model.run_info.fovy_deg)
     cam = sim.camera
     default = type(cam)()
@@ -91,8 +82,6 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
 
     Raises RunError (a ValueError) for a run without weights or probe, or with another camera.
     """
-    from orbitmodel.train.checkpoint import RunError
-
     variant = Variant(variant)
     timings = timings or Timings()
     model = load_world_model(run, variant) if variant.needs_model else None
@@ -108,10 +97,11 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
                            f"{max(step, config.mppi.horizon // step * step)}")
         if config.compile:
             model.compile_rollout()
-        dynamics = LearnedDynamics(model, load_probe(run), timings, history=config.history or None, frames=frames)
+        probe = PhysicsProbe.from_pretrained(run, world_model=model.fingerprint)
+        dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)
     else:
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
-    depth = {"depth-head": lambda: PredictedDepth(model, timings, depth_head_for(run, model, config.depth_head),
+    depth = {"depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head),
                                                   frames),
              "sensor": lambda: sensor_depth,
              "true": lambda: None}[variant.obstacles]()
@@ -124,11 +114,13 @@ def pilot_factory(variant: Variant | str):
     """An ``orbitdata.fly`` factory for ``variant``: ``factory(config, run=None, **planner) -> Pilot``.
 
     ``make_planner`` below is registered as the ``orbitdata.pilots`` entry point ``planner``, so
-    ``orbitdata fly --pilot planner --pilot-option run=RUN --image-size 64`` flies it. ``planner`` options are PlannerConfig / MPPIConfig field names (``samples``, ``horizon``,
-    ``memory_frames``, ...); ``orbitdata fly --pilot-option`` passes strings, converted here.
+    ``orbitdata fly --pilot planner --pilot-option run=RUN --pilot-option planner=cpu --image-size 64``
+    flies it. ``planner`` names a planner preset (``plan.config.PLANNER_PRESETS``, default
+    ``paper``); the other options are PlannerConfig / MPPIConfig / CostConfig field names
+    (``samples``, ``horizon``, ``memory_frames``, ...); ``--pilot-option`` passes strings, converted here.
     """
-    def factory(config, run: str | None = None, **options) -> PlannerPilot:
-        pilot, sim = build_pilot(variant, run, planner_config(**options), config.sim)
+    def factory(config, run: str | None = None, planner: str = "paper", **options) -> PlannerPilot:
+        pilot, sim = build_pilot(variant, run, planner_config(planner, **options), config.sim)
         if sim.camera != config.sim.camera:
             raise ValueError(f"pilot {Variant(variant).value} needs the run's camera ({sim.camera.image_size} px); "
                              "fly it with `orbitmodel eval closed-loop`, which sets it")
@@ -137,26 +129,8 @@ def pilot_factory(variant: Variant | str):
     return factory
 
 
-def planner_config(**options) -> PlannerConfig:
-    """A PlannerConfig from flat options: MPPIConfig, CostConfig and PlannerConfig field names
-    (values may be strings, as the command line gives them)."""
-    from orbitmodel.plan.cost import CostConfig
-    from orbitmodel.plan.mppi import MPPIConfig
-
-    parts: dict[type, dict] = {MPPIConfig: {}, CostConfig: {}, PlannerConfig: {}}
-    for key, value in options.items():
-        owner = next((cls for cls in parts if key in {f.name for f in dataclasses.fields(cls)}), None)
-        if owner is None or key in ("mppi", "cost"):
-            raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
-        kind = type(getattr(owner(), key))
-        parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
-            else kind(value)
-    return PlannerConfig(mppi=MPPIConfig(**parts[MPPIConfig]), cost=CostConfig(**parts[CostConfig]),
-                         **parts[PlannerConfig])
-
-
-def make_planner(config, run: str | None = None, **options) -> PlannerPilot:
+def make_planner(config, run: str | None = None, planner: str = "paper", **options) -> PlannerPilot:
     """The ``planner`` entry point of ``orbitdata.pilots``: the MPPI planner on a trained run."""
     if run is None:
         raise ValueError("pilot 'planner' needs its run folder: pass --pilot-option run=RUN")
-    return pilot_factory(Variant.PLANNER)(config, run, **options)
+    return pilot_factory(Variant.PLANNER)(config, run, planner, **options)

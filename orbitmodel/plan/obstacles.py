@@ -25,7 +25,7 @@ import torch
 from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.schema import DEPTH_LOW_SIDE
 from orbitdata.sim.config import SimConfig
-from orbitmodel.plan.rotation import rot6d_to_matrix
+from orbitmodel.kinematics import P, ROT, rot6d_to_matrix
 
 
 @dataclass(frozen=True)
@@ -115,8 +115,8 @@ def depth_to_points(depth: np.ndarray, state: np.ndarray, camera: Camera, max_ra
     d = depth[keep]  # (N,)
     body = np.asarray(camera.position) + d[:, None] * camera.cell_rays(depth.shape[0])[keep]  # (N, 3)
     s = np.asarray(state, dtype=np.float64)
-    R = rot6d_to_matrix(torch.as_tensor(s[6:12])).numpy()  # body -> world
-    points = s[0:3] + body @ R.T
+    R = rot6d_to_matrix(torch.as_tensor(s[ROT])).numpy()  # body -> world
+    points = s[P] + body @ R.T
     return points, footprint * 0.5 * camera.cell_width(depth.shape[0]) * d
 
 

@@ -23,7 +23,7 @@ planner never sees the obstacle list. The classes are ``orbitdata.fly.Pilot`` su
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from enum import Enum
 from typing import Callable
 
@@ -34,8 +34,10 @@ from orbitdata.fly import Pilot
 from orbitdata.seeding import rng
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
-from orbitmodel.plan.cost import CostConfig, trajectory_cost
-from orbitmodel.plan.mppi import MPPI, MPPIConfig, PlanResult
+from orbitmodel.kinematics import P
+from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.plan.cost import trajectory_cost
+from orbitmodel.plan.mppi import MPPI
 from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, depth_to_points
 from orbitmodel.plan.timing import Timings
 
@@ -64,71 +66,6 @@ class Variant(str, Enum):
     @property
     def needs_model(self) -> bool:
         return self.learned_dynamics or self.obstacles == "depth-head"
-
-
-@dataclass(frozen=True)
-class PlannerConfig:
-    """Everything a planning pilot is tuned by.
-
-    Args:
-        mppi: sampling (K, H, noise, temperature); see :class:`MPPIConfig`.
-        cost: weights and margins; see :class:`CostConfig`.
-        noise: "wrench" (perturb along thrust patterns that make independent body forces and
-            torques, torques scaled by ``torque_noise``) or "thrust" (each thruster alone).
-        torque_noise: scale of the torque patterns against the force patterns.
-        history: latents the world model sees per imagined step (0: its own ``config.history``,
-            8). Fewer is faster (the rollout's cost is proportional) and less accurate.
-        memory_frames: depth frames whose points stay in the world-frame cloud (1: current only).
-            50 (2 s) by measurement on a validation grid seed (1, not the reported 0): the
-            depth-head oracle flew 75.0 / 78.3 / 81.7 / 83.3 / 83.3 % at 1 / 10 / 25 / 50 / 100.
-        max_range: metres; depth cells farther than this are not obstacles to plan around.
-        depth_head: which depth head gives the point cloud: "stage1" (trained with the world
-            model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth) or
-            "auto" (the refit when the run has one, else Stage I's).
-        footprint: a point's sphere radius in half cell widths at its depth.
-        support: keep a depth cell only if this many of its 8 neighbours are at a similar depth
-            (``obstacles.supported_cells``; 0: keep every cell within ``max_range``). 1 by
-            measurement on the validation grid seed 1: with the refitted head of the 5-frame-step
-            run the planner flew 86.7 / 95.0 / 91.7 % at 0 / 1 / 2 (README "Plan and fly").
-        reach: metres of clearance beyond which points are ignored (>= the collision margin).
-        rigid_substeps: substeps of the rigid-body model (the simulator's 8 = exact).
-        replan_every: control steps between replans (in between, the plan's next step runs).
-        compile: run the world model's imagined step through ``torch.compile``
-            (:meth:`WorldModel.compile_rollout`; learned-dynamics pilots only). Same plans to
-            float rounding, ~35 % faster rollouts on this CPU, slow first replans.
-        record: keep each replan's best imagined path and the believed points (for videos).
-    """
-
-    mppi: MPPIConfig = field(default_factory=MPPIConfig)
-    cost: CostConfig = field(default_factory=CostConfig)
-    noise: str = "wrench"
-    torque_noise: float = 0.3
-    history: int = 0
-    memory_frames: int = 50
-    max_range: float = 10.0
-    depth_head: str = "auto"
-    footprint: float = 1.0
-    support: int = 1
-    reach: float = 1.0
-    rigid_substeps: int = 1
-    replan_every: int = 1
-    compile: bool = False
-    record: bool = False
-
-    def __post_init__(self):
-        if self.noise not in ("wrench", "thrust"):
-            raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
-        if self.depth_head not in ("auto", "stage1", "refit"):
-            raise ValueError(f"depth_head={self.depth_head!r}: use 'auto', 'stage1' or 'refit'")
-        if self.history < 0:
-            raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
-        if not 0 <= self.support <= 8:
-            raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
-        if self.replan_every < 1 or self.memory_frames < 1:
-            raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
-        if self.reach < self.cost.margin + self.cost.hull_radius:
-            raise ValueError(f"reach={self.reach} m is shorter than the collision ramp "
-                             f"({self.cost.hull_radius + self.cost.margin:.2f} m)")
 
 
 def wrench_noise_basis(sim: SimConfig, torque_scale: float) -> torch.Tensor:
@@ -243,7 +180,6 @@ class PlannerPilot(Pilot):
         self.nonfinite_actions = 0
         self.clipped_actions = 0
         self.replans: list[Replan] = []
-        self.last: PlanResult | None = None
 
     def _obstacles(self, obs: dict):
         if self._true is not None:
@@ -271,12 +207,11 @@ class PlannerPilot(Pilot):
             return total
 
         result = self.mppi.optimize(cost, self.generator)
-        self.last = result
         self.effective_samples.append(result.effective_samples)
         self.replan_seconds.append(time.perf_counter() - start)
         if self.config.record:
             points = getattr(field, "points", np.zeros((0, 3)))
-            path = imagined["states"][result.best, :, 0:3].numpy().copy()
+            path = imagined["states"][result.best, :, P].numpy().copy()
             self.replans.append(Replan(self._step, path, np.asarray(points).copy(), float(result.costs[result.best])))
 
     def _safe(self, action: np.ndarray) -> np.ndarray:

@@ -15,14 +15,15 @@ import torch
 from torch import nn
 
 from orbitdata import schema as S
+from orbitmodel.model.normalise import NormalisedStates
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import INCREMENT_DIM, integrate, step
-from orbitmodel.probe.model import Increments, load_probe
+from orbitmodel.probe.model import Increments, from_run
 
 STATE_ACTION_DIM = S.STATE_DIM + S.ACTION_DIM
 
 
-class StateDynamics(nn.Module):
+class StateDynamics(NormalisedStates, nn.Module):
     """(state, action) -> increments, rolled out autoregressively: ``model(state0, actions)``."""
 
     def __init__(self, config: ProbeConfig):
@@ -32,13 +33,7 @@ class StateDynamics(nn.Module):
                              f"got kind {config.kind!r}, latent_dim {config.latent_dim}")
         self.config = config
         self.increments = Increments(config)
-        self.register_buffer("state_mean", torch.zeros(S.STATE_DIM))
-        self.register_buffer("state_std", torch.ones(S.STATE_DIM))
-
-    def set_normalisation(self, state_mean, state_std) -> None:
-        """The dataset's state mean and std (16,) from meta/stats.json, as the world model takes them."""
-        self.state_mean.copy_(torch.as_tensor(state_mean, dtype=torch.float32))
-        self.state_std.copy_(torch.as_tensor(state_std, dtype=torch.float32).clamp(min=1e-3))
+        self.register_state_stats(S.STATE_DIM)
 
     def forward(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """state0 (B, 16) at frame t, actions (B, n, 8) in [0, 1] applied at frames t..t+n-1
@@ -46,7 +41,7 @@ class StateDynamics(nn.Module):
         x = state0.float()
         out = []
         for k in range(actions.shape[1]):
-            features = torch.cat([(x - self.state_mean) / self.state_std, actions[:, k] * 2 - 1], dim=-1)  # (B, 24)
+            features = torch.cat([self.normalise_states(x), actions[:, k] * 2 - 1], dim=-1)  # (B, 24)
             x = step(x, self.increments(features), self.config.dt, self.config.coasting)
             out.append(x)
         return torch.stack(out, dim=1)
@@ -54,10 +49,7 @@ class StateDynamics(nn.Module):
     @classmethod
     def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu") -> "StateDynamics":
         """The reference trained by ``orbitmodel probe RUN DATASET --state-only``, in eval mode."""
-        config, weights = load_probe(run_dir, "state")
-        model = cls(config)
-        model.load_state_dict(weights)
-        return model.to(device).eval()
+        return from_run(cls, run_dir, "state", device)
 
 
 def constant_velocity(state0: torch.Tensor, n: int, dt: float = S.DT) -> torch.Tensor:

@@ -2,9 +2,10 @@
 
 The world model is frozen and deterministic in eval mode, so the latents it imagines for a
 window are the same in every epoch. On a GPU, upstream recomputes them every step (no cache,
-``cache_windows = 0``). On a CPU, imagining is ~99 % of a probe step, so the ``cpu`` recipe
+``cache_windows = 0``). On a CPU, imagining dominates a probe step, so the ``cpu`` recipe
 imagines a seeded subset of the training windows once (``RUN/probe/latents.safetensors``, reused
-by --resume and by a new probe on the same world model, dataset and windows) and trains the probe for many epochs on it: the same optimisation, far less compute.
+by --resume and by a new probe on the same world model, dataset and windows) and trains the
+probe for many epochs on it: the same optimisation, far less compute.
 """
 
 from __future__ import annotations
@@ -105,8 +106,8 @@ def load_cache(folder: Path, key: str) -> dict[str, torch.Tensor] | None:
         from safetensors import safe_open
 
         with safe_open(str(path), "pt") as f:
-            if (f.metadata() or {}).get("key") != key or LAST not in f.keys():
-                return None  # another world model or windows, or a cache from before z_last
+            if (f.metadata() or {}).get("key") != key:
+                return None  # another world model or other windows
         return load_file(path)
     except (OSError, SafetensorError):
         return None  # a torn write: imagine again

@@ -21,12 +21,12 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
-from orbitmodel.data import read_dataset_meta
+from orbitmodel.data import group_actions, read_dataset_meta
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, interpolate_frames, rot6d_to_matrix
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
-from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, geodesic_angle, rot6d_to_matrix
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.probe.train import load_stage1
-from orbitmodel.train.checkpoint import CONFIG, RunError
+from orbitmodel.runs import CONFIG, RunError
 from orbitmodel.train.loop import resolve_device
 
 QUANTITIES = {"position": "m", "velocity": "m/s", "rotation": "rad", "angular_velocity": "rad/s", "fuel": "ratio"}
@@ -87,10 +87,7 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
 
     A world model with ``frame_step`` s > 1 encodes every s-th context frame (``context`` = its
     (m - 1) s + 1 frames), imagines n / s steps, and its probe's states are interpolated to every
-    frame as the planner does (``plan.dynamics.interpolate_frames``)."""
-    from orbitmodel.data import group_actions
-    from orbitmodel.plan.dynamics import interpolate_frames
-
+    frame as the planner does (:func:`~orbitmodel.kinematics.interpolate_frames`)."""
     m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
@@ -153,12 +150,9 @@ def evaluate_probe(req: EvalRequest) -> dict:
     """Table I (JSON + markdown) and Figure 5 (PNGs) of a run's probe; returns the result dict."""
     if req.windows < 1 or not req.horizons or min(req.horizons) < 1:
         raise ValueError(f"windows={req.windows}, horizons={req.horizons}: give at least one window and horizons >= 1")
-    stage1, world_model, wm_print = load_stage1(req.run, read_dataset_meta(req.dataset))
-    probe = PhysicsProbe.from_pretrained(req.run)
+    world_model = load_stage1(req.run, read_dataset_meta(req.dataset))
+    probe = PhysicsProbe.from_pretrained(req.run, world_model=world_model.fingerprint)
     probe_config = json.loads((probe_folder(req.run, "latent") / CONFIG).read_text())
-    if probe_config.get("world_model") != wm_print:
-        raise RunError(f"{probe_folder(req.run, 'latent')} was trained on another world model than {req.run} holds "
-                       f"now; train it again with `orbitmodel probe {req.run} DATASET --overwrite`")
     try:
         state_mlp = StateDynamics.from_pretrained(req.run)
     except RunError:
@@ -187,7 +181,7 @@ def evaluate_probe(req: EvalRequest) -> dict:
     table = summarise({r: {q: torch.cat(v) for q, v in per_q.items()} for r, per_q in errors.items()},
                       req.horizons)
     table.setdefault("state_mlp", None)
-    result = {"run": str(req.run), "dataset": str(req.dataset), "preset": stage1.preset.name,
+    result = {"run": str(req.run), "dataset": str(req.dataset), "preset": world_model.run.preset.name,
               "windows": len(chosen), "seed": req.seed, "context": context, "frame_step": s,
               "horizons": list(req.horizons),
               "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,

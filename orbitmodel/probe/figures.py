@@ -8,7 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from orbitdata import schema as S
+from orbitdata.scenario.spec import Scenario
 from orbitdata.state import STATE_NAMES
+from orbitmodel.extras import pyplot
 
 FIG_STATES, FIG_3D = "probe_fig5_states.png", "probe_fig5_3d.png"
 STYLE = {"truth": dict(color="black", lw=1.8, label="true"),
@@ -18,27 +20,9 @@ STYLE = {"truth": dict(color="black", lw=1.8, label="true"),
 NEAR = 2.0  # metres: obstacles drawn when within this of the window's path
 
 
-def _pyplot():
-    try:
-        import matplotlib
-    except ImportError:
-        raise ImportError("figures need matplotlib: pip install 'orbitdata[viz]'") from None
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def bounding_radius(shape: str, size) -> float:
-    """metres: the radius of a sphere around an obstacle (MuJoCo geom sizes)."""
-    r, a, b = (float(x) for x in size)
-    return {"sphere": r, "ellipsoid": max(r, a, b), "box": float(np.linalg.norm([r, a, b])),
-            "capsule": r + a, "cylinder": float(np.hypot(r, a))}.get(shape, max(r, a, b))
-
-
 def plot_states(context_states: np.ndarray, states: dict[str, np.ndarray], dt: float, path: Path, title: str) -> None:
     """4 x 4 panels, one per state entry: context (m, 16) then each row's (n, 16) over time."""
-    plt = _pyplot()
+    plt = pyplot()
     m, n = len(context_states), len(states["truth"])
     t_ctx = (np.arange(m) - (m - 1)) * dt  # seconds; 0 = last context frame
     t = np.arange(1, n + 1) * dt
@@ -67,7 +51,7 @@ def _sphere(ax, center, radius: float) -> None:
 
 def plot_3d(panels: list[dict], path: Path) -> None:
     """One 3-D panel per window: {"title", "context" (m, 3), "paths": {row: (n, 3)}, "obstacles"}."""
-    plt = _pyplot()
+    plt = pyplot()
     fig = plt.figure(figsize=(7 * len(panels), 6.5))
     for k, panel in enumerate(panels):
         ax = fig.add_subplot(1, len(panels), k + 1, projection="3d")
@@ -102,8 +86,8 @@ def _obstacles(dataset: str, episode: int, path_xyz: np.ndarray) -> list[tuple[n
     table = load_episode_table(dataset, "test", {})
     row = next(r for r in table.to_pylist() if r[S.EPISODE_INDEX] == episode)
     near = []
-    for ob in row[S.OBSTACLES]:
-        center, radius = np.asarray(ob["center"], dtype=float), bounding_radius(ob["shape"], ob["size"])
+    for ob in Scenario.from_dict(row).obstacles:
+        center, radius = np.asarray(ob.center, dtype=float), ob.bounding_radius
         if np.linalg.norm(path_xyz - center, axis=1).min() < radius + NEAR:
             near.append((center, radius))
     return near

@@ -1,9 +1,5 @@
-"""Batched rigid-body kinematics for the probe, in torch: rot6d <-> matrix, the so(3)
-exponential, the geodesic angle, and the integrator that turns increments into states.
-
-State (16, the dataset's convention): p (3) metres, world frame, relative to the start;
-v (3) m/s, body frame; rot6d (6) the first two columns of R (body -> world), row-major
-[R00, R01, R10, R11, R20, R21]; w (3) rad/s, body frame; fuel (1) ratio in [0, 1].
+"""The probe's integrator: per-step increments -> states, batched in torch (the rotation maths
+and the state layout are ``orbitmodel.kinematics``').
 
 Increments (10, what the probe predicts per step): dp (3) metres, world frame; dv (3) m/s,
 body frame; dw (3) rad/s, body frame; dfuel (1). One step of ``dt`` seconds::
@@ -24,60 +20,12 @@ bf16 rotation drifts off SO(3) within a few steps.
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from orbitdata import schema as S
-from orbitdata.state import STATE_SLICES
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, matrix_to_rot6d, rot6d_to_matrix, rotate, so3_exp
 
-P, V, ROT, W, FUEL = (STATE_SLICES[k] for k in ("p", "v", "r", "w", "fuel"))
 INCREMENT_DIM = 10
 D_P, D_V, D_W, D_FUEL = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 10)
-SMALL_ANGLE = 1e-4  # rad^2: below this, Rodrigues' coefficients come from their Taylor series
-
-
-def rot6d_to_matrix(rot6d: torch.Tensor) -> torch.Tensor:
-    """(..., 6) row-major first two columns -> (..., 3, 3) rotation, by Gram-Schmidt."""
-    cols = rot6d.unflatten(-1, (3, 2))  # (..., 3, 2): row i holds [R_i0, R_i1]
-    b1 = F.normalize(cols[..., 0], dim=-1)  # (..., 3)
-    a2 = cols[..., 1]
-    b2 = F.normalize(a2 - (b1 * a2).sum(-1, keepdim=True) * b1, dim=-1)
-    b3 = torch.linalg.cross(b1, b2, dim=-1)
-    return torch.stack([b1, b2, b3], dim=-1)  # columns b1, b2, b3
-
-
-def matrix_to_rot6d(R: torch.Tensor) -> torch.Tensor:
-    """(..., 3, 3) -> (..., 6) = R[..., :, :2] row-major."""
-    return R[..., :2].flatten(-2)
-
-
-def hat(w: torch.Tensor) -> torch.Tensor:
-    """(..., 3) -> (..., 3, 3) skew matrix with hat(w) x = w x x."""
-    x, y, z = w.unbind(-1)
-    zero = torch.zeros_like(x)
-    return torch.stack([zero, -z, y, z, zero, -x, -y, x, zero], dim=-1).unflatten(-1, (3, 3))
-
-
-def exp_so3(phi: torch.Tensor) -> torch.Tensor:
-    """Rotation vector (..., 3) rad -> (..., 3, 3), Rodrigues: I + a K + b K^2 with K = hat(phi),
-    a = sin t / t, b = (1 - cos t) / t^2, t = |phi|; exact and smooth through phi = 0."""
-    t2 = (phi * phi).sum(-1)[..., None, None]  # (..., 1, 1)
-    small = t2 < SMALL_ANGLE
-    t2_safe = torch.where(small, torch.ones_like(t2), t2)
-    t = t2_safe.sqrt()
-    a = torch.where(small, 1 - t2 / 6 + t2 * t2 / 120, torch.sin(t) / t)
-    b = torch.where(small, 0.5 - t2 / 24 + t2 * t2 / 720, (1 - torch.cos(t)) / t2_safe)
-    K = hat(phi)
-    eye = torch.eye(3, dtype=phi.dtype, device=phi.device)
-    return eye + a * K + b * (K @ K)
-
-
-def geodesic_angle(R_a: torch.Tensor, R_b: torch.Tensor) -> torch.Tensor:
-    """(..., 3, 3) x 2 -> (...) rad in [0, pi]: the angle of R_a^T R_b. atan2 of the sine (from
-    the skew part) and the cosine (from the trace) keeps it accurate near 0, where acos is not."""
-    E = R_a.transpose(-1, -2) @ R_b
-    cos = (E.diagonal(dim1=-2, dim2=-1).sum(-1) - 1) / 2
-    skew = torch.stack([E[..., 2, 1] - E[..., 1, 2], E[..., 0, 2] - E[..., 2, 0], E[..., 1, 0] - E[..., 0, 1]], -1)
-    return torch.atan2(skew.norm(dim=-1) / 2, cos)
 
 
 def _state(p, v, R, w, fuel) -> torch.Tensor:
@@ -90,12 +38,12 @@ def step(state: torch.Tensor, inc: torch.Tensor, dt: float = S.DT, coasting: boo
         state, inc = state.float(), inc.float()
         w = state[..., W] + inc[..., D_W]  # rad/s, body frame
         R0 = rot6d_to_matrix(state[..., ROT])
-        R = rot6d_to_matrix(matrix_to_rot6d(R0 @ exp_so3(w * dt)))
+        R = rot6d_to_matrix(matrix_to_rot6d(R0 @ so3_exp(w * dt)))
         fuel = (state[..., FUEL] + inc[..., D_FUEL]).clamp(0, 1)
         if not coasting:
             return _state(state[..., P] + inc[..., D_P], state[..., V] + inc[..., D_V], R, w, fuel)
-        u = _rotate(R0, state[..., V]) + _rotate(R, inc[..., D_V])  # m/s, world frame
-        return _state(state[..., P] + u * dt + inc[..., D_P], _rotate(R.transpose(-1, -2), u), R, w, fuel)
+        u = rotate(R0, state[..., V]) + rotate(R, inc[..., D_V])  # m/s, world frame
+        return _state(state[..., P] + u * dt + inc[..., D_P], rotate(R.transpose(-1, -2), u), R, w, fuel)
 
 
 def integrate(state0: torch.Tensor, inc: torch.Tensor, dt: float = S.DT, coasting: bool = False) -> torch.Tensor:
@@ -111,10 +59,10 @@ def integrate(state0: torch.Tensor, inc: torch.Tensor, dt: float = S.DT, coastin
         state0, inc = state0.float(), inc.float()
         w = state0[:, None, W] + inc[..., D_W].cumsum(1)  # (B, n, 3) rad/s, body frame
         R0 = rot6d_to_matrix(state0[:, ROT])  # (B, 3, 3)
-        R = rot6d_to_matrix(matrix_to_rot6d(R0[:, None] @ prefix_product(exp_so3(w * dt))))  # (B, n, 3, 3)
+        R = rot6d_to_matrix(matrix_to_rot6d(R0[:, None] @ prefix_product(so3_exp(w * dt))))  # (B, n, 3, 3)
         if coasting:
-            u = _rotate(R0, state0[:, V])[:, None] + _rotate(R, inc[..., D_V]).cumsum(1)  # (B, n, 3) m/s, world
-            v = _rotate(R.transpose(-1, -2), u)  # (B, n, 3) m/s, body frame
+            u = rotate(R0, state0[:, V])[:, None] + rotate(R, inc[..., D_V]).cumsum(1)  # (B, n, 3) m/s, world
+            v = rotate(R.transpose(-1, -2), u)  # (B, n, 3) m/s, body frame
             p = state0[:, None, P] + (u * dt + inc[..., D_P]).cumsum(1)  # (B, n, 3) metres, world frame
         else:
             v = state0[:, None, V] + inc[..., D_V].cumsum(1)  # (B, n, 3) m/s, body frame
@@ -124,11 +72,6 @@ def integrate(state0: torch.Tensor, inc: torch.Tensor, dt: float = S.DT, coastin
             fuel = (fuel + inc[:, k, D_FUEL]).clamp(0, 1)
             fuels.append(fuel)
         return _state(p, v, R, w, torch.stack(fuels, 1))
-
-
-def _rotate(R: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
-    """(..., 3, 3) @ (..., 3) -> (..., 3)."""
-    return (R @ x[..., None]).squeeze(-1)
 
 
 def prefix_product(M: torch.Tensor) -> torch.Tensor:
@@ -147,7 +90,7 @@ def increments_of(states: torch.Tensor, dt: float = S.DT, coasting: bool = False
     dp, dv = d[..., P], d[..., V]
     if coasting:  # what coasting does not explain
         R = rot6d_to_matrix(states[..., ROT])  # (B, T, 3, 3)
-        u = _rotate(R, states[..., V])  # (B, T, 3) m/s, world frame
-        dv = _rotate(R[:, 1:].transpose(-1, -2), u[:, 1:] - u[:, :-1])
+        u = rotate(R, states[..., V])  # (B, T, 3) m/s, world frame
+        dv = rotate(R[:, 1:].transpose(-1, -2), u[:, 1:] - u[:, :-1])
         dp = dp - u[:, 1:] * dt
     return torch.cat([dp, dv, d[..., W], d[..., FUEL]], dim=-1)

@@ -8,10 +8,9 @@
 the world-frame velocity; see ``probe.integrator``.)
 
 x_0 is the true state at the last context frame. An increment is a change between frames, and a
-latent alone says where the craft is, not what just changed: on the README's per-frame SIGReg
-run, reading the change took the angular-velocity MAE at h = 25 from 0.40 to 0.07 rad/s. The MLP
-sees each step's features independently, so all n increments come from one batched call and
-only the attitude product loops over time.
+latent alone says where the craft is, not what just changed (``docs/model.md`` measures what
+reading the change does). The MLP sees each step's features independently, so all n increments
+come from one batched call and only the attitude product loops over time.
 
 ``scale`` is fixed at training start to the RMS of the true per-step increments (metres per step
 for dp, fuel ratio per step for dfuel, ...), so the MLP's outputs are of order 1 for every
@@ -30,6 +29,7 @@ from torch import nn
 from orbitmodel.model.world_model import mlp
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import INCREMENT_DIM, integrate
+from orbitmodel.runs import CONFIG, RunError, load_weights
 
 PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a Stage I run
 
@@ -89,34 +89,45 @@ class PhysicsProbe(nn.Module):
         return integrate(state0, self.increments(x), self.config.dt, self.config.coasting)
 
     @classmethod
-    def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu") -> "PhysicsProbe":
-        """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/``, in eval mode."""
-        config, weights = load_probe(run_dir, "latent")
-        probe = cls(config)
-        probe.load_state_dict(weights)
-        return probe.to(device).eval()
+    def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu",
+                        world_model: str | None = None) -> "PhysicsProbe":
+        """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/``, in eval mode;
+        ``world_model``: the fingerprint of the world model it must have been trained on."""
+        return from_run(cls, run_dir, "latent", device, world_model)
 
 
 def probe_folder(run_dir: str | Path, kind: str) -> Path:
     return Path(run_dir) / PROBE_FOLDER[kind]
 
 
-def load_probe(run_dir: str | Path, kind: str) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
-    """(config, weights) of a Stage I run's probe of ``kind``; RunError with the fix if absent."""
-    from orbitmodel.train.checkpoint import CONFIG, RunError, load_weights
-
+def load_probe(run_dir: str | Path, kind: str, world_model: str | None = None) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
+    """(config, weights) of a Stage I run's probe of ``kind``; RunError with the fix if it is
+    absent, or if ``world_model`` (a weights fingerprint) is not the one it was trained on."""
     folder = probe_folder(run_dir, kind)
     command = f"orbitmodel probe {run_dir} DATASET" + (" --state-only" if kind == "state" else "")
     if not (folder / CONFIG).is_file():
-        raise RunError(f"{run_dir} has no trained {kind} probe ({folder} is missing); train it with `{command}`")
+        what = "physics probe" if kind == "latent" else "state-only reference"
+        raise RunError(f"{run_dir} has no {what} ({folder} is missing); train it with `{command}`")
     raw = json.loads((folder / CONFIG).read_text())
     try:
         config = ProbeConfig(**raw["probe"])
     except (KeyError, TypeError) as err:
         raise RunError(f"{folder / CONFIG} is not a probe config ({err}); train it again with `{command} "
                        "--overwrite`") from None
+    if world_model is not None and kind == "latent" and raw.get("world_model") != world_model:
+        raise RunError(f"{folder} was trained on another world model than {run_dir} holds now; train it again "
+                       f"with `{command} --overwrite`")
     try:
         weights = load_weights(folder)
     except RunError:
         raise RunError(f"{folder} has no weights yet; train it with `{command}`") from None
     return config, weights
+
+
+def from_run(cls, run_dir: str | Path, kind: str, device: str | torch.device = "cpu", world_model: str | None = None):
+    """A probe module of class ``cls`` (built from a ProbeConfig) with the weights of ``run_dir``'s
+    ``kind`` probe, in eval mode (see :func:`load_probe`)."""
+    config, weights = load_probe(run_dir, kind, world_model)
+    module = cls(config)
+    module.load_state_dict(weights)
+    return module.to(device).eval()

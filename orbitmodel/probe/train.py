@@ -16,8 +16,6 @@ of its own: config.json, checkpoints/, metrics.jsonl, model.safetensors.
 
 from __future__ import annotations
 
-import hashlib
-import json
 from dataclasses import asdict, dataclass
 from importlib.metadata import version
 from pathlib import Path
@@ -28,15 +26,17 @@ from torch import nn
 
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
+from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig
 from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta
+from orbitmodel.kinematics import FUEL, P, ROT, V, W
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
 from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
                                     save_cache, subset)
-from orbitmodel.probe.config import KINDS, ProbeConfig, ProbeTrainConfig, default_probe, recipe
-from orbitmodel.probe.integrator import FUEL, P, ROT, V, W, increments_of
+from orbitmodel.probe.config import ProbeConfig
+from orbitmodel.probe.integrator import increments_of
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
-from orbitmodel.train.checkpoint import RunConfig, RunDir, RunError, load_weights, read_run_config
+from orbitmodel.runs import PROBE, RunDir, RunError, check_image_size, read_run_config, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device
 
 COLUMNS = {"latent": (S.IMAGE, S.STATE, S.ACTION), "state": (S.STATE, S.ACTION)}
@@ -112,50 +112,25 @@ class ProbeJob:
 class ProbeRequest:
     run: Path  # the Stage I run folder
     dataset: str
-    train: ProbeTrainConfig
+    recipe: ProbeRecipe  # the run's preset's (``run_recipe``), with any changes the command asked for
     kind: str = "latent"
-    hidden: int = 256
-    inputs: str | None = None  # None: ``default_probe`` of the run's preset
-    integrator: str | None = None  # None: ``default_probe`` of the run's preset
     device: str = "auto"
     resume: bool = False
     overwrite: bool = False
 
 
-def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> tuple[RunConfig, WorldModel, str]:
-    """A Stage I run's config, its world model (frozen, eval mode, on CPU) and its weights'
-    fingerprint; RunError with the fix when the run is missing or untrained, or when the
-    dataset ``meta`` does not fit it."""
-    config = read_run_config(run)
-    if meta is not None:
-        check_dataset(meta, config)
-    weights = load_weights(run)
-    model = WorldModel(config.preset.model)
-    model.load_state_dict(weights)
-    model.run_info = config.dataset
-    return config, model.requires_grad_(False).eval(), fingerprint(weights)
+def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
+    """A Stage I run's world model, frozen, in eval mode, on CPU (``WorldModel.from_pretrained``:
+    ``.run`` its config, ``.fingerprint`` its weights'); RunError with the fix when the run is
+    missing or untrained, or when the dataset ``meta`` does not give the images it takes."""
+    if meta is not None:  # before loading weights that may not fit this dataset's images
+        check_image_size(meta, read_run_config(run).preset.model.image_size, f"the world model of {run}")
+    return WorldModel.from_pretrained(run).requires_grad_(False)
 
 
-def fingerprint(weights: dict[str, torch.Tensor]) -> str:
-    """sha256 of a state dict's names and bytes: which world model a probe was trained on."""
-    h = hashlib.sha256()
-    for name in sorted(weights):
-        h.update(name.encode())
-        h.update(weights[name].detach().cpu().contiguous().reshape(-1).view(torch.uint8).numpy().tobytes())
-    return h.hexdigest()[:16]
-
-
-def run_recipe(run: str | Path) -> ProbeTrainConfig:
-    """The probe recipe for a Stage I run's preset (see ``RECIPES``)."""
-    return recipe(read_run_config(run).preset.name)
-
-
-def check_dataset(meta: DatasetMeta, stage1: RunConfig) -> None:
-    """The dataset must give the images the run's encoder was built for."""
-    want = stage1.preset.model.image_size
-    if meta.image_size != want:
-        raise RunError(f"{meta.source} holds {meta.image_size} px images but the world model of this run takes "
-                       f"{want} px; use a dataset generated with `--image-size {want}` (like {stage1.dataset.source})")
+def run_recipe(run: str | Path) -> ProbeRecipe:
+    """The probe recipe a Stage I run's preset prescribes (``Preset.probe``)."""
+    return read_run_config(run).preset.probe
 
 
 def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1) -> torch.Tensor:
@@ -170,29 +145,30 @@ def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, 
     return inc.flatten(0, 1).pow(2).mean(0).sqrt()  # (10,)
 
 
-def probe_run_config(kind: str, probe: ProbeConfig, train: ProbeTrainConfig, meta: DatasetMeta, run: Path,
-                     world_model: str | None) -> dict:
-    config = {"stage": "probe", "probe": probe.to_dict(), "train": train.to_dict(), "dataset": meta.to_dict(),
-              "stage1_run": str(run)}
-    if kind == "latent":
-        config["world_model"] = world_model  # a probe reads one world model's latents only
-    return json.loads(json.dumps(config))  # as config.json holds it (lists, not tuples), so --resume compares equal
-
-
 def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
              folder: Path) -> dict:
     """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
     # The rollout depends on the weights, the model's config (its history) and the code that
     # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
     # and so does --overwrite.
+    t = req.recipe.train
     key = cache_key(world_model=wm_print, config=asdict(world_model.config), package=version("orbitdata"),
-                    dataset=meta.to_dict(), windows=chosen, context=req.train.context,
-                    horizon=req.train.horizon, stride=req.train.window_stride)
+                    dataset=meta.to_dict(), windows=chosen, context=t.context, horizon=t.horizon,
+                    stride=t.window_stride)
     cached = load_cache(folder, key)
     if cached is None:
-        cached = imagine(world_model.to(device), windows, chosen, req.train.context, device)
+        cached = imagine(world_model.to(device), windows, chosen, t.context, device)
         save_cache(folder, key, cached)
     return cached
+
+
+def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: int) -> ProbeConfig:
+    """The probe network of ``kind`` that ``recipe`` prescribes for a world model with latents of
+    ``latent_dim`` stepping ``frame_step`` frames (the state-only reference reads state and action)."""
+    latent = kind == "latent"
+    return ProbeConfig(kind=kind, latent_dim=latent_dim if latent else STATE_ACTION_DIM, hidden=recipe.hidden,
+                       layers=recipe.layers, dt=S.DT * frame_step, inputs=recipe.inputs if latent else "latent",
+                       integrator=recipe.integrator)
 
 
 def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
@@ -200,28 +176,27 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     if req.kind not in KINDS:
         raise ValueError(f"probe kind {req.kind!r}: choose one of {', '.join(KINDS)}")
     meta = read_dataset_meta(req.dataset)
-    stage1, world_model, wm_print = load_stage1(req.run, meta)
-    default_inputs, default_integrator = default_probe(stage1.preset.name)
+    world_model = load_stage1(req.run, meta)
+    stage1, wm_print = world_model.run, world_model.fingerprint
     device = resolve_device(req.device)
-    t = req.train
+    t = req.recipe.train
     latent = req.kind == "latent"
     frame_step = stage1.preset.model.frame_step
     if not latent and frame_step > 1:
         raise RunError(f"{req.run} steps {frame_step} frames per prediction; the state-only reference reads "
                        "one frame's state and action, so train it on a per-frame run (`orbitmodel train` "
                        "without --frame-step)")
-    config = ProbeConfig(kind=req.kind, latent_dim=stage1.preset.model.latent_dim if latent else STATE_ACTION_DIM,
-                         hidden=req.hidden, dt=S.DT * frame_step,
-                         inputs=(req.inputs or default_inputs) if latent else "latent",
-                         integrator=req.integrator or default_integrator)
+    config = probe_config(req.recipe, req.kind, stage1.preset.model.latent_dim, frame_step)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
         # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
         # again must not reuse latents imagined by another version of the model code.
         (out / CACHE_FILE).unlink(missing_ok=True)
     run = RunDir(out)
-    run.start(probe_run_config(req.kind, config, t, meta, Path(req.run), wm_print if latent else None),
-              resume=req.resume, overwrite=req.overwrite)
+    parts = {"probe": config.to_dict(), "train": t.to_dict(), "dataset": meta.to_dict(), "stage1_run": str(req.run)}
+    if latent:
+        parts["world_model"] = wm_print  # a probe reads one world model's latents only
+    run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite)
     windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
                                  stride=t.window_stride, columns=list(COLUMNS[req.kind]))
     data = windows
@@ -237,7 +212,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         module = LatentObjective(world_model, model, t)
     else:
         model = StateDynamics(config)
-        model.set_normalisation(stage1.dataset.state_mean, stage1.dataset.state_std)
+        model.set_state_stats(stage1.dataset.state_mean, stage1.dataset.state_std)
         module = StateObjective(model, t)
     if not req.resume:
         model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step))

@@ -15,10 +15,9 @@ from __future__ import annotations
 import json
 import math
 import os
-import signal
 import time
 from contextlib import nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Protocol
 
 import torch
@@ -26,10 +25,8 @@ from torch import nn
 from torch.utils.data import DataLoader
 
 from orbitdata.load import collate_windows
-from orbitmodel.train.checkpoint import METRICS, TENSORBOARD, RunDir, RunError
+from orbitmodel.runs import METRICS, TENSORBOARD, RunDir, RunError
 from orbitmodel.train.progress import Progress
-
-KILL_AFTER_STEP = "ORBITMODEL_KILL_AFTER_STEP"  # tests: SIGKILL the run right after this step's checkpoint
 
 
 class Job(Protocol):
@@ -71,7 +68,6 @@ class FitResult:
     seconds: float
     windows_per_s: float
     data_wait: float  # fraction of step time spent waiting for the next batch
-    last: dict = field(default_factory=dict)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -173,6 +169,69 @@ class _Metrics:
             self.tb.close()
 
 
+class _Tally:
+    """Loss parts averaged between log lines, windows seen, and time waiting for data vs computing."""
+
+    def __init__(self, world: int):
+        self.world, self.started = world, time.perf_counter()
+        self.sums: dict[str, float] = {}
+        self.count, self.wait, self.busy, self.windows = 0, 0.0, 0.0, 0
+
+    def add(self, batch: dict, values: dict) -> None:
+        self.windows += len(batch[next(iter(batch))]) * self.world
+        for k, v in values.items():
+            self.sums[k] = self.sums.get(k, 0.0) + float(v)
+        self.count += 1
+
+    def record(self, step: int, epoch: int, lr: float) -> dict:
+        """The metrics line for ``step`` (the averages since the last one), then start averaging again."""
+        elapsed = time.perf_counter() - self.started
+        record = {"step": step, "epoch": epoch, "lr": lr, **{k: v / self.count for k, v in self.sums.items()},
+                  "windows_per_s": self.windows / max(elapsed, 1e-9), "data_wait": self.data_wait,
+                  "elapsed_s": elapsed, "world_size": self.world}
+        self.sums, self.count = {}, 0
+        return record
+
+    @property
+    def data_wait(self) -> float:
+        return self.wait / max(self.wait + self.busy, 1e-9)
+
+    def result(self, steps: int) -> FitResult:
+        elapsed = time.perf_counter() - self.started
+        return FitResult(steps=steps, seconds=elapsed, windows_per_s=self.windows / max(elapsed, 1e-9),
+                         data_wait=self.data_wait)
+
+
+def _batches(dataset, sampler, step: int, per_epoch: int, total: int, s: LoopSettings, device: torch.device,
+             rank: int, tally: _Tally):
+    """(epoch, batch) from ``step`` to ``total``; a resumed run skips the batches it already took
+    without reading them. The time spent waiting for each batch goes to ``tally.wait``."""
+    while step < total:
+        epoch, offset = divmod(step, per_epoch)
+        sampler.set_epoch(epoch)
+        order = list(sampler)
+        batches = [order[i * s.batch_size:(i + 1) * s.batch_size] for i in range(offset, min(per_epoch, offset + total - step))]
+        # Its own generator: a DataLoader draws its workers' base seed from the global RNG
+        # otherwise, and a resumed run (a new loader mid-epoch) would shift the dropout masks.
+        loader = DataLoader(dataset, batch_sampler=batches, num_workers=s.num_workers, collate_fn=collate_windows,
+                            pin_memory=device.type == "cuda", generator=step_generator(s.seed, step, stream=99, rank=rank))
+        tick = time.perf_counter()
+        for batch in loader:
+            tally.wait += time.perf_counter() - tick
+            yield epoch, batch
+            step += 1
+            tick = time.perf_counter()
+
+
+def _restore(job: Job, optimizer, run: RunDir, rank: int) -> int:
+    """Load the newest checkpoint into the job and the optimiser; returns its step."""
+    ckpt = run.latest_checkpoint()
+    job.saved.load_state_dict(ckpt.weights)
+    optimizer.load_state_dict(ckpt.state["optimizer"])
+    _set_rng_state(ckpt.state["rng"][rank] if isinstance(ckpt.state["rng"], list) else ckpt.state["rng"])
+    return ckpt.step
+
+
 def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.device, resume: bool = False,
         label: str = "train", on_log: Callable[[dict], None] | None = None) -> FitResult:
     """Train ``job`` on map-style window ``dataset`` until ``epochs`` or ``max_steps``."""
@@ -187,86 +246,46 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
     params = [p for p in job.module.parameters() if p.requires_grad]
     optimizer = _optimizer(params, s)
     torch.manual_seed(s.seed + rank)
-    after_step = getattr(job, "after_step", None)
-    step = 0
-    if resume:
-        ckpt = run.latest_checkpoint()
-        job.saved.load_state_dict(ckpt.weights)
-        optimizer.load_state_dict(ckpt.state["optimizer"])
-        _set_rng_state(ckpt.state["rng"][rank] if isinstance(ckpt.state["rng"], list) else ckpt.state["rng"])
-        step = ckpt.step
+    step = _restore(job, optimizer, run, rank) if resume else 0
     job.module.to(device)
-    model = job.module
-    if world > 1:
-        model = nn.parallel.DistributedDataParallel(job.module, device_ids=[device.index] if device.type == "cuda"
-                                                    else None)
+    model = job.module if world == 1 else nn.parallel.DistributedDataParallel(
+        job.module, device_ids=[device.index] if device.type == "cuda" else None)
     autocast = torch.autocast("cuda", dtype=torch.bfloat16) if device.type == "cuda" else nullcontext()
-    kill_after = int(os.environ.get(KILL_AFTER_STEP, "0"))
+    after_step = getattr(job, "after_step", None)
     main = rank == 0
-    metrics = _Metrics(run, main, step)
-    progress = Progress(label, total, step, enabled=main)
-    sums: dict[str, float] = {}
-    count, wait, busy, windows = 0, 0.0, 0.0, 0
-    started = time.perf_counter()
+    metrics, progress, tally = _Metrics(run, main, step), Progress(label, total, step, enabled=main), _Tally(world)
     try:
-        while step < total:
-            epoch, offset = divmod(step, per_epoch)
-            sampler.set_epoch(epoch)
-            order = list(sampler)
-            batches = [order[i * s.batch_size:(i + 1) * s.batch_size]
-                       for i in range(offset, min(per_epoch, offset + total - step))]
-            # Its own generator: a DataLoader draws its workers' base seed from the global RNG
-            # otherwise, and a resumed run (a new loader mid-epoch) would shift the dropout masks.
-            loader = DataLoader(dataset, batch_sampler=batches, num_workers=s.num_workers,
-                                collate_fn=collate_windows, pin_memory=device.type == "cuda",
-                                generator=step_generator(s.seed, step, stream=99, rank=rank))
-            tick = time.perf_counter()
-            for batch in loader:
-                got = time.perf_counter()
-                wait += got - tick
-                lr = lr_at(step, total, s)
-                for group in optimizer.param_groups:
-                    group["lr"] = lr
-                inputs = job.inputs(batch, step, device)
-                with autocast:
-                    loss, parts = model(**inputs)
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                grad_norm = torch.nn.utils.clip_grad_norm_(params, s.grad_clip)
-                optimizer.step()
-                step += 1
-                if after_step is not None:
-                    after_step(step)
-                windows += len(batch[next(iter(batch))]) * world
-                for k, v in {"loss": loss.detach(), **parts, "grad_norm": grad_norm}.items():
-                    sums[k] = sums.get(k, 0.0) + float(v)
-                count += 1
-                tick = time.perf_counter()
-                busy += tick - got
-                if step % s.log_every == 0 or step == total:
-                    elapsed = time.perf_counter() - started
-                    record = {"step": step, "epoch": epoch, "lr": lr,
-                              **{k: v / count for k, v in sums.items()},
-                              "windows_per_s": windows / max(elapsed, 1e-9),
-                              "data_wait": wait / max(wait + busy, 1e-9), "elapsed_s": elapsed,
-                              "world_size": world}
-                    metrics.write(record)
-                    progress.update(step, record)
-                    if on_log:
-                        on_log(record)
-                    sums, count = {}, 0
-                if step % s.save_every == 0 or step == total:
-                    _save(run, job, optimizer, step, world, main)
-                    if kill_after and step >= kill_after:
-                        os.kill(os.getpid(), signal.SIGKILL)
+        for epoch, batch in _batches(dataset, sampler, step, per_epoch, total, s, device, rank, tally):
+            got = time.perf_counter()
+            lr = lr_at(step, total, s)
+            for group in optimizer.param_groups:
+                group["lr"] = lr
+            inputs = job.inputs(batch, step, device)
+            with autocast:
+                loss, parts = model(**inputs)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            grad_norm = torch.nn.utils.clip_grad_norm_(params, s.grad_clip)
+            optimizer.step()
+            step += 1
+            if after_step is not None:
+                after_step(step)
+            tally.add(batch, {"loss": loss.detach(), **parts, "grad_norm": grad_norm})
+            if step % s.log_every == 0 or step == total:
+                record = tally.record(step, epoch, lr)
+                metrics.write(record)
+                progress.update(step, record)
+                if on_log:
+                    on_log(record)
+            if step % s.save_every == 0 or step == total:
+                _save(run, job, optimizer, step, world, main)
+            tally.busy += time.perf_counter() - got
         if main:
             run.save_final(job.saved.state_dict(), step)
     finally:
         progress.close()
         metrics.close()
-    elapsed = time.perf_counter() - started
-    return FitResult(steps=step, seconds=elapsed, windows_per_s=windows / max(elapsed, 1e-9),
-                     data_wait=wait / max(wait + busy, 1e-9))
+    return tally.result(step)
 
 
 def _save(run: RunDir, job: Job, optimizer, step: int, world: int, main: bool) -> None:

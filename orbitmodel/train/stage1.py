@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from orbitdata import schema as S
 from orbitmodel.config import Preset
 from orbitmodel.data import DatasetMeta, episode_filter, load_model_windows, read_dataset_meta
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.train.checkpoint import RunDir, RunError
+from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
@@ -60,32 +61,29 @@ class Stage1Request:
     overwrite: bool = False
 
 
-def run_config(preset: Preset, meta: DatasetMeta, levels, outcomes) -> dict:
-    return {"stage": "world_model", "preset": preset.to_dict(), "dataset": meta.to_dict(),
-            "levels": list(levels), "outcomes": list(outcomes)}
-
-
-def check_image_size(meta: DatasetMeta, preset: Preset, resize: bool) -> int | None:
-    """The loader's ``image_size``: None when the dataset matches the preset; raises otherwise unless resizing."""
+def loader_image_size(meta: DatasetMeta, preset: Preset, resize: bool) -> int | None:
+    """The loader's ``image_size``: None when the dataset matches the preset, the preset's size
+    when resizing; RunError otherwise."""
     want = preset.model.image_size
     if meta.image_size == want:
         return None
     if not resize:
-        raise RunError(f"preset {preset.name!r} takes {want} px images but {meta.source} holds {meta.image_size} px; "
-                       f"generate one with `orbitdata generate DIR --image-size {want}`, or pass --resize")
+        check_image_size(meta, want, f"preset {preset.name!r}", resize=True)
     return want
 
 
 def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     """Train (or resume) a Stage I run; returns the loop's summary."""
     meta = read_dataset_meta(req.dataset)
-    image_size = check_image_size(meta, req.preset, req.resize)
+    image_size = loader_image_size(meta, req.preset, req.resize)
     device = resolve_device(req.device)
     run = RunDir(req.out)
     t = req.preset.train
-    rank = int(__import__("os").environ.get("RANK", 0))
+    rank = int(os.environ.get("RANK", 0))
     if rank == 0:
-        run.start(run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume, overwrite=req.overwrite)
+        config = run_config(WORLD_MODEL, preset=req.preset.to_dict(), dataset=meta.to_dict(), levels=list(req.levels),
+                            outcomes=list(req.outcomes))
+        run.start(config, resume=req.resume, overwrite=req.overwrite)
     windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
                                  horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
                                  episodes=episode_filter(list(req.levels), list(req.outcomes)))

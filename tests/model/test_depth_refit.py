@@ -11,9 +11,10 @@ from typer.testing import CliRunner
 
 from orbitmodel.cli.app import app
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.factory import build_pilot, planner_config
-from orbitmodel.train.checkpoint import RunError
-from orbitmodel.train.depth import DepthRefitConfig, load_refit_head, refit_depth_head
+from orbitmodel.plan.config import planner_config
+from orbitmodel.plan.factory import build_pilot
+from orbitmodel.runs import RunError
+from orbitmodel.plan.depth_refit import DepthRefitConfig, load_refit_head, refit_depth_head
 
 torch.set_num_threads(1)
 runner = CliRunner()

@@ -4,6 +4,7 @@ told only the task (never the obstacles) and reads only the camera image and the
 from __future__ import annotations
 
 import inspect
+import json
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,9 +14,9 @@ import torch
 from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.pilot import DiffusionPilot, load_policy_pilot, make_diffusion_pilot
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
-from orbitmodel.baselines.diffusion.train import run_config
+from orbitmodel.baselines.diffusion.train import policy_run_config
 from orbitmodel.data import DatasetMeta
-from orbitmodel.train.checkpoint import RunDir
+from orbitmodel.runs import RunDir
 
 torch.set_num_threads(1)
 PRESET = get_policy_preset("tiny")
@@ -134,13 +135,19 @@ def test_errors(policy):
         make_diffusion_pilot(None)
 
 
-def test_loads_from_a_run_folder(policy, tmp_path):
+def save_policy_run(policy, path) -> RunDir:
+    """``policy`` as a policy run folder of a 64 px dataset (root seed 0, one episode)."""
     meta = DatasetMeta(source="x", image_size=64, state_mean=(0.0,) * 16, state_std=(1.0,) * 16,
                        action_mean=(0.1,) * 8, action_std=(0.1,) * 8, depth_max=50.1, fovy_deg=100.0, root_seed=0,
                        episodes={"train": 1})
-    run = RunDir(tmp_path / "run")
-    run.start(run_config(PRESET, meta, ["expert"], []), resume=False, overwrite=False)
+    run = RunDir(path)
+    run.start(policy_run_config(PRESET, meta, ["expert"], []), resume=False, overwrite=False)
     run.save_final(policy.state_dict(), step=0)
+    return run
+
+
+def test_loads_from_a_run_folder(policy, tmp_path):
+    run = save_policy_run(policy, tmp_path / "run")
     pilot = load_policy_pilot(run.path)
     for k, v in policy.state_dict().items():
         assert torch.equal(pilot.policy.state_dict()[k], v), k
@@ -149,3 +156,22 @@ def test_loads_from_a_run_folder(policy, tmp_path):
     config = GenerationConfig()  # renders 224 px by default
     with pytest.raises(ValueError, match="--image-size 64"):
         make_diffusion_pilot(config, run=str(run.path))
+
+
+def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
+    """`orbitmodel eval closed-loop POLICY_RUN` flies the policy on the grid (it used to fail on
+    reading the policy's config as a world model's), and refuses a planning --pilot for it."""
+    from typer.testing import CliRunner
+
+    from orbitmodel.cli.app import app
+
+    run = save_policy_run(policy, tmp_path / "dp")
+    out = tmp_path / "diffusion.json"
+    grid = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "4"]
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), *grid, "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    report = json.loads(out.read_text())
+    assert report["pilot"] == "diffusion" and report["planner"] is None and report["run"] == str(run.path)
+    assert [e["frames"] for e in report["episodes"]] == [4]
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--pilot", "oracle-true", *grid])
+    assert res.exit_code == 2 and "flies as itself" in res.output and "Traceback" not in res.output

@@ -23,8 +23,7 @@ from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.cli.app import app
 from orbitmodel.data import read_dataset_meta
-from orbitmodel.train.checkpoint import RunError, load_weights
-from orbitmodel.train.loop import KILL_AFTER_STEP
+from orbitmodel.runs import RunError, load_weights
 
 torch.set_num_threads(1)
 runner = CliRunner()
@@ -78,9 +77,10 @@ def test_checkpoint_round_trip(trained, tiny_dataset_master):
 def test_resume_is_exact(trained, tiny_dataset_master, tmp_path):
     """Killed after the checkpoint at step 2 and resumed: the same weights and EMA as straight through."""
     out = tmp_path / "run"
-    cmd = [sys.executable, "-m", "orbitmodel.cli.app", "train-policy", str(tiny_dataset_master), "--out", str(out),
+    kill_after = Path(__file__).with_name("kill_after.py")  # SIGKILL right after the step-2 checkpoint
+    cmd = [sys.executable, str(kill_after), "2", "train-policy", str(tiny_dataset_master), "--out", str(out),
            "--preset", "tiny", "--max-steps", str(STEPS), "--device", "cpu"]
-    env = {**os.environ, KILL_AFTER_STEP: "2", "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
     # the CLI's tiny preset saves every 2 steps, as PRESET does
     assert get_policy_preset("tiny").train.save_every == 2
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)

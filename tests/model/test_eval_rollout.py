@@ -10,7 +10,7 @@ import torch
 from typer.testing import CliRunner
 
 from orbitmodel.cli.app import app
-from orbitmodel.evaluate.rollout import depth_by_band
+from orbitmodel.plan.depth_bands import depth_by_band
 
 runner = CliRunner()
 

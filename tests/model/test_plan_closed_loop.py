@@ -14,7 +14,7 @@ from orbitmodel.cli.app import app
 from orbitmodel.evaluate.closed_loop import (ClosedLoopRequest, check_unseen_seeds, closed_loop_report,
                                              dataset_seeds, fly_closed_loop, grid_seeds)
 from orbitmodel.evaluate.figure6 import plot_figure6, read_report, success_table
-from orbitmodel.plan.factory import planner_config
+from orbitmodel.plan.config import planner_config
 from orbitmodel.plan.pilot import Variant
 
 torch.set_num_threads(1)
@@ -24,12 +24,12 @@ runner = CliRunner()
 @pytest.fixture(scope="module")
 def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
     """A copy of the tiny run with a real physics probe in RUN/probe (two tiny epochs)."""
-    from orbitmodel.probe.config import recipe
+    from orbitmodel.config import get_preset
     from orbitmodel.probe.train import ProbeRequest, train_probe
 
     run = tmp_path_factory.mktemp("probed") / "tiny"
     shutil.copytree(tiny_run, run)
-    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), train=recipe("tiny"), hidden=32,
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe,
                              device="cpu"))
     return run
 
@@ -157,16 +157,15 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
     """--frame-step 2: Stage I and the probe on steps of 2 frames, the planner imagining a 6-frame
     plan in 3 predictor calls; a horizon that is not a multiple of 2 is refused before flying."""
     from orbitmodel.config import get_preset
-    from orbitmodel.probe.config import recipe
     from orbitmodel.probe.model import PhysicsProbe
     from orbitmodel.probe.train import ProbeRequest, train_probe
-    from orbitmodel.train.checkpoint import RunError
+    from orbitmodel.runs import RunError
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
     run = tmp_path / "skip2"
     preset = get_preset("tiny").with_model(frame_step=2).with_train(max_steps=2)
     train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=run, device="cpu"))
-    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), train=recipe("tiny"), hidden=32, device="cpu"))
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
     assert PhysicsProbe.from_pretrained(run).config.dt == pytest.approx(0.08)  # two frames of 0.04 s
     # Table I per frame (the probe's states interpolated between steps), and the latent curves per step
     res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "4",

@@ -13,7 +13,7 @@ from orbitdata.state import so3_log
 from orbitmodel.config import get_preset
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
-from orbitmodel.plan.rotation import matrix_to_rot6d, rot6d_to_matrix, so3_exp
+from orbitmodel.kinematics import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 
 torch.set_num_threads(1)
 
@@ -197,7 +197,7 @@ def test_learned_dynamics_with_a_frame_step_sees_every_step_th_frame_and_grouped
 
 
 def test_interpolated_frames_pass_through_the_predicted_states():
-    from orbitmodel.plan.dynamics import interpolate_frames
+    from orbitmodel.kinematics import interpolate_frames
 
     R = so3_exp(torch.tensor([[0.0, 0.0, 0.3], [0.0, 0.0, 0.6]]))
     state0 = torch.zeros(1, 16)

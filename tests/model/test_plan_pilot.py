@@ -22,7 +22,8 @@ from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.factory import PredictedDepth, sensor_depth
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera
-from orbitmodel.plan.pilot import OraclePilot, PlannerConfig, PlannerPilot, Variant
+from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 
 torch.set_num_threads(1)
 SIM = SimConfig(camera=CameraConfig(image_size=64), max_steps=8)

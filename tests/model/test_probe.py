@@ -8,8 +8,9 @@ import torch
 from orbitdata import schema as S
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics, constant_velocity
 from orbitmodel.probe.config import ProbeConfig
-from orbitmodel.probe.integrator import (FUEL, P, ROT, V, W, exp_so3, geodesic_angle, hat, increments_of, integrate,
-                                         matrix_to_rot6d, rot6d_to_matrix, step)
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, hat, matrix_to_rot6d, rot6d_to_matrix
+from orbitmodel.kinematics import so3_exp as exp_so3
+from orbitmodel.probe.integrator import increments_of, integrate, step
 from orbitmodel.probe.model import PhysicsProbe
 
 DT = S.DT
@@ -222,10 +223,3 @@ def test_a_probe_reading_latent_changes_needs_the_last_context_latent():
     upstream = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16))  # reads z_k alone: z_last changes nothing
     torch.nn.init.normal_(upstream.increments.net[-1].weight, generator=torch.Generator().manual_seed(1))
     assert torch.equal(upstream(z, state), upstream(z, state, z_last))
-
-
-def test_the_paper_preset_keeps_upstreams_probe_and_the_others_take_the_measured_one():
-    from orbitmodel.probe.config import default_probe
-
-    assert default_probe("paper") == ("latent", "upstream")
-    assert default_probe("cpu") == default_probe("tiny") == ("latent+change", "coasting")

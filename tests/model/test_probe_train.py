@@ -13,11 +13,12 @@ from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.cli.app import app
 from orbitmodel.probe.cache import CACHE_FILE, LAST, LATENT
-from orbitmodel.probe.config import ProbeConfig, recipe
+from orbitmodel.config import get_preset
+from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.evaluate import PAPER, QUANTITIES, ROWS, TABLE_JSON, TABLE_MD
 from orbitmodel.probe.model import PhysicsProbe
 from orbitmodel.probe.train import LatentObjective, ProbeJob, ProbeRequest, load_stage1, train_probe
-from orbitmodel.train.checkpoint import RunDir
+from orbitmodel.runs import RunDir
 from orbitmodel.train.loop import LoopSettings, fit
 
 runner = CliRunner()
@@ -31,16 +32,16 @@ def run(tiny_run, tmp_path):
 
 
 def request(run, dataset, kind="latent", **changes):
-    return ProbeRequest(run=run, dataset=str(dataset), train=recipe("tiny").with_changes(**changes), kind=kind,
-                        hidden=32, device="cpu")
+    return ProbeRequest(run=run, dataset=str(dataset), recipe=get_preset("tiny").probe.with_changes(**changes),
+                        kind=kind, device="cpu")
 
 
 def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
     """No cache: the world model runs on every batch, and ends exactly as it started
     (weights and BatchNorm statistics), even when the objective is put in train mode."""
-    _, world_model, _ = load_stage1(run)
+    world_model = load_stage1(run)
     before = {k: v.clone() for k, v in world_model.state_dict().items()}
-    t = recipe("tiny").with_changes(cache_windows=0, max_steps=4)
+    t = get_preset("tiny").probe.train.with_changes(cache_windows=0, max_steps=4)
     probe = PhysicsProbe(ProbeConfig(latent_dim=32, hidden=32))
     module = LatentObjective(world_model, probe, t).train()
     windows = load_windows(tiny_dataset_master, context=t.context, horizon=t.horizon, stride=t.window_stride,
@@ -58,8 +59,8 @@ def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
     result = train_probe(request(run, tiny_dataset_master, epochs=12))
     assert result.steps == 12 * (32 // 4)
     batch = load_file(run / "probe" / CACHE_FILE)  # the imagined latents of the 32 training windows
-    _, world_model, _ = load_stage1(run)
-    t = recipe("tiny")
+    world_model = load_stage1(run)
+    t = get_preset("tiny").probe.train
 
     def loss(probe):
         with torch.no_grad():
@@ -125,7 +126,7 @@ def one_line_error(res, message):
 def test_clear_errors(run, tiny_dataset_master, tmp_path):
     data = str(tiny_dataset_master)
     one_line_error(runner.invoke(app, ["probe", str(tmp_path / "nothing"), data]), "not an orbitmodel run")
-    one_line_error(runner.invoke(app, ["eval", "probe", str(run), data]), "no trained latent probe")
+    one_line_error(runner.invoke(app, ["eval", "probe", str(run), data]), "no physics probe")
     untrained = tmp_path / "untrained"
     shutil.copytree(run, untrained)
     (untrained / "model.safetensors").unlink()
@@ -136,7 +137,7 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     config = json.loads((other_size / "config.json").read_text())
     config["preset"]["model"]["image_size"] = 32
     (other_size / "config.json").write_text(json.dumps(config))
-    one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "64 px images")
+    one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "holds 64 px")
     for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1"):
         one_line_error(runner.invoke(app, ["probe", str(run), data, "--loss-weights", bad]), "--loss-weights")
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0

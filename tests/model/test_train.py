@@ -7,6 +7,7 @@ import json
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import torch
@@ -16,15 +17,19 @@ from typer.testing import CliRunner
 from orbitmodel.cli.app import app
 from orbitmodel.config import get_preset
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.train.checkpoint import RunError
-from orbitmodel.train.loop import KILL_AFTER_STEP
+from orbitmodel.runs import RunError
 from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
 runner = CliRunner()
 
 
-def _cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "orbitmodel.cli.app", *args], capture_output=True, text=True,
+KILL_AFTER = Path(__file__).with_name("kill_after.py")
+
+
+def _cli(*args: str, env: dict | None = None, kill_after: int | None = None) -> subprocess.CompletedProcess:
+    """The CLI in a fresh process; ``kill_after``: SIGKILLed right after that step's checkpoint."""
+    launch = ["-m", "orbitmodel.cli.app"] if kill_after is None else [str(KILL_AFTER), str(kill_after)]
+    return subprocess.run([sys.executable, *launch, *args], capture_output=True, text=True,
                           env={**os.environ, **(env or {})}, timeout=300)
 
 
@@ -69,7 +74,7 @@ def test_a_killed_run_resumes_to_the_same_weights(tiny_dataset_master, tmp_path)
     common = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "8", "--device", "cpu"]
     straight = _cli(*common, "--out", str(tmp_path / "a"))
     assert straight.returncode == 0, straight.stderr
-    killed = _cli(*common, "--out", str(tmp_path / "b"), env={KILL_AFTER_STEP: "4"})
+    killed = _cli(*common, "--out", str(tmp_path / "b"), kill_after=4)
     assert killed.returncode == -9  # SIGKILL right after the step-4 checkpoint
     assert not (tmp_path / "b" / "model.safetensors").exists()
     assert (tmp_path / "b" / "checkpoints" / "latest").read_text().strip() == "step-0000004"
@@ -169,7 +174,7 @@ def test_tensorboard_event_files_when_installed(trained):
 
 
 def test_sigreg_flags_override_the_preset_and_land_in_the_run_config(tiny_dataset_master, tmp_path):
-    from orbitmodel.train.checkpoint import read_run_config
+    from orbitmodel.runs import read_run_config
 
     run = tmp_path / "run"
     args = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "1", "--out", str(run),

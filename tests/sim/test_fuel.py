@@ -7,7 +7,7 @@ import pytest
 from scenes import free_space, pure_force_thrust
 
 from orbitdata.sim import CubeSatConfig, CubeSatEnv, SimConfig
-from orbitdata.sim.env import G0
+from orbitdata.sim.config import G0
 
 
 def test_fuel_is_monotone_and_matches_mass_flow(physics_env):

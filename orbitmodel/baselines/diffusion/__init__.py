@@ -1,6 +1,6 @@
 """Diffusion Policy (Chi et al. 2023), the baseline flown beside the learned planner.
 
-    orbitmodel train-policy DATASET --policy diffusion --preset cpu --out RUN
+    orbitmodel train-policy DATASET --preset cpu --out RUN
     orbitmodel eval policy RUN DATASET          # action MSE on held-out expert windows
     pilot = load_policy_pilot(RUN)              # an orbitdata pilot: reset(task), act(obs)
 
@@ -15,7 +15,7 @@ _EXPORTS = {
     "PolicyConfig": "config", "PolicyTrainConfig": "config", "PolicyPreset": "config",
     "POLICY_PRESETS": "config", "get_policy_preset": "config",
     "ConditionalUnet1D": "unet", "DiffusionPolicy": "policy",
-    "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "train",
+    "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "config",
     "DiffusionPilot": "pilot", "load_policy_pilot": "pilot",
     "evaluate_policy": "evaluate", "ActionMSE": "evaluate",
 }

@@ -11,12 +11,16 @@ steps, DDIM 10 inference steps, EMA) at ``down_dims (64, 128, 256)`` with a 4-la
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, STATE_DIM
 from orbitmodel.config import replace_given
+from orbitmodel.data import DatasetMeta
+from orbitmodel.runs import CONFIG, POLICY, RunDir, RunError
 
 GOAL_DIM = 3  # the goal in the body frame, metres
+FAMILY = "diffusion"  # config.json's "policy": the policy family of a policy run
 PREDICTION_TYPES = ("epsilon", "sample")
 
 
@@ -87,11 +91,6 @@ class PolicyConfig:
                 raise ValueError(f"{name}={getattr(self, name)}: {bad} not divisible by n_groups={self.n_groups}")
         object.__setattr__(self, "cnn_channels", tuple(self.cnn_channels))
         object.__setattr__(self, "down_dims", tuple(self.down_dims))
-
-    @property
-    def window(self) -> int:
-        """Frames per training window: the observations then the rest of the action horizon."""
-        return self.horizon
 
     @property
     def action_start(self) -> int:
@@ -178,12 +177,10 @@ class PolicyPreset:
 
 
 def _cpu() -> PolicyPreset:
-    # 55.8 windows/s measured on the 2-core machine (batch 64, 9 % of it waiting for data):
-    # 1500 steps take about 29 min, 0.6 epoch of the expert episodes. At this budget the
-    # reference's epsilon prediction samples badly (measured on the first cpu run: eps MSE
-    # 0.04-0.34 per noise level, yet DDIM samples 11x worse than the mean action, biased
-    # upwards by the clipped x0 estimates of the noisiest steps), so the preset predicts the
-    # clean sample (the reference's other prediction_type) at a 3x higher learning rate.
+    # 1500 steps fit the 2-core machine's half hour (docs/model.md). At this budget the
+    # reference's epsilon prediction samples badly (DDIM samples far from the data, biased by
+    # the clipped x0 estimates of the noisiest steps), so the preset predicts the clean sample
+    # (the reference's other prediction_type) at a 3x higher learning rate.
     train = PolicyTrainConfig(batch_size=64, lr=3e-4, epochs=100, max_steps=1500, warmup=0.05, num_workers=0,
                               log_every=20, save_every=250)
     return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
@@ -206,3 +203,24 @@ def get_policy_preset(name: str) -> PolicyPreset:
     if name not in POLICY_PRESETS:
         raise ValueError(f"unknown policy preset {name!r}; choose one of {', '.join(POLICY_PRESETS)}")
     return POLICY_PRESETS[name]()
+
+
+@dataclass(frozen=True)
+class PolicyRun:
+    """A policy run's preset and dataset facts (and the raw config.json)."""
+
+    preset: PolicyPreset
+    dataset: DatasetMeta
+    raw: dict
+
+
+def read_policy_run(path: str | Path) -> PolicyRun:
+    """A policy run's preset and dataset facts, from its config.json; RunError for anything else."""
+    raw = RunDir(path).read_config()
+    if raw.get("stage") != POLICY or raw.get("policy") != FAMILY:
+        raise RunError(f"{path} holds a {raw.get('stage', 'unknown')!r} run, not a diffusion policy; "
+                       "train one with `orbitmodel train-policy DATASET --out RUN`")
+    try:
+        return PolicyRun(PolicyPreset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
+    except (KeyError, TypeError, ValueError) as err:
+        raise RunError(f"{Path(path) / CONFIG} is not a policy run config ({err})") from None

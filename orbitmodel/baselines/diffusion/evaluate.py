@@ -25,7 +25,7 @@ from orbitdata.load.tables import load_episode_table, load_steps
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.baselines.diffusion.train import COLUMNS, DEFAULT_LEVELS, episode_goals
 from orbitmodel.data import episode_filter, read_dataset_meta
-from orbitmodel.train.checkpoint import RunError
+from orbitmodel.runs import check_image_size
 
 
 @dataclass(frozen=True)
@@ -70,9 +70,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                          "give stride and batch size >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
-    size = read_dataset_meta(dataset).image_size
-    if size != c.image_size:
-        raise RunError(f"{run} takes {c.image_size} px images but {dataset} holds {size} px")
+    check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     windows = load_windows(dataset, split=split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
                            stride=stride, pad=True, columns=[*COLUMNS, S.IS_LAST],
                            episodes=episode_filter(list(levels), list(outcomes)))

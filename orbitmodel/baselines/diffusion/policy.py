@@ -28,25 +28,18 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from orbitdata.state import STATE_SLICES
-from orbitmodel.baselines.diffusion.config import PolicyConfig
+from orbitmodel.baselines.diffusion.config import PolicyConfig, read_policy_run
 from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
+from orbitmodel.kinematics import P, body_to_world
+from orbitmodel.model.normalise import NormalisedStates
+from orbitmodel.runs import RunError, load_weights
 
 
 def goal_in_body(states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-    """R^T (goal - p): states (..., 16), goal (..., 3) metres world frame -> (..., 3) metres body frame.
-
-    R's first two columns are the state's rot6d (row-major 3x2), re-orthonormalised by
-    Gram-Schmidt; the third is their cross product.
-    """
-    p = states[..., STATE_SLICES["p"]]
-    r6 = states[..., STATE_SLICES["r"]].unflatten(-1, (3, 2))  # (..., 3, 2)
-    x = F.normalize(r6[..., 0], dim=-1)
-    y = F.normalize(r6[..., 1] - (x * r6[..., 1]).sum(-1, keepdim=True) * x, dim=-1)
-    z = torch.linalg.cross(x, y)
-    d = goal - p  # (..., 3)
-    return torch.stack([(x * d).sum(-1), (y * d).sum(-1), (z * d).sum(-1)], dim=-1)
+    """R^T (goal - p): states (..., 16), goal (..., 3) metres world frame -> (..., 3) metres body frame."""
+    R = body_to_world(states)  # (..., 3, 3)
+    return (R.transpose(-1, -2) @ (goal - states[..., P])[..., None]).squeeze(-1)
 
 
 def make_schedulers(config: PolicyConfig):
@@ -88,7 +81,7 @@ class Denoiser(nn.Module):
                                       config.step_embed, config.kernel_size, config.n_groups)
 
 
-class DiffusionPolicy(nn.Module):
+class DiffusionPolicy(NormalisedStates, nn.Module):
     """The policy with its EMA copy and normalisation. Build it from a :class:`PolicyConfig`, or
     load a trained one with :meth:`from_pretrained`."""
 
@@ -97,8 +90,7 @@ class DiffusionPolicy(nn.Module):
         self.config = config
         self.net = Denoiser(config)
         self.ema = copy.deepcopy(self.net).requires_grad_(False)  # updated by ema_update after each step
-        self.register_buffer("state_mean", torch.zeros(config.state_dim))
-        self.register_buffer("state_std", torch.ones(config.state_dim))
+        self.register_state_stats(config.state_dim)
         self.register_buffer("action_low", torch.zeros(config.action_dim))
         self.register_buffer("action_high", torch.ones(config.action_dim))
         self.register_buffer("goal_scale", torch.tensor(1.0))  # metres per unit of the goal input
@@ -110,8 +102,7 @@ class DiffusionPolicy(nn.Module):
         low = torch.as_tensor(action_low, dtype=torch.float32)
         high = torch.as_tensor(action_high, dtype=torch.float32)
         flat = high - low < 1e-6
-        self.state_mean.copy_(torch.as_tensor(state_mean, dtype=torch.float32))
-        self.state_std.copy_(torch.as_tensor(state_std, dtype=torch.float32).clamp(min=1e-3))
+        self.set_state_stats(state_mean, state_std)
         self.action_low.copy_(torch.where(flat, torch.zeros_like(low), low))
         self.action_high.copy_(torch.where(flat, torch.ones_like(high), high))
         self.goal_scale.fill_(max(float(goal_scale), 1e-3))
@@ -126,7 +117,7 @@ class DiffusionPolicy(nn.Module):
     def condition(self, net: Denoiser, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3) metres world frame -> (B, C)."""
         x = images.float() / 127.5 - 1.0  # [-1, 1]
-        s = (states - self.state_mean) / self.state_std
+        s = self.normalise_states(states)
         g = goal_in_body(states, goal[:, None, :].expand(-1, states.shape[1], -1)) / self.goal_scale  # (B, To, 3)
         return net.obs_encoder(x, s, g)
 
@@ -180,9 +171,6 @@ class DiffusionPolicy(nn.Module):
     @classmethod
     def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "DiffusionPolicy":
         """Load a trained policy from a run folder (``orbitmodel train-policy --out RUN``), in eval mode."""
-        from orbitmodel.baselines.diffusion.train import read_policy_run
-        from orbitmodel.train.checkpoint import RunError, load_weights
-
         run = read_policy_run(path)
         policy = cls(run.preset.model)
         try:

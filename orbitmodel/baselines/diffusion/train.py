@@ -13,7 +13,6 @@ optimiser step.
 
 from __future__ import annotations
 
-import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,14 +25,12 @@ from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitdata.load.tables import load_episode_table
 from orbitdata.state import STATE_SLICES
-from orbitmodel.baselines.diffusion.config import PolicyPreset
+from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
-from orbitmodel.train.checkpoint import CONFIG, RunDir, RunError
+from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
-STAGE = "policy"
-POLICY = "diffusion"
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION)  # plus episode_index, always loaded; the goal comes from the episodes table
 DEFAULT_LEVELS = ("expert",)
 STREAM_NOISE, STREAM_SHIFT = 0, 1
@@ -119,38 +116,15 @@ class PolicyRequest:
     overwrite: bool = False
 
 
-@dataclass(frozen=True)
-class PolicyRun:
-    preset: PolicyPreset
-    dataset: DatasetMeta
-    raw: dict
-
-
-def run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes) -> dict:
-    """The run's config.json, as it reads back (tuples as lists), so that a resume compares equal."""
-    config = {"stage": STAGE, "policy": POLICY, "preset": preset.to_dict(), "dataset": meta.to_dict(),
-              "levels": list(levels), "outcomes": list(outcomes)}
-    return json.loads(json.dumps(config))
-
-
-def read_policy_run(path: str | Path) -> PolicyRun:
-    """A policy run's preset and dataset facts, from its config.json; RunError for anything else."""
-    raw = RunDir(path).read_config()
-    if raw.get("stage") != STAGE or raw.get("policy") != POLICY:
-        raise RunError(f"{path} holds a {raw.get('stage', 'unknown')!r} run, not a diffusion policy; "
-                       "train one with `orbitmodel train-policy DATASET --out RUN`")
-    try:
-        return PolicyRun(PolicyPreset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
-    except (KeyError, TypeError, ValueError) as err:
-        raise RunError(f"{Path(path) / CONFIG} is not a policy run config ({err})") from None
+def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes) -> dict:
+    """The run's config.json (``runs.run_config``)."""
+    return run_config(POLICY, policy=FAMILY, preset=preset.to_dict(), dataset=meta.to_dict(), levels=list(levels),
+                      outcomes=list(outcomes))
 
 
 def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
     """A fresh policy (initialised from the preset's seed) with the dataset's normalisation."""
-    if meta.image_size != preset.model.image_size:
-        raise RunError(f"preset {preset.name!r} takes {preset.model.image_size} px images but {meta.source} holds "
-                       f"{meta.image_size} px; generate one with `orbitdata generate DIR --image-size "
-                       f"{preset.model.image_size}`")
+    check_image_size(meta, preset.model.image_size, f"policy preset {preset.name!r}")
     torch.manual_seed(preset.train.seed)  # initialisation
     policy = DiffusionPolicy(preset.model)
     low, high = action_range(meta.source)
@@ -166,7 +140,8 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     run = RunDir(req.out)
     rank = int(os.environ.get("RANK", 0))
     if rank == 0:
-        run.start(run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume, overwrite=req.overwrite)
+        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume,
+                  overwrite=req.overwrite)
     windows = policy_windows(req.dataset, "train", req.preset, req.levels, req.outcomes)
     goals = episode_goals(req.dataset, "train")
     return fit(PolicyJob(policy, req.preset, goals, rank), windows, LoopSettings.of(req.preset.train), run, device,

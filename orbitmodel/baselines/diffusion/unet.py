@@ -5,7 +5,7 @@
     down: 2 residual blocks per level, then Conv1d(3, stride 2) except at the last level
     mid:  2 residual blocks at the widest level
     up:   concat the skip, 2 residual blocks, ConvTranspose1d(4, stride 2)
-    out:  Conv1dBlock -> Conv1d(1) back to A channels           (B, H, A)  predicted noise
+    out:  Conv1dBlock -> Conv1d(1) back to A channels           (B, H, A)  the noise or the clean sample
 
 Every residual block is conv -> FiLM(g) -> conv, plus a 1x1 residual. As in the reference
 (``real-stanford/diffusion_policy``, ``conditional_unet1d.py`` with ``cond_predict_scale``),
@@ -66,7 +66,8 @@ class ConditionalResidualBlock1D(nn.Module):
 
 
 class ConditionalUnet1D(nn.Module):
-    """Predicts the noise in a (B, H, A) action sequence given the step and global features."""
+    """Denoises a (B, H, A) action sequence given the step and global features: predicts its noise
+    or its clean sample, as the policy's ``prediction_type`` trains it."""
 
     def __init__(self, action_dim: int, global_cond_dim: int, down_dims: tuple[int, ...], step_embed: int,
                  kernel_size: int, n_groups: int):
@@ -93,7 +94,7 @@ class ConditionalUnet1D(nn.Module):
                                    nn.Conv1d(down_dims[0], action_dim, 1))
 
     def forward(self, sample: torch.Tensor, step: torch.Tensor, global_cond: torch.Tensor) -> torch.Tensor:
-        """sample (B, H, A), step (B,) int, global_cond (B, C) -> predicted noise (B, H, A)."""
+        """sample (B, H, A), step (B,) int, global_cond (B, C) -> (B, H, A), the noise or the clean sample."""
         g = torch.cat([self.step_embedding(step), global_cond], dim=-1)  # (B, E + C)
         x = sample.transpose(1, 2)  # (B, A, H): convolve over time
         skips = []

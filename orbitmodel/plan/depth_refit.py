@@ -1,11 +1,11 @@
 """Refit the depth head for the planner: the run's encoder frozen, the loss weighted towards near cells.
 
-Stage I trains the depth head with upstream's MSE on depth / depth_max. About 96 % of the
-16x16 cells are sky at the far plane (50 m), so that loss is mostly about the sky: on the `cpu`
-run the head places 48 % of the cells truly within 2 m at or beyond the planner's 10 m range,
-and the planner does not plan around what it does not see (``orbitmodel eval rollout`` prints
-these figures). The refit keeps the architecture and starts from the Stage I head, reads the
-frozen encoder's patch tokens of ``frames`` random training frames (encoded once), and minimises
+Stage I trains the depth head with upstream's MSE on depth / depth_max. Most of the 16x16 cells
+are sky at the far plane (50 m), so that loss is mostly about the sky, and the head misses many
+near cells (``orbitmodel eval rollout`` reports them by band, ``plan.depth_bands``); the planner
+does not plan around what it does not see. The refit keeps the architecture and starts from the
+Stage I head, reads the frozen encoder's patch tokens of ``frames`` random training frames
+(encoded once), and minimises
 
     mean_cells (1 + near_weight [d < near_m]) (pred - d)^2 / depth_max^2
 
@@ -25,8 +25,12 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
-from orbitmodel.plan.pilot import PlannerConfig
-from orbitmodel.train.checkpoint import CONFIG, WEIGHTS, RunError, write_json_atomic
+from orbitmodel.data import read_dataset_meta
+from orbitmodel.model.world_model import WorldModel, images_to_float
+from orbitmodel.plan.config import MAX_RANGE
+from orbitmodel.plan.depth_bands import depth_by_band
+from orbitmodel.runs import CONFIG, DEPTH_REFIT, WEIGHTS, RunDir, RunError, check_image_size, load_weights, run_config, \
+    write_json_atomic
 
 FOLDER = "depth"
 EVAL = "eval.json"
@@ -34,12 +38,8 @@ EVAL = "eval.json"
 
 @dataclass(frozen=True)
 class DepthRefitConfig:
-    """The refit's recipe (README "Plan and fly").
-
-    ``frames`` and ``epochs`` were chosen on the 5-frame-step run's held-out test frames (cells
-    truly within 2 m predicted at or beyond 10 m): 30,000 frames x 8 epochs missed 7.9 %,
-    60,000 x 30 3.8 %, 120,000 x 30 2.6 % (its fit reads ~2 GB of float16 patch tokens).
-    ``near_weight`` was set before any flight (it balances the ~4 % of near cells).
+    """The refit's recipe (``docs/planner.md`` gives the comparison it was chosen from; the fit
+    holds ``frames`` x patches x width float16 tokens in memory).
 
     Args:
         frames: random training frames whose patch tokens are encoded once (a dataset with fewer
@@ -47,7 +47,7 @@ class DepthRefitConfig:
         test_frames: random test frames for the before/after comparison.
         epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
         near_weight: extra weight of a cell whose true depth is below ``near_m``.
-        near_m: metres; the planner's range (``PlannerConfig.max_range``).
+        near_m: metres; the planner's range (``plan.config.MAX_RANGE``).
         seed: frame choice and data order.
     """
 
@@ -57,7 +57,7 @@ class DepthRefitConfig:
     batch_size: int = 256
     lr: float = 1e-3
     near_weight: float = 25.0
-    near_m: float = PlannerConfig.max_range
+    near_m: float = MAX_RANGE
     seed: int = 0
 
     def __post_init__(self):
@@ -74,7 +74,6 @@ def depth_folder(run: str | Path) -> Path:
 def _patches(model, dataset: str, split: str, n: int, seed: int, where: str) -> tuple[torch.Tensor, torch.Tensor]:
     """Patch tokens (n, P, width) float16 and true depth (n, 16, 16) of n random frames of ``split``."""
     from orbitdata.load import load_windows
-    from orbitmodel.model.world_model import images_to_float
 
     frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.DEPTH_LOW])
     if len(frames) < n:
@@ -99,19 +98,11 @@ def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
 def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(),
                      overwrite: bool = False) -> dict:
     """Refit ``run``'s depth head (see the module docstring); returns the before/after evaluation."""
-    from orbitmodel.data import read_dataset_meta
-    from orbitmodel.evaluate.rollout import depth_by_band
-    from orbitmodel.model.world_model import WorldModel
-    from orbitmodel.train.checkpoint import RunDir
-
     out = depth_folder(run)
     if (out / WEIGHTS).exists() and not overwrite:
         raise RunError(f"{out} already holds a refitted depth head; pass --overwrite to fit it again")
     model = WorldModel.from_pretrained(run)
-    meta = read_dataset_meta(dataset)
-    if meta.image_size != model.config.image_size:
-        raise RunError(f"{run} was trained on {model.config.image_size} px images but {dataset} holds "
-                       f"{meta.image_size} px; refit on a dataset generated with --image-size {model.config.image_size}")
+    check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
     start = time.perf_counter()
     train_x, train_d = _patches(model, dataset, "train", cfg.frames, cfg.seed, "--frames")
     test_x, test_d = _patches(model, dataset, "test", cfg.test_frames, cfg.seed + 1, "--test-frames")
@@ -144,8 +135,8 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
     for name, h in (("stage1", model.depth_head), ("refit", head)):
         pred = _predict(h, test_x, scale)
         result[name] = {"mae_m": float((pred - test_d).abs().mean()), **depth_by_band(pred, test_d, seen_within=cfg.near_m)}
-    RunDir(out).start({"stage": "depth_refit", "refit": asdict(cfg), "dataset": str(dataset)}, resume=False,
-                      overwrite=True)
+    RunDir(out).start(run_config(DEPTH_REFIT, refit=asdict(cfg), dataset=str(dataset), world_model=model.fingerprint),
+                      resume=False, overwrite=True)
     RunDir(out).save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
     write_json_atomic(out / EVAL, result)
     return result
@@ -154,8 +145,6 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
 def load_refit_head(run: str | Path, model):
     """The refitted depth head of ``run`` (a copy of ``model.depth_head`` with its weights), or
     RunError with the command that makes it."""
-    from orbitmodel.train.checkpoint import load_weights
-
     folder = depth_folder(run)
     if not (folder / WEIGHTS).is_file() or not (folder / CONFIG).is_file():
         raise RunError(f"{run} has no refitted depth head ({folder} is missing); fit one with "
@@ -169,19 +158,10 @@ def load_refit_head(run: str | Path, model):
     return head.eval()
 
 
-def band_lines(result: dict) -> list[str]:
-    """The before/after table `orbitmodel depth` prints."""
-    from orbitmodel.evaluate.rollout import band_label
-
-    rows = [f"depth head on {result['config']['test_frames']} test frames: Stage I -> refit "
-            f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"]
-    before, after = result["stage1"], result["refit"]
-    rows.append(f"  all cells: MAE {before['mae_m']:.2f} -> {after['mae_m']:.2f} m")
-    for b, a in zip(before["bands"], after["bands"]):
-        if b["cells"]:
-            rows.append(f"  {band_label(b):>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
-                        f"missed {100 * b['missed']:.1f} -> {100 * a['missed']:.1f} %")
-    if before["phantom"] is not None:
-        rows.append(f"  far cells predicted inside {result['config']['near_m']:g} m: "
-                    f"{100 * before['phantom']:.2f} -> {100 * after['phantom']:.2f} %")
-    return rows
+def refit_head_for(run: str | Path, model, choice: str):
+    """The depth head a planner flies with: the refitted one for ``choice`` "refit" (RunError if
+    the run has none), "auto" (if there is one), or None for the Stage I head ("stage1", or
+    "auto" without a refit)."""
+    if choice == "stage1" or (choice == "auto" and not (depth_folder(run) / WEIGHTS).is_file()):
+        return None
+    return load_refit_head(run, model)

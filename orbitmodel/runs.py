@@ -1,20 +1,26 @@
-"""A run folder: what ``orbitmodel train`` (and the later stages) write, and how to resume.
+"""Run folders: what every stage writes, how it resumes, and how a trained run is read back.
 
 ::
 
-    RUN/config.json                     the stage's preset, training settings and dataset facts
+    RUN/config.json                     the stage, its preset or recipe, and the dataset's facts
     RUN/model.safetensors               the final weights (written when the run ends)
     RUN/checkpoints/step-NNNNNNN/       model.safetensors + state.pt (optimiser, step, RNG)
     RUN/checkpoints/latest              name of the newest complete checkpoint
     RUN/metrics.jsonl                   one JSON line per logged step
     RUN/tensorboard/                    event files, when tensorboard is installed
+    RUN/probe/  RUN/probe-state/  RUN/depth/   a Stage I run's sub-runs, each a run folder
 
 A checkpoint folder is written under a temporary name and renamed, and ``latest`` is replaced
 atomically after it, so a run killed at any moment resumes from a complete checkpoint.
+
+This is the bottom layer of ``orbitmodel`` (with ``config``, ``data`` and ``kinematics``): every
+stage writes through :class:`RunDir`, every loader reads through :func:`load_run`, and every
+run-level refusal is a :class:`RunError`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import shutil
@@ -25,6 +31,9 @@ import torch
 from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
+from orbitmodel.config import Preset
+from orbitmodel.data import DatasetMeta
+
 CONFIG = "config.json"
 WEIGHTS = "model.safetensors"
 STATE = "state.pt"
@@ -34,6 +43,10 @@ METRICS = "metrics.jsonl"
 TENSORBOARD = "tensorboard"
 OWNED = (CONFIG, WEIGHTS, CHECKPOINTS, METRICS, TENSORBOARD)  # what --overwrite may remove
 KEEP = 2  # checkpoints kept on disk
+# The ``stage`` of a config.json, and the command that makes each.
+WORLD_MODEL, PROBE, DEPTH_REFIT, POLICY = "world_model", "probe", "depth_refit", "policy"
+MAKES = {WORLD_MODEL: "orbitmodel train DATASET --out RUN", PROBE: "orbitmodel probe RUN DATASET",
+         DEPTH_REFIT: "orbitmodel depth RUN DATASET", POLICY: "orbitmodel train-policy DATASET --out RUN"}
 
 
 class RunError(ValueError):
@@ -54,8 +67,14 @@ def write_json_atomic(path: Path, data: dict) -> None:
     os.replace(tmp, path)
 
 
+def run_config(stage: str, **parts) -> dict:
+    """A run's config.json: its stage and parts, as the file reads back (tuples become lists), so
+    that a resumed run compares equal to the one on disk."""
+    return json.loads(json.dumps({"stage": stage, **parts}))
+
+
 class RunDir:
-    """One stage's folder (a Stage I run, or its ``probe/`` sub-folder)."""
+    """One stage's folder (a Stage I run, a policy run, or a sub-run such as ``probe/``)."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
@@ -149,23 +168,65 @@ def load_weights(path: str | Path) -> dict[str, torch.Tensor]:
                 return load_file(file)
             except (OSError, SafetensorError) as err:
                 raise RunError(f"{file} is corrupt or truncated ({err}); train the run again") from None
-    raise RunError(f"{run} has no weights ({WEIGHTS}); train it first with `orbitmodel train`")
+    stage = stage_of(run) if (run / CONFIG).is_file() else WORLD_MODEL
+    raise RunError(f"{run} has no weights ({WEIGHTS}); train it first with `{MAKES.get(stage, MAKES[WORLD_MODEL])}`")
 
 
+def fingerprint(weights: dict[str, torch.Tensor]) -> str:
+    """sha256 of a state dict's names and bytes: which weights a sub-run was made from."""
+    h = hashlib.sha256()
+    for name in sorted(weights):
+        h.update(name.encode())
+        h.update(weights[name].detach().cpu().contiguous().reshape(-1).view(torch.uint8).numpy().tobytes())
+    return h.hexdigest()[:16]
+
+
+def stage_of(path: str | Path) -> str:
+    """The ``stage`` a run folder's config.json records ("world_model", "policy", ...)."""
+    return str(RunDir(path).read_config().get("stage", "unknown"))
+
+
+# ---- Stage I runs ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RunConfig:
-    preset: "object"
-    dataset: "object"
+    """A Stage I run's preset and dataset facts (and the raw config.json)."""
+
+    preset: Preset
+    dataset: DatasetMeta
     raw: dict
 
 
-def read_run_config(path: str | Path) -> RunConfig:
-    """A Stage I run's preset and dataset facts, from its config.json."""
-    from orbitmodel.config import Preset
-    from orbitmodel.data import DatasetMeta
+@dataclass(frozen=True)
+class Run:
+    """A trained Stage I run: its config and its weights (:func:`load_run`)."""
 
+    path: Path
+    config: RunConfig
+    weights: dict[str, torch.Tensor]
+
+
+def read_run_config(path: str | Path) -> RunConfig:
+    """A Stage I run's preset and dataset facts, from its config.json; RunError for any other run."""
     raw = RunDir(path).read_config()
+    stage = raw.get("stage", WORLD_MODEL)
+    if stage != WORLD_MODEL:
+        raise RunError(f"{path} holds a {stage!r} run, not a Stage I world model; "
+                       f"give the folder of `{MAKES[WORLD_MODEL]}`")
     try:
         return RunConfig(Preset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
     except (KeyError, TypeError, ValueError) as err:
         raise RunError(f"{Path(path) / CONFIG} is not a Stage I run config ({err})") from None
+
+
+def load_run(path: str | Path) -> Run:
+    """A trained Stage I run: config and final (else newest checkpoint's) weights; RunError with the fix."""
+    return Run(Path(path), read_run_config(path), load_weights(path))
+
+
+def check_image_size(meta: DatasetMeta, size: int, user: str, resize: bool = False) -> None:
+    """RunError unless the dataset ``meta`` holds the ``size`` px images that ``user`` (a run or a
+    preset, named in the message) takes; ``resize`` names the --resize way out too."""
+    if meta.image_size != size:
+        raise RunError(f"{user} takes {size} px images but {meta.source} holds {meta.image_size} px; use a dataset "
+                       f"generated with `orbitdata generate DIR --image-size {size}`"
+                       + (", or pass --resize" if resize else ""))

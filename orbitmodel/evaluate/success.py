@@ -1,0 +1,73 @@
+"""Success rates with their uncertainty: every rate we report comes with its episode count and
+its 95 % Wilson score interval (Wilson 1927), which stays inside [0, 1] and is honest at 0 % and
+100 %, where the normal approximation collapses to a point."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
+
+
+def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """(low, high) in [0, 1]: the Wilson score interval of ``successes`` out of ``n`` trials."""
+    if n <= 0:
+        raise ValueError(f"a success rate needs at least one episode, got n={n}")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes={successes} must be in [0, n={n}]")
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def rate_text(successes: int, n: int) -> str:
+    """'97.5 % [92.9, 99.1] (117/120)': the rate, its 95 % Wilson interval and the count."""
+    low, high = wilson(successes, n)
+    return f"{100 * successes / n:.1f} % [{100 * low:.1f}, {100 * high:.1f}] ({successes}/{n})"
+
+
+def report_totals(report: dict) -> tuple[int, int]:
+    """(successes, episodes) over every setting of a grid result (``--json`` table)."""
+    return (sum(int(s["success"]) for s in report["settings"]), sum(int(s["episodes"]) for s in report["settings"]))
+
+
+FAILURES = ("collision", "timeout", "out_of_fuel")
+
+
+def failures_text(report: dict) -> str:
+    """'3 collisions, 1 timeout' over every setting ('none' without failures)."""
+    counts = {kind: sum(int(s.get(kind, 0)) for s in report["settings"]) for kind in FAILURES}
+    words = {"collision": "collision", "timeout": "timeout", "out_of_fuel": "out of fuel"}
+    parts = [f"{n} {words[k]}{'s' if n != 1 and k != 'out_of_fuel' else ''}" for k, n in counts.items() if n]
+    return ", ".join(parts) or "none"
+
+
+def markdown_table(reports: list[dict], sources: list[str] | None = None, per_setting_ci: bool = False) -> str:
+    """One row per grid result: successes per setting (k/n, or with ``per_setting_ci`` the rate and
+    its interval), the rate over all settings with its 95 % Wilson interval and count, the failures,
+    and (``sources``) the file each row came from. Every report must cover the same settings."""
+    settings = [(int(s["obstacles"]), float(s["speed"])) for s in reports[0]["settings"]]
+    head = [f"{n} obst. {v:g} m/s" for n, v in settings]
+    lines = ["| pilot | " + " | ".join(head) + " | all settings, 95 % CI | failures |" + (" JSON |" if sources else ""),
+             "|---" * (len(head) + 3 + bool(sources)) + "|"]
+    for i, r in enumerate(reports):
+        mine = {(int(s["obstacles"]), float(s["speed"])): s for s in r["settings"]}
+        if sorted(mine) != sorted(settings):
+            raise ValueError(f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
+                             f"{reports[0]['pilot']!r} ({sorted(settings)}); tabulate one grid at a time")
+        cells = []
+        for key in settings:
+            k, n = int(mine[key]["success"]), int(mine[key]["episodes"])
+            if per_setting_ci:
+                low, high = wilson(k, n)
+                cells.append(f"{100 * k / n:.0f} [{100 * low:.0f}, {100 * high:.0f}]")
+            else:
+                cells.append(f"{k}/{n}")
+        label = r["pilot"]
+        if sources and Path(sources[i]).name.split(".")[0] != label:  # e.g. the same pilot with another head
+            label += f" ({Path(sources[i]).name.split('.')[0]})"
+        row = f"| {label} | " + " | ".join(cells) + f" | {rate_text(*report_totals(r))} | {failures_text(r)} |"
+        lines.append(row + (f" [{Path(sources[i]).name}]({sources[i]}) |" if sources else ""))
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,106 @@
+"""A planning pilot's settings, and the named planner presets that the CLI and the scripts fly.
+
+``paper`` is the design's MPPI (K = 256 samples, H = 50 frames, the world model's own history of
+latents); ``cpu`` is what the reported grids fly on a 2-core CPU with the ``cpu-step5`` world
+model: K = 32, H = 50, a history of 2 latents (its latency: ``benchmarks/bench_plan.py
+--planner cpu``). Flags of ``orbitmodel eval closed-loop`` (or ``--pilot-option``) change single
+fields of the chosen preset; the result files record the preset and every field.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Callable
+
+from orbitmodel.plan.cost import CostConfig
+from orbitmodel.plan.mppi import MPPIConfig
+
+MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to plan around
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Everything a planning pilot is tuned by.
+
+    Args:
+        mppi: sampling (K, H, noise, temperature); see :class:`MPPIConfig`.
+        cost: weights and margins; see :class:`CostConfig`.
+        noise: "wrench" (perturb along thrust patterns that make independent body forces and
+            torques, torques scaled by ``torque_noise``) or "thrust" (each thruster alone).
+        torque_noise: scale of the torque patterns against the force patterns.
+        history: latents the world model sees per imagined step (0: its own ``config.history``).
+            Fewer is faster (the rollout's cost is proportional) and less accurate.
+        memory_frames: depth frames whose points stay in the world-frame cloud (1: current only;
+            50 = 2 s, chosen on a validation grid seed, ``docs/planner.md``).
+        max_range: metres; depth cells farther than this are not obstacles to plan around.
+        depth_head: which depth head gives the point cloud: "stage1" (trained with the world
+            model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth) or
+            "auto" (the refit when the run has one, else Stage I's).
+        footprint: a point's sphere radius in half cell widths at its depth.
+        support: keep a depth cell only if this many of its 8 neighbours are at a similar depth
+            (``obstacles.supported_cells``; 0: keep every cell within ``max_range``; 1 chosen on
+            a validation grid seed, ``docs/planner.md``).
+        reach: metres of clearance beyond which points are ignored (>= the collision margin).
+        rigid_substeps: substeps of the rigid-body model (the simulator's 8 = exact).
+        replan_every: control steps between replans (in between, the plan's next step runs).
+        compile: run the world model's imagined step through ``torch.compile``
+            (:meth:`WorldModel.compile_rollout`; learned-dynamics pilots only). Same plans to
+            float rounding, faster rollouts, slow first replans.
+        record: keep each replan's best imagined path and the believed points (for videos).
+    """
+
+    mppi: MPPIConfig = field(default_factory=MPPIConfig)
+    cost: CostConfig = field(default_factory=CostConfig)
+    noise: str = "wrench"
+    torque_noise: float = 0.3
+    history: int = 0
+    memory_frames: int = 50
+    max_range: float = MAX_RANGE
+    depth_head: str = "auto"
+    footprint: float = 1.0
+    support: int = 1
+    reach: float = 1.0
+    rigid_substeps: int = 1
+    replan_every: int = 1
+    compile: bool = False
+    record: bool = False
+
+    def __post_init__(self):
+        if self.noise not in ("wrench", "thrust"):
+            raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
+        if self.depth_head not in ("auto", "stage1", "refit"):
+            raise ValueError(f"depth_head={self.depth_head!r}: use 'auto', 'stage1' or 'refit'")
+        if self.history < 0:
+            raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
+        if not 0 <= self.support <= 8:
+            raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
+        if self.replan_every < 1 or self.memory_frames < 1:
+            raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
+        if self.reach < self.cost.margin + self.cost.hull_radius:
+            raise ValueError(f"reach={self.reach} m is shorter than the collision ramp "
+                             f"({self.cost.hull_radius + self.cost.margin:.2f} m)")
+
+
+PLANNER_PRESETS: dict[str, Callable[[], PlannerConfig]] = {
+    "paper": lambda: PlannerConfig(),
+    "cpu": lambda: PlannerConfig(mppi=MPPIConfig(samples=32, horizon=50), history=2),
+}
+
+
+def planner_config(preset: str = "paper", **options) -> PlannerConfig:
+    """The planner preset ``preset`` with single fields changed: ``options`` are MPPIConfig,
+    CostConfig and PlannerConfig field names (values may be strings, as a command line gives them)."""
+    if preset not in PLANNER_PRESETS:
+        raise ValueError(f"unknown planner preset {preset!r}; choose one of {', '.join(PLANNER_PRESETS)}")
+    base = PLANNER_PRESETS[preset]()
+    parts: dict[type, dict] = {MPPIConfig: {}, CostConfig: {}, PlannerConfig: {}}
+    for key, value in options.items():
+        owner = next((cls for cls in parts if key in {f.name for f in dataclasses.fields(cls)}), None)
+        if owner is None or key in ("mppi", "cost"):
+            raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
+        kind = type(getattr(owner(), key))
+        parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
+            else kind(value)
+    return dataclasses.replace(base, mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),
+                               cost=dataclasses.replace(base.cost, **parts[CostConfig]), **parts[PlannerConfig])

@@ -1,0 +1,43 @@
+"""Success rates come with their 95 % Wilson interval and episode count (``orbitmodel eval table``)."""
+
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from orbitmodel.cli.app import app
+from orbitmodel.evaluate.success import failures_text, markdown_table, rate_text, wilson
+
+
+def test_wilson_matches_the_textbook_values():
+    low, high = wilson(117, 120)  # 97.5 %
+    assert (round(100 * low, 1), round(100 * high, 1)) == (92.9, 99.1)
+    low, high = wilson(0, 20)
+    assert low == 0.0 and high == pytest.approx(0.1611, abs=1e-4)  # never a zero-width interval at 0 %
+    low, high = wilson(20, 20)
+    assert high == 1.0 and low == pytest.approx(0.8389, abs=1e-4)
+    assert rate_text(110, 120) == "91.7 % [85.3, 95.4] (110/120)"
+    for bad in ((1, 0), (-1, 5), (6, 5)):
+        with pytest.raises(ValueError):
+            wilson(*bad)
+
+
+def grid(pilot, successes, collisions=0, timeouts=0):
+    return {"pilot": pilot, "seed": 0, "settings": [
+        {"obstacles": n, "speed": v, "episodes": 20, "success": k, "collision": c, "timeout": t, "out_of_fuel": 0}
+        for (n, v), k, c, t in zip([(1, 1.0), (5, 2.0)], successes, collisions or [0, 0], timeouts or [0, 0])]}
+
+
+def test_the_table_gives_counts_the_interval_and_the_failures(tmp_path):
+    planner = grid("planner", [19, 18], collisions=[1, 1], timeouts=[0, 1])
+    table = markdown_table([grid("expert", [20, 20]), planner])
+    assert "| planner | 19/20 | 18/20 | 92.5 % [80.1, 97.4] (37/40) | 2 collisions, 1 timeout |" in table
+    assert failures_text(grid("expert", [20, 20])) == "none"
+    assert "95 [76, 99]" in markdown_table([planner], per_setting_ci=True)
+    with pytest.raises(ValueError, match="another grid"):
+        markdown_table([planner, {**planner, "settings": planner["settings"][:1]}])
+    for name, report in (("expert", grid("expert", [20, 20])), ("planner", planner)):
+        (tmp_path / f"{name}.json").write_text(json.dumps(report))
+    res = CliRunner().invoke(app, ["eval", "table", str(tmp_path / "expert.json"), str(tmp_path / "planner.json")])
+    assert res.exit_code == 0, res.output
+    assert "(40/40)" in res.output and f"[planner.json]({tmp_path / 'planner.json'})" in res.output
