@@ -1,7 +1,7 @@
 """Planning latency of the learned planner (world model + probe + depth head + MPPI) on this CPU.
 
     python benchmarks/bench_plan.py [--run RUN] [--planner paper|cpu] [--samples K] [--horizon H]
-        [--history N] [--threads 2] [--replan-every 1] [--steps 30] [--sweep] [--floor] [--compile]
+        [--history N] [--threads 1] [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,

@@ -314,7 +314,7 @@ def _cpu() -> Preset:
         window_stride=3, weights=(1.0, 1.0, 1.0, 1.0, 100.0), cache_windows=10240, batch_size=128, lr=1e-3,
         min_lr=1e-5, epochs=60, warmup=0.05, num_workers=0, log_every=20, save_every=200))
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
-                  "4-block predictor, SIGReg pooled over the batch; < 60 min", model, train, probe)
+                  "4-block predictor, SIGReg pooled over the batch", model, train, probe)
 
 
 def _cpu_step5() -> Preset:
@@ -334,7 +334,7 @@ def _tiny() -> Preset:
     probe = ProbeRecipe(inputs="latent+change", integrator="coasting", hidden=32, train=ProbeTrainConfig(
         context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4, lr=3e-3, epochs=2,
         warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0))
-    return Preset("tiny", "a few thousand parameters, for tests", model, train, probe)
+    return Preset("tiny", "a tiny model for tests", model, train, probe)
 
 
 PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "cpu-step5": _cpu_step5, "tiny": _tiny}

@@ -7,6 +7,7 @@
     RUN/checkpoints/step-NNNNNNN/       model.safetensors + state.pt (optimiser, step, RNG)
     RUN/checkpoints/latest              name of the newest complete checkpoint
     RUN/metrics.jsonl                   one JSON line per logged step
+    RUN/training.json                   each training segment (a resume starts one): steps, seconds, hardware
     RUN/tensorboard/                    event files, when tensorboard is installed
     RUN/probe/  RUN/probe-state/  RUN/depth/   a Stage I run's sub-runs, each a run folder
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,8 +42,9 @@ STATE = "state.pt"
 CHECKPOINTS = "checkpoints"
 LATEST = "latest"
 METRICS = "metrics.jsonl"
+TRAINING = "training.json"  # each training segment's steps, wall time and hardware
 TENSORBOARD = "tensorboard"
-OWNED = (CONFIG, WEIGHTS, CHECKPOINTS, METRICS, TENSORBOARD)  # what --overwrite may remove
+OWNED = (CONFIG, WEIGHTS, CHECKPOINTS, METRICS, TRAINING, TENSORBOARD)  # what --overwrite may remove
 KEEP = 2  # checkpoints kept on disk
 # The ``stage`` of a config.json, and the command that makes each.
 WORLD_MODEL, PROBE, DEPTH_REFIT, POLICY = "world_model", "probe", "depth_refit", "policy"
@@ -49,8 +52,43 @@ MAKES = {WORLD_MODEL: "orbitmodel train DATASET --out RUN", PROBE: "orbitmodel p
          DEPTH_REFIT: "orbitmodel depth RUN DATASET", POLICY: "orbitmodel train-policy DATASET --out RUN"}
 
 
+REPO_ID = re.compile(r"^(?P<repo>[A-Za-z0-9][\w.-]*/[\w.-]+)(?:@(?P<revision>[\w./-]+))?$")  # owner/name[@rev]
+
+
 class RunError(ValueError):
     """A run folder that cannot be used as asked (the CLI turns it into one line, exit 2)."""
+
+
+def resolve_run(run: str | Path, revision: str | None = None) -> Path:
+    """The local folder of a run: ``run`` itself when it exists here, else the Hugging Face Hub model
+    repo it names (``owner/name``, ``owner/name@revision`` or ``revision=``), downloaded into the
+    ``huggingface_hub`` cache, or found there alone in offline mode (``HF_HUB_OFFLINE=1``).
+    ``orbitmodel push`` makes such repos. Anything else comes back as the path it is, for the
+    caller's own "not a run" error."""
+    path = Path(run)
+    match = REPO_ID.match(str(run))
+    if path.exists() or match is None:
+        return path
+    from huggingface_hub import constants, snapshot_download
+    from huggingface_hub.errors import (HfHubHTTPError, LocalEntryNotFoundError, RepositoryNotFoundError,
+                                        RevisionNotFoundError)
+
+    repo, rev = match["repo"], match["revision"] or revision
+    where = f"{repo}" + (f"@{rev}" if rev else "")
+    try:
+        return Path(snapshot_download(repo, revision=rev, repo_type="model"))
+    except RevisionNotFoundError:
+        raise RunError(f"{where}: the model repo has no revision {rev!r}; give a branch, tag or commit it has") \
+            from None
+    except RepositoryNotFoundError:
+        raise RunError(f"{run} is neither a run folder here nor a model repo on {constants.ENDPOINT} (not found, "
+                       "or private without a token that may read it)") from None
+    except LocalEntryNotFoundError:
+        raise RunError(f"{where} is not in the local Hugging Face cache and the Hub cannot be reached (offline "
+                       "mode, or no network); download it once online, or give a local run folder") from None
+    except HfHubHTTPError as err:
+        status = err.response.status_code if err.response is not None else "?"
+        raise RunError(f"the Hub refused {where} (HTTP {status}); check the repo id and your token") from None
 
 
 @dataclass
@@ -89,8 +127,10 @@ class RunDir:
         except json.JSONDecodeError as err:
             raise RunError(f"{path} is not valid JSON ({err}); train the run again") from None
 
-    def start(self, config: dict, resume: bool, overwrite: bool) -> None:
-        """Claim the folder for a run with ``config``: new, resumed, or overwritten."""
+    def start(self, config: dict, resume: bool, overwrite: bool, upgrade=None) -> None:
+        """Claim the folder for a run with ``config``: new, resumed, or overwritten. ``upgrade``:
+        old config -> the same config as this version writes it (a resume then compares like with
+        like, and the file is rewritten in the current form)."""
         existing = self.path / CONFIG
         config = json.loads(json.dumps(config))  # as it reads back (tuples become lists)
         if existing.exists() and overwrite:
@@ -102,6 +142,8 @@ class RunDir:
                     target.unlink()
         elif existing.exists():
             old = self.read_config()
+            if upgrade is not None:
+                old = json.loads(json.dumps(upgrade(old)))
             if old != config:
                 changed = sorted(k for k in set(old) | set(config) if old.get(k) != config.get(k))
                 raise RunError(f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
@@ -148,6 +190,12 @@ class RunDir:
             raise RunError(f"checkpoint {folder} is corrupt ({type(err).__name__}); delete it and "
                            f"point {pointer} at an older one, or start again with --overwrite") from None
         return Checkpoint(int(state["step"]), weights, state)
+
+    def add_training_segment(self, segment: dict) -> None:
+        """Record one training segment (a run and each resume of it) in training.json."""
+        path = self.path / TRAINING
+        done = json.loads(path.read_text())["segments"] if path.is_file() else []
+        write_json_atomic(path, {"segments": [s for s in done if s["to_step"] <= segment["from_step"]] + [segment]})
 
     def save_final(self, weights: dict[str, torch.Tensor], step: int) -> None:
         tmp = self.path / f".{WEIGHTS}.tmp"
@@ -218,9 +266,11 @@ def read_run_config(path: str | Path) -> RunConfig:
         raise RunError(f"{Path(path) / CONFIG} is not a Stage I run config ({err})") from None
 
 
-def load_run(path: str | Path) -> Run:
-    """A trained Stage I run: config and final (else newest checkpoint's) weights; RunError with the fix."""
-    return Run(Path(path), read_run_config(path), load_weights(path))
+def load_run(path: str | Path, revision: str | None = None) -> Run:
+    """A trained Stage I run, a folder or a Hub repo id (:func:`resolve_run`): config and final (else
+    newest checkpoint's) weights; RunError with the fix."""
+    local = resolve_run(path, revision)
+    return Run(local, read_run_config(local), load_weights(local))
 
 
 def check_image_size(meta: DatasetMeta, size: int, user: str, resize: bool = False) -> None:

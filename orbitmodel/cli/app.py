@@ -41,7 +41,7 @@ def presets() -> None:
 
 
 def _register() -> None:
-    from orbitmodel.cli import closed_loop, depth, evaluate, policy, probe, train
+    from orbitmodel.cli import closed_loop, depth, evaluate, policy, probe, push, train
 
     train.register(app)
     evaluate.register(eval_app)
@@ -49,6 +49,7 @@ def _register() -> None:
     closed_loop.register(eval_app)
     probe.register(app, eval_app)
     depth.register(app)
+    push.register(app)
 
 
 _register()

@@ -62,14 +62,16 @@ def closed_loop(
     support: Annotated[Optional[int], typer.Option(
         min=0, max=8, help="keep a depth cell only with this many of its 8 neighbours at a similar depth (0: off)")
     ] = None,
-    depth_head: Annotated[DepthHead, typer.Option(help="stage1: the head trained with the world model; refit: "
-                                                       "RUN/depth (`orbitmodel depth`); auto: refit if there")] = "auto",
+    depth_head: Annotated[Optional[DepthHead], typer.Option(
+        help="stage1: the head trained with the world model; refit: RUN/depth (`orbitmodel depth`); auto: refit if "
+             "there [default: the preset's, auto]")] = None,
     history: Annotated[Optional[int], typer.Option(min=1, help="latents the world model sees per imagined step "
                                                                "[default: the preset's]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
-    compile_rollout: Annotated[bool, typer.Option("--compile", help="torch.compile the world model's imagined step "
-                                                                   "(needs a C++ compiler)")] = False,
+    compile_rollout: Annotated[Optional[bool], typer.Option(
+        "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
+                                       "[default: the preset's, off]")] = None,
     config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
 ) -> None:
     """Fly a planning pilot (or a policy run) over the orbitdata fly grid and print the success table.
@@ -84,16 +86,19 @@ def closed_loop(
     from orbitmodel.plan.config import planner_config
 
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
-                                     replan_every=replan_every, memory_frames=memory_frames,
-                                     history=history, support=support).items() if x is not None}
+                                     replan_every=replan_every, memory_frames=memory_frames, history=history,
+                                     support=support, depth_head=depth_head.value if depth_head else None,
+                                     compile=compile_rollout).items() if x is not None}
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
         variant=Variant(pilot.value), run=run, obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
         speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
-        planner=planner_config(planner.value, depth_head=depth_head.value, compile=compile_rollout, **options),
+        planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, video_dir=video, video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
+    if loop.name != req.variant.value and (options or planner.value != "paper"):
+        fail(f"{run} holds a policy, which takes no planner settings; drop --planner and the MPPI and depth flags")
     report = loop.report(_fly_with_progress(loop, json_out))
     print_table(report, episodes)
     if json_out is not None:

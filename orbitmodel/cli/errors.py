@@ -8,8 +8,6 @@ import sys
 
 import typer
 
-from orbitmodel.extras import MissingExtra
-
 BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError)
 
 
@@ -30,8 +28,8 @@ def friendly(func):
         except KeyboardInterrupt:
             typer.secho("interrupted; run the same command with --resume to continue", err=True)
             sys.exit(130)
-        except MissingExtra as exc:
-            fail(str(exc), code=1)
+        except ImportError as exc:  # MissingExtra, or an optional package's own ImportError (ffmpeg, ...)
+            fail(str(exc).splitlines()[0] if str(exc) else f"a package is missing: {exc.name}", code=1)
         except BAD_INPUT as exc:
             fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
         except OSError as exc:

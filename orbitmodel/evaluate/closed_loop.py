@@ -28,7 +28,7 @@ from orbitmodel.plan.config import PlannerConfig
 from orbitmodel.plan.factory import build_pilot, camera_for_run
 from orbitmodel.plan.pilot import Variant
 from orbitmodel.plan.timing import Timings
-from orbitmodel.runs import POLICY, RunDir, RunError, stage_of
+from orbitmodel.runs import POLICY, RunDir, RunError, resolve_run, stage_of
 
 
 @dataclass(frozen=True)
@@ -37,10 +37,12 @@ class ClosedLoopRequest:
 
     Args:
         variant: the planning pilot (see ``orbitmodel.plan.pilot``); a policy run flies its own.
-        run: the Stage I run folder (world model, probe, dataset facts), or a policy run;
-            optional for the rigid-body oracles, which then skip the unseen-seed check.
+        run: the Stage I run folder (world model, probe, dataset facts), or a policy run, or
+            the Hub model repo id of either (``owner/name[@revision]``); optional for the
+            rigid-body oracles, which then skip the unseen-seed check.
         obstacles, speeds, episodes, seed: the grid, as ``orbitdata fly``.
-        planner: the planning pilot's settings; ``planner_preset`` names the preset they start from.
+        planner: the planning pilot's settings; ``planner_preset`` names the preset they started
+            from (None: built some other way), for the report.
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
@@ -53,7 +55,7 @@ class ClosedLoopRequest:
     episodes: int = 20
     seed: int = 0
     planner: PlannerConfig = field(default_factory=PlannerConfig)
-    planner_preset: str = "paper"
+    planner_preset: str | None = None
     config: GenerationConfig = field(default_factory=GenerationConfig)
     max_steps: int | None = None
     video_dir: Path | None = None
@@ -99,17 +101,17 @@ def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
 EpisodeHook = Callable[[CellResult, dict], None]
 
 
-def load_pilot(req: "ClosedLoopRequest", planner: PlannerConfig, sim, timings: Timings):
-    """(pilot, simulator settings, pilot name) for ``req``: the run's policy for a policy run,
-    else the planning pilot of ``req.variant``."""
-    if req.run is not None and stage_of(req.run) == POLICY:
+def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfig, sim, timings: Timings):
+    """(pilot, simulator settings, pilot name) for ``req``, whose run is in the local folder ``run``:
+    the run's policy for a policy run, else the planning pilot of ``req.variant``."""
+    if run is not None and stage_of(run) == POLICY:
         from orbitmodel.baselines.diffusion.pilot import load_policy_pilot
 
         if req.variant != Variant.PLANNER:
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
-        pilot = load_policy_pilot(req.run)
+        pilot = load_policy_pilot(run)
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
-    pilot, sim = build_pilot(req.variant, req.run, planner, sim, timings)
+    pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value
 
 
@@ -137,12 +139,13 @@ class ClosedLoop:
             raise ValueError(f"max_steps={req.max_steps}: an episode needs at least 2 frames")
         self.req = req
         self.seeds = grid_seeds(req.obstacles, req.speeds, req.episodes, req.seed)
-        if req.run is not None:
-            meta = run_dataset(req.run)
+        run = None if req.run is None else resolve_run(req.run)  # a folder, or a Hub repo id downloaded once
+        if run is not None:
+            meta = run_dataset(run)
             check_unseen_seeds([s for *_, s in self.seeds], meta.root_seed, sum(meta.episodes.values()))
         self.timings = Timings()
         planner = dataclasses.replace(req.planner, record=req.video_dir is not None)
-        self.pilot, sim, self.name = load_pilot(req, planner, req.config.sim, self.timings)
+        self.pilot, sim, self.name = load_pilot(req, run, planner, req.config.sim, self.timings)
         self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
                                        max_steps=req.max_steps or sim.max_steps)
 

@@ -52,8 +52,9 @@ class RolloutEvalConfig:
 def derangement(n: int, seed: int) -> np.ndarray:
     """A permutation of range(n) without fixed points (n >= 2), from ``seed``.
 
-    Random permutations are redrawn until one has no fixed point (the figures in the README were
-    drawn this way); if the redraws repeat themselves (small n), a random cycle is taken instead.
+    Random permutations are redrawn until one has no fixed point (the committed rollout
+    evaluations were drawn this way); if the redraws repeat themselves (small n), a random cycle is
+    taken instead.
     """
     shuffle, tried = np.random.default_rng(seed + 1).permutation(n), set()
     while n > 1 and np.any(shuffle == np.arange(n)):

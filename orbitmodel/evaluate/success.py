@@ -23,7 +23,7 @@ def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
 
 
 def rate_text(successes: int, n: int) -> str:
-    """'97.5 % [92.9, 99.1] (117/120)': the rate, its 95 % Wilson interval and the count."""
+    """'90.0 % [69.9, 97.2] (18/20)': the rate, its 95 % Wilson interval and the count."""
     low, high = wilson(successes, n)
     return f"{100 * successes / n:.1f} % [{100 * low:.1f}, {100 * high:.1f}] ({successes}/{n})"
 

@@ -230,12 +230,15 @@ class WorldModel(NormalisedStates, nn.Module):
 
     # ---- persistence ------------------------------------------------------------------------
     @classmethod
-    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "WorldModel":
-        """Load a trained model from a run folder (``orbitmodel train --out RUN``), in eval mode.
+    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu",
+                        revision: str | None = None) -> "WorldModel":
+        """Load a trained model, in eval mode, from a run folder (``orbitmodel train --out RUN``) or
+        a Hub model repo id (``owner/name``, ``orbitmodel push``; ``revision`` or ``owner/name@rev``).
 
-        ``model.run`` keeps the run's config (preset, dataset facts) and ``model.fingerprint``
-        the weights' identity, which every sub-run (probe, depth refit) records."""
-        run = load_run(path)
+        ``model.run`` keeps the run's config (preset, dataset facts), ``model.run_dir`` its local
+        folder and ``model.fingerprint`` the weights' identity, which every sub-run (probe, depth
+        refit) records."""
+        run = load_run(path, revision)
         model = cls(run.config.preset.model)
         try:
             model.load_state_dict(run.weights)
@@ -243,7 +246,7 @@ class WorldModel(NormalisedStates, nn.Module):
             raise RunError(f"{path}: the weights do not fit the model its config.json describes "
                            f"({str(err).splitlines()[1].strip() if len(str(err).splitlines()) > 1 else err}); "
                            "train the run again") from None
-        model.run = run.config
+        model.run, model.run_dir = run.config, run.path
         model.run_info = run.config.dataset
         model.fingerprint = fingerprint(run.weights)
         return model.to(device).eval()

@@ -149,6 +149,10 @@ def load_refit_head(run: str | Path, model):
     if not (folder / WEIGHTS).is_file() or not (folder / CONFIG).is_file():
         raise RunError(f"{run} has no refitted depth head ({folder} is missing); fit one with "
                        f"`orbitmodel depth {run} DATASET`")
+    made_on = RunDir(folder).read_config().get("world_model")  # refits before fingerprints have none
+    if made_on is not None and made_on != getattr(model, "fingerprint", made_on):
+        raise RunError(f"{folder} was refitted on another world model than {run} holds now; fit it again with "
+                       f"`orbitmodel depth {run} DATASET --overwrite`")
     head = copy.deepcopy(model.depth_head)
     try:
         head.load_state_dict(load_weights(folder))

@@ -22,7 +22,7 @@ from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.probe import PhysicsProbe
-from orbitmodel.runs import RunError
+from orbitmodel.runs import RunError, resolve_run
 
 
 class PredictedDepth:
@@ -79,11 +79,13 @@ def camera_for_run(sim: SimConfig, model) -> SimConfig:
 def build_pilot(variant: Variant | str, run: str | Path | None = None, config: PlannerConfig = PlannerConfig(),
                 sim: SimConfig = SimConfig(), timings: Timings | None = None) -> tuple[PlannerPilot, SimConfig]:
     """The pilot of ``variant`` and the simulator settings it must fly in (the run's camera).
+    ``run``: a run folder or a Hub model repo id (``owner/name[@revision]``, ``orbitmodel push``).
 
     Raises RunError (a ValueError) for a run without weights or probe, or with another camera.
     """
     variant = Variant(variant)
     timings = timings or Timings()
+    run = None if run is None else resolve_run(run)  # once: the probe and the depth head read the same folder
     model = load_world_model(run, variant) if variant.needs_model else None
     frames = None
     if model is not None:

@@ -11,6 +11,7 @@ from orbitdata import schema as S
 from orbitdata.scenario.spec import Scenario
 from orbitdata.state import STATE_NAMES
 from orbitmodel.extras import pyplot
+from orbitmodel.kinematics import P
 
 FIG_STATES, FIG_3D = "probe_fig5_states.png", "probe_fig5_3d.png"
 STYLE = {"truth": dict(color="black", lw=1.8, label="true"),
@@ -95,12 +96,12 @@ def _obstacles(dataset: str, episode: int, path_xyz: np.ndarray) -> list[tuple[n
 
 def _panel(window: dict, j: int, context: int, dataset: str, title: str) -> dict:
     states = {k: v[j].numpy() for k, v in window["states"].items()}
-    ctx = window["batch"][S.STATE][j, :context, :3].numpy()
+    ctx = window["batch"][S.STATE][j, :context, P].numpy()
     episode = int(window["batch"][S.EPISODE_INDEX][j, 0])
     first = int(window["batch"][S.FRAME_INDEX][j, 0])
-    path_xyz = np.concatenate([ctx, states["truth"][:, :3]])
+    path_xyz = np.concatenate([ctx, states["truth"][:, P]])
     return {"title": f"{title}: episode {episode}, frames {first}..{first + len(path_xyz) - 1}", "context": ctx,
-            "paths": {row: s[:, :3] for row, s in states.items()},
+            "paths": {row: s[:, P] for row, s in states.items()},
             "obstacles": _obstacles(dataset, episode, path_xyz)}
 
 

@@ -29,7 +29,7 @@ from torch import nn
 from orbitmodel.model.world_model import mlp
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import INCREMENT_DIM, integrate
-from orbitmodel.runs import CONFIG, RunError, load_weights
+from orbitmodel.runs import CONFIG, RunError, load_weights, resolve_run
 
 PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a Stage I run
 
@@ -90,10 +90,11 @@ class PhysicsProbe(nn.Module):
 
     @classmethod
     def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu",
-                        world_model: str | None = None) -> "PhysicsProbe":
-        """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/``, in eval mode;
-        ``world_model``: the fingerprint of the world model it must have been trained on."""
-        return from_run(cls, run_dir, "latent", device, world_model)
+                        world_model: str | None = None, revision: str | None = None) -> "PhysicsProbe":
+        """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/`` of a run folder or a Hub
+        model repo id (``orbitmodel push``), in eval mode; ``world_model``: the fingerprint of the
+        world model it must have been trained on."""
+        return from_run(cls, run_dir, "latent", device, world_model, revision)
 
 
 def probe_folder(run_dir: str | Path, kind: str) -> Path:
@@ -124,10 +125,11 @@ def load_probe(run_dir: str | Path, kind: str, world_model: str | None = None) -
     return config, weights
 
 
-def from_run(cls, run_dir: str | Path, kind: str, device: str | torch.device = "cpu", world_model: str | None = None):
+def from_run(cls, run_dir: str | Path, kind: str, device: str | torch.device = "cpu", world_model: str | None = None,
+             revision: str | None = None):
     """A probe module of class ``cls`` (built from a ProbeConfig) with the weights of ``run_dir``'s
-    ``kind`` probe, in eval mode (see :func:`load_probe`)."""
-    config, weights = load_probe(run_dir, kind, world_model)
+    ``kind`` probe, in eval mode (see :func:`load_probe`); ``run_dir`` may be a Hub repo id."""
+    config, weights = load_probe(resolve_run(run_dir, revision), kind, world_model)
     module = cls(config)
     module.load_state_dict(weights)
     return module.to(device).eval()

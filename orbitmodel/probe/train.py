@@ -124,7 +124,9 @@ def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
     ``.run`` its config, ``.fingerprint`` its weights'); RunError with the fix when the run is
     missing or untrained, or when the dataset ``meta`` does not give the images it takes."""
     if meta is not None:  # before loading weights that may not fit this dataset's images
-        check_image_size(meta, read_run_config(run).preset.model.image_size, f"the world model of {run}")
+        config = read_run_config(run)
+        check_image_size(meta, config.preset.model.image_size,
+                         f"the world model of {run} (trained on {config.dataset.source})")
     return WorldModel.from_pretrained(run).requires_grad_(False)
 
 

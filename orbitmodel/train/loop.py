@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import platform
 import time
 from contextlib import nullcontext
 from dataclasses import dataclass
@@ -68,6 +69,19 @@ class FitResult:
     seconds: float
     windows_per_s: float
     data_wait: float  # fraction of step time spent waiting for the next batch
+
+
+def hardware(device: torch.device) -> str:
+    """What trained: the GPU's name, or the CPU's model and core count."""
+    if device.type == "cuda":
+        return torch.cuda.get_device_name(device)
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f if line.startswith("model name")), model)
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores visible, {torch.get_num_threads()} torch threads"
 
 
 def resolve_device(name: str) -> torch.device:
@@ -246,7 +260,7 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
     params = [p for p in job.module.parameters() if p.requires_grad]
     optimizer = _optimizer(params, s)
     torch.manual_seed(s.seed + rank)
-    step = _restore(job, optimizer, run, rank) if resume else 0
+    step = start = _restore(job, optimizer, run, rank) if resume else 0
     job.module.to(device)
     model = job.module if world == 1 else nn.parallel.DistributedDataParallel(
         job.module, device_ids=[device.index] if device.type == "cuda" else None)
@@ -282,6 +296,11 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
             tally.busy += time.perf_counter() - got
         if main:
             run.save_final(job.saved.state_dict(), step)
+            result = tally.result(step)
+            run.add_training_segment({"from_step": start, "to_step": step, "seconds": round(result.seconds, 1),
+                                      "windows_per_s": round(result.windows_per_s, 2), "world_size": world,
+                                      "device": str(device), "hardware": hardware(device),
+                                      "torch": torch.__version__})
     finally:
         progress.close()
         metrics.close()

@@ -61,6 +61,17 @@ class Stage1Request:
     overwrite: bool = False
 
 
+def upgrade_config(old: dict) -> dict:
+    """A Stage I config.json as this version writes it: a run from before presets carried their
+    probe recipe gets its named preset's (``Preset.from_dict``), so it resumes."""
+    if "preset" not in old:
+        return old
+    try:
+        return {**old, "preset": Preset.from_dict(old["preset"]).to_dict()}
+    except (KeyError, TypeError, ValueError):
+        return old  # not a preset this version reads: the comparison says what differs
+
+
 def loader_image_size(meta: DatasetMeta, preset: Preset, resize: bool) -> int | None:
     """The loader's ``image_size``: None when the dataset matches the preset, the preset's size
     when resizing; RunError otherwise."""
@@ -83,7 +94,7 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     if rank == 0:
         config = run_config(WORLD_MODEL, preset=req.preset.to_dict(), dataset=meta.to_dict(), levels=list(req.levels),
                             outcomes=list(req.outcomes))
-        run.start(config, resume=req.resume, overwrite=req.overwrite)
+        run.start(config, resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_config)
     windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
                                  horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
                                  episodes=episode_filter(list(req.levels), list(req.outcomes)))

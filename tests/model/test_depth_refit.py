@@ -13,8 +13,8 @@ from orbitmodel.cli.app import app
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import planner_config
 from orbitmodel.plan.factory import build_pilot
-from orbitmodel.runs import RunError
 from orbitmodel.plan.depth_refit import DepthRefitConfig, load_refit_head, refit_depth_head
+from orbitmodel.runs import RunError
 
 torch.set_num_threads(1)
 runner = CliRunner()
@@ -78,3 +78,16 @@ def test_the_planner_flies_the_refit_head_when_there_is_one(refit_run, tiny_run)
         build_pilot("oracle-true-dyn-depth", tiny_run, planner_config(depth_head="refit"))
     with pytest.raises(ValueError, match="depth_head"):
         planner_config(depth_head="best")
+
+
+def test_a_refit_of_other_weights_is_refused(refit_run, tmp_path):
+    """A Stage I run trained again after its refit: the planner must not fly the stale head."""
+    from safetensors.torch import load_file, save_file
+
+    run = tmp_path / "retrained"
+    shutil.copytree(refit_run[0], run)
+    weights = load_file(run / "model.safetensors")
+    weights["predictor.pos"] = weights["predictor.pos"] + 1.0
+    save_file(weights, run / "model.safetensors")
+    with pytest.raises(RunError, match="refitted on another world model"):
+        load_refit_head(run, WorldModel.from_pretrained(run))

@@ -175,3 +175,5 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert [e["frames"] for e in report["episodes"]] == [4]
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--pilot", "oracle-true", *grid])
     assert res.exit_code == 2 and "flies as itself" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--samples", "8", *grid])
+    assert res.exit_code == 2 and "takes no planner settings" in res.output

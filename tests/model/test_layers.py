@@ -1,7 +1,7 @@
 """orbitmodel's layers import one way (``shared/DESIGN.md``, "Layers of orbitmodel"):
 
     config, data, extras, kinematics  <-  runs  <-  model  <-  train  <-  probe | baselines  <-  plan
-    <-  evaluate  <-  cli  <-  the package's lazy facade (orbitmodel/__init__.py)
+    <-  evaluate  <-  publish  <-  cli  <-  the package's lazy facade (orbitmodel/__init__.py)
 
 A module may import its own unit and any unit below it, never one above or beside it (probe and
 baselines are siblings). Every import counts: top-level, inside functions (lazy), and module
@@ -19,7 +19,7 @@ import orbitmodel
 
 ROOT = Path(orbitmodel.__file__).parent
 RANK = {"config": 0, "data": 0, "extras": 0, "kinematics": 0, "runs": 1, "model": 2, "train": 3, "probe": 4,
-        "baselines": 4, "plan": 5, "evaluate": 6, "cli": 7, "__init__": 8}
+        "baselines": 4, "plan": 5, "evaluate": 6, "publish": 7, "cli": 8, "__init__": 9}
 MODULE_PATH = re.compile(r"^orbitmodel(\.\w+)+$")
 
 
@@ -35,9 +35,9 @@ def module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imported(path: Path) -> list[tuple[int, str]]:
-    """(line, module) of every orbitmodel module ``path`` imports, however it imports it."""
-    name = module_name(path)
+def imported(path: Path, name: str | None = None) -> list[tuple[int, str]]:
+    """(line, module) of every orbitmodel module ``path`` (module ``name``) imports, however it imports it."""
+    name = name or module_name(path)
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     out = []
     for node in ast.walk(ast.parse(path.read_text(), str(path))):
@@ -71,16 +71,14 @@ def test_every_import_points_down_a_layer():
     assert not upward, "imports that point up or sideways:\n" + "\n".join(upward)
 
 
-def test_the_check_sees_lazy_and_string_imports(tmp_path):
-    """The scanner itself: a function-level import and an importlib path in a table both count."""
-    probe_file = ROOT / "probe" / "_layer_check_example.py"
-    probe_file.write_text('def f():\n    from orbitmodel.plan.cost import CostConfig\n\n'
-                          'TABLE = {"x": "orbitmodel.evaluate.rollout"}\n')
-    try:
-        found = [m for _, m in imported(probe_file)]
-    finally:
-        probe_file.unlink()
-    assert found == ["orbitmodel.plan.cost", "orbitmodel.evaluate.rollout"]
+def test_the_check_sees_lazy_relative_and_string_imports(tmp_path):
+    """The scanner itself: a function-level import, a relative one and an importlib path in a
+    table all count (a file standing in for a module of the probe package)."""
+    example = tmp_path / "example.py"
+    example.write_text('def f():\n    from orbitmodel.plan.cost import CostConfig\n\n'
+                       'from ..evaluate import rollout\nTABLE = {"x": "orbitmodel.evaluate.figure6"}\n')
+    found = [m for _, m in imported(example, "orbitmodel.probe.example")]
+    assert sorted(found) == ["orbitmodel.evaluate", "orbitmodel.evaluate.figure6", "orbitmodel.plan.cost"]
 
 
 def test_orbitdata_never_imports_orbitmodel():

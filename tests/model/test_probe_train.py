@@ -143,3 +143,23 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
     one_line_error(runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5",
                                        "--no-figures"]), "test episodes")
+
+
+def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, tiny_dataset_master, tmp_path):
+    """A run whose preset has its own name and recipe: `orbitmodel probe` trains what config.json says."""
+    custom = tmp_path / "custom"
+    shutil.copytree(run, custom, ignore=shutil.ignore_patterns("probe*"))
+    config = json.loads((custom / "config.json").read_text())
+    config["preset"]["name"] = "mine"
+    config["preset"]["probe"].update(inputs="latent", integrator="upstream", hidden=24)
+    config["preset"]["probe"]["train"].update(epochs=1, weights=[1, 2, 3, 4, 5])
+    (custom / "config.json").write_text(json.dumps(config))
+    res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu"])
+    assert res.exit_code == 0, res.output
+    probe = json.loads((custom / "probe" / "config.json").read_text())
+    assert (probe["probe"]["inputs"], probe["probe"]["integrator"], probe["probe"]["hidden"]) == ("latent", "upstream", 24)
+    assert probe["train"]["epochs"] == 1 and probe["train"]["weights"] == [1, 2, 3, 4, 5]
+    res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu", "--overwrite",
+                              "--inputs", "latent+change", "--epochs", "2"])  # flags change single settings
+    probe = json.loads((custom / "probe" / "config.json").read_text())
+    assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["epochs"] == 2

@@ -203,3 +203,21 @@ def test_model_step_windows_take_every_step_th_frame_and_group_its_actions(tiny_
     assert torch.equal(batch[S.ACTION][1], item[S.ACTION]) and torch.equal(batch[S.IMAGE][1], item[S.IMAGE])
     assert load_model_windows(tiny_dataset_master, 1, context=8, horizon=4, stride=3, columns=cols).__class__ \
         is frames.__class__  # one frame per step: the loader's own dataset
+
+
+def test_a_run_from_before_presets_carried_their_probe_recipe_resumes(tiny_dataset_master, tmp_path):
+    """Its config.json has no preset.probe: --resume must see the same run, and finish it."""
+    from orbitmodel.config import Preset
+
+    out = tmp_path / "legacy"
+    _train(tiny_dataset_master, out, steps=2, save_every=1)
+    config = json.loads((out / "config.json").read_text())
+    del config["preset"]["probe"]
+    (out / "config.json").write_text(json.dumps(config))
+    (out / "model.safetensors").unlink()
+    preset = get_preset("tiny").with_train(max_steps=2, save_every=1)
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu",
+                                    resume=True))
+    assert (out / "model.safetensors").is_file()
+    upgraded = json.loads((out / "config.json").read_text())["preset"]
+    assert "probe" in upgraded and Preset.from_dict(upgraded).probe == get_preset("tiny").probe

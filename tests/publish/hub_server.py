@@ -36,7 +36,8 @@ from urllib.parse import parse_qs, unquote, urlparse
 
 # Looks like a real token so that a leak would be easy to spot; it only opens the test Hub.
 TOKEN = "hf_OrbitdataTestToken0123456789abcdefXYZ"
-LFS_SUFFIXES = (".parquet", ".png", ".jpg", ".arrow", ".bin")
+LFS_SUFFIXES = (".parquet", ".png", ".jpg", ".arrow", ".bin", ".safetensors")
+KINDS = {"dataset": "datasets", "model": "models", "space": "spaces"}  # create_repo's "type" -> URL segment
 EMPTY_COMMIT = "0" * 40
 
 
@@ -133,7 +134,7 @@ class Handler(BaseHTTPRequestHandler):
         return self.headers.get("Authorization", "") == f"Bearer {self.state.token}"
 
     def _repo(self, kind: str, repo_id: str, write: bool = False) -> Repo | None:
-        repo = self.state.repos.get(repo_id) if kind == "datasets" else None
+        repo = self.state.repos.get((kind, repo_id))
         if repo is None or (repo.private and not self._authorized()):
             self._error(404, "Repository not found", "RepoNotFound")
             return None
@@ -150,22 +151,27 @@ class Handler(BaseHTTPRequestHandler):
         return False
 
     # ---- routes --------------------------------------------------------------------------
+    # Dataset repos live under /datasets/ and /api/datasets/; model repos under /api/models/ and at
+    # the top level (/{owner}/{name}/resolve/..., /{owner}/{name}.git/...): an empty kind group.
     ROUTES = [
         ("GET", r"^/api/whoami-v2$", "whoami"),
         ("POST", r"^/api/repos/create$", "create_repo"),
         ("POST", r"^/api/validate-yaml$", "validate_yaml"),
-        ("POST", r"^/api/(datasets)/([^/]+/[^/]+)/preupload/(.+)$", "preupload"),
+        ("POST", r"^/api/(datasets|models)/([^/]+/[^/]+)/preupload/(.+)$", "preupload"),
         ("POST", r"^/(datasets)/([^/]+/[^/]+)\.git/info/lfs/objects/batch$", "lfs_batch"),
+        ("POST", r"^/()([^/]+/[^/]+)\.git/info/lfs/objects/batch$", "lfs_batch"),
         ("PUT", r"^/lfs-objects/([0-9a-f]{64})$", "lfs_put"),
-        ("POST", r"^/api/(datasets)/([^/]+/[^/]+)/commit/(.+)$", "commit"),
-        ("POST", r"^/api/(datasets)/([^/]+/[^/]+)/branch/(.+)$", "branch"),
-        ("GET", r"^/api/(datasets)/([^/]+/[^/]+)/refs$", "refs"),
-        ("GET", r"^/api/(datasets)/([^/]+/[^/]+)/tree/([^/]+)/?(.*)$", "tree"),
-        ("POST", r"^/api/(datasets)/([^/]+/[^/]+)/paths-info/(.+)$", "paths_info"),
-        ("GET", r"^/api/(datasets)/([^/]+/[^/]+)/revision/(.+)$", "info"),
-        ("GET", r"^/api/(datasets)/([^/]+/[^/]+)$", "info"),
+        ("POST", r"^/api/(datasets|models)/([^/]+/[^/]+)/commit/(.+)$", "commit"),
+        ("POST", r"^/api/(datasets|models)/([^/]+/[^/]+)/branch/(.+)$", "branch"),
+        ("GET", r"^/api/(datasets|models)/([^/]+/[^/]+)/refs$", "refs"),
+        ("GET", r"^/api/(datasets|models)/([^/]+/[^/]+)/tree/([^/]+)/?(.*)$", "tree"),
+        ("POST", r"^/api/(datasets|models)/([^/]+/[^/]+)/paths-info/(.+)$", "paths_info"),
+        ("GET", r"^/api/(datasets|models)/([^/]+/[^/]+)/revision/(.+)$", "info"),
+        ("GET", r"^/api/(datasets|models)/([^/]+/[^/]+)$", "info"),
         ("GET", r"^/(datasets)/([^/]+/[^/]+)/resolve/([^/]+)/(.+)$", "resolve"),
         ("HEAD", r"^/(datasets)/([^/]+/[^/]+)/resolve/([^/]+)/(.+)$", "resolve"),
+        ("GET", r"^/()([^/]+/[^/]+)/resolve/([^/]+)/(.+)$", "resolve"),
+        ("HEAD", r"^/()([^/]+/[^/]+)/resolve/([^/]+)/(.+)$", "resolve"),
     ]
 
     def _route(self) -> None:
@@ -173,7 +179,10 @@ class Handler(BaseHTTPRequestHandler):
         for method, pattern, name in self.ROUTES:
             m = re.match(pattern, path)
             if m and method == self.command:
-                return getattr(self, name)(*[unquote(g) if g is not None else g for g in m.groups()])
+                groups = [unquote(g) if g is not None else g for g in m.groups()]
+                if groups and groups[0] == "":  # a top-level path: a model repo
+                    groups[0] = "models"
+                return getattr(self, name)(*groups)
         self._body()
         self._error(404, f"no such endpoint in the test Hub: {self.command} {path}")
 
@@ -194,12 +203,13 @@ class Handler(BaseHTTPRequestHandler):
         if not self._authorized():
             return self._error(401, "Invalid credentials in Authorization header")
         repo_id = f"{body.get('organization') or self.state.user}/{body['name']}"
-        url = f"{self.endpoint}/datasets/{repo_id}"
+        kind = KINDS.get(body.get("type"), "models")  # the client sends no type for a model repo
+        url = f"{self.endpoint}/{'' if kind == 'models' else kind + '/'}{repo_id}"
         with self.state.lock:
-            if repo_id in self.state.repos:
-                return self._json(409, {"error": "You already created this dataset repo", "url": url})
+            if (kind, repo_id) in self.state.repos:
+                return self._json(409, {"error": f"You already created this {kind[:-1]} repo", "url": url})
             private = body.get("visibility") == "private" or bool(body.get("private"))
-            self.state.repos[repo_id] = Repo(repo_id, private)
+            self.state.repos[(kind, repo_id)] = Repo(repo_id, private)
         self._json(200, {"url": url, "name": repo_id, "id": repo_id})
 
     def validate_yaml(self) -> None:
@@ -281,7 +291,8 @@ class Handler(BaseHTTPRequestHandler):
             repo.commits[sha] = tree
             repo.branches[rev if rev in repo.branches else "main"] = sha
             repo.messages.append(summary)
-        self._json(200, {"commitUrl": f"{self.endpoint}/datasets/{repo_id}/commit/{sha}", "commitOid": sha,
+        prefix = "" if kind == "models" else f"{kind}/"
+        self._json(200, {"commitUrl": f"{self.endpoint}/{prefix}{repo_id}/commit/{sha}", "commitOid": sha,
                          "pullRequestUrl": None})
 
     def branch(self, kind, repo_id, name) -> None:
@@ -317,7 +328,7 @@ class Handler(BaseHTTPRequestHandler):
         sha, tree = self._tree(kind, repo_id, rev)
         if tree is None:
             return
-        repo = self.state.repos[repo_id]
+        repo = self.state.repos[(kind, repo_id)]
         self._json(200, {"id": repo_id, "_id": repo_id, "author": repo_id.split("/")[0], "sha": sha,
                          "private": repo.private, "gated": False, "disabled": False, "downloads": 0, "likes": 0,
                          "tags": [], "lastModified": "2026-01-01T00:00:00.000Z",
@@ -408,8 +419,8 @@ class HubServer:
         self.httpd.shutdown()
         self.httpd.server_close()
 
-    def files(self, repo_id: str, rev: str = "main") -> dict[str, bytes]:
-        repo = self.state.repos[repo_id]
+    def files(self, repo_id: str, rev: str = "main", kind: str = "datasets") -> dict[str, bytes]:
+        repo = self.state.repos[(kind, repo_id)]
         return {p: b.data for p, b in repo.commits[repo.resolve(rev)].items()}
 
 

@@ -85,7 +85,7 @@ def test_push_in_several_commits_resumes_after_an_interruption(hub_client, tiny_
     result = push(tiny_dataset_master, REPO, options)
     assert set(result.unchanged) == first  # resumed: what went up before is not sent again
     assert hub.files(REPO) == dataset_files(tiny_dataset_master)
-    messages = hub.state.repos[REPO].messages
+    messages = hub.state.repos["datasets", REPO].messages
     assert messages == ["orbit (part 1/3)", "orbit (part 1/2)", "orbit (part 2/2)"]  # part 2/3 was cut
     puts = [path for method, path, _ in hub.state.requests if method == "PUT"]
     assert len(puts) == len(set(puts))  # no blob crossed the wire twice
@@ -124,7 +124,7 @@ def test_push_to_a_branch(hub_client, tiny_dataset_master):
     result = runner.invoke(app, ["push", str(tiny_dataset_master), REPO, "--branch", "v1", "--private",
                                  "--message", "first release"])
     assert result.exit_code == 0, result.output
-    repo = hub_client.state.repos[REPO]
+    repo = hub_client.state.repos["datasets", REPO]
     assert repo.private and hub_client.files(REPO, "v1") == dataset_files(tiny_dataset_master)
     assert hub_client.files(REPO, "main") == {} and repo.messages == ["first release"]
     assert "revision='v1'" in result.output

@@ -184,7 +184,7 @@ def _cpu() -> PolicyPreset:
     train = PolicyTrainConfig(batch_size=64, lr=3e-4, epochs=100, max_steps=1500, warmup=0.05, num_workers=0,
                               log_every=20, save_every=250)
     return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
-                        "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction; < 30 min",
+                        "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction",
                         PolicyConfig(prediction_type="sample"), train)
 
 
@@ -193,7 +193,7 @@ def _tiny() -> PolicyPreset:
                          step_embed=8, kernel_size=3, inference_steps=4)
     train = PolicyTrainConfig(window_stride=4, batch_size=4, lr=1e-3, epochs=2, warmup=0.1, shift=2,
                               num_workers=0, log_every=1, save_every=2, seed=0)
-    return PolicyPreset("tiny", "a few thousand parameters, for tests", model, train)
+    return PolicyPreset("tiny", "a tiny policy for tests", model, train)
 
 
 POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {"cpu": _cpu, "tiny": _tiny}

@@ -33,7 +33,7 @@ from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
 from orbitmodel.kinematics import P, body_to_world
 from orbitmodel.model.normalise import NormalisedStates
-from orbitmodel.runs import RunError, load_weights
+from orbitmodel.runs import RunError, load_weights, resolve_run
 
 
 def goal_in_body(states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -169,8 +169,11 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         return sum(p.numel() for p in self.net.parameters())
 
     @classmethod
-    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu") -> "DiffusionPolicy":
-        """Load a trained policy from a run folder (``orbitmodel train-policy --out RUN``), in eval mode."""
+    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu",
+                        revision: str | None = None) -> "DiffusionPolicy":
+        """Load a trained policy, in eval mode, from a run folder (``orbitmodel train-policy --out
+        RUN``) or a Hub model repo id (``orbitmodel push``; ``revision`` or ``owner/name@rev``)."""
+        path = resolve_run(path, revision)
         run = read_policy_run(path)
         policy = cls(run.preset.model)
         try:

@@ -24,10 +24,10 @@ import torch.nn.functional as F
 from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitdata.load.tables import load_episode_table
-from orbitdata.state import STATE_SLICES
 from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
+from orbitmodel.kinematics import P
 from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
@@ -58,7 +58,7 @@ def action_range(source: str | Path) -> tuple[list[float], list[float]]:
 
 def goal_scale(meta: DatasetMeta) -> float:
     """Metres per unit of the goal input: the position's mean spread (the goal's order of size)."""
-    return float(np.mean(meta.state_std[STATE_SLICES["p"]]))
+    return float(np.mean(meta.state_std[P]))
 
 
 def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> torch.Tensor:

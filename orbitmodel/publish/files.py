@@ -1,0 +1,86 @@
+"""What a run publishes, and whether it is complete enough to publish.
+
+A Stage I run goes up with its sub-runs (the physics probe, the state-only reference, the
+refitted depth head), its evaluations (``RUN/eval``: ``rollout.json``, ``probe_table.json`` and
+their figures; grid results in ``RUN/eval/grid/``) and its training record; a policy run with
+its own. Checkpoints, TensorBoard events and the probe's latent cache stay home: they are for
+resuming, not for using.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from orbitmodel.runs import (CHECKPOINTS, CONFIG, MAKES, METRICS, POLICY, TRAINING, WEIGHTS, WORLD_MODEL, RunError,
+                             stage_of)
+
+SUB_RUNS = ("probe", "probe-state", "depth")  # a Stage I run's sub-run folders
+SUB_RUN_FILES = (CONFIG, WEIGHTS, METRICS, TRAINING, "eval.json")
+EVAL = "eval"
+GRID = "eval/grid"  # grid results (eval closed-loop / orbitdata fly --json) shown on the card
+EVAL_SUFFIXES = (".json", ".md", ".png")
+
+
+@dataclass(frozen=True)
+class RunFile:
+    rel: str  # path in the repo
+    path: Path  # the local file
+    bytes: int
+
+
+def check_complete(run: Path) -> str:
+    """The run's stage, or RunError naming what is missing and the command that makes it: final
+    weights (not just checkpoints), and for a Stage I run a probe trained on these weights."""
+    run = Path(run)
+    if not (run / CONFIG).is_file():
+        raise RunError(f"{run} is not an orbitmodel run (no {CONFIG}); push a folder made by `orbitmodel train` "
+                       "or `orbitmodel train-policy`")
+    stage = stage_of(run)
+    if stage not in (WORLD_MODEL, POLICY):
+        raise RunError(f"{run} holds a {stage!r} sub-run; push the run folder above it")
+    if not (run / WEIGHTS).is_file():
+        state = "has only checkpoints: its training has not finished" if (run / CHECKPOINTS).is_dir() else \
+            "has no weights"
+        raise RunError(f"{run} {state}; finish it (`{MAKES[stage]} --resume`) before pushing")
+    if stage == WORLD_MODEL:
+        from orbitmodel.probe.model import load_probe
+        from orbitmodel.runs import fingerprint, load_weights
+
+        try:
+            load_probe(run, "latent", fingerprint(load_weights(run)))
+        except RunError as err:
+            raise RunError(f"incomplete run, not pushed: {err}") from None
+    return stage
+
+
+def run_files(run: Path, grid: Path | None = None) -> list[RunFile]:
+    """Every file a push of ``run`` uploads (the card aside), in upload order; ``grid``: a folder
+    of grid results to publish under eval/grid/ as well."""
+    run = Path(run)
+    found: dict[str, Path] = {}
+    for name in (CONFIG, WEIGHTS, METRICS, TRAINING):
+        if (run / name).is_file():
+            found[name] = run / name
+    for sub in SUB_RUNS:
+        for name in SUB_RUN_FILES:
+            if (run / sub / name).is_file():
+                found[f"{sub}/{name}"] = run / sub / name
+    if (run / EVAL).is_dir():
+        for path in sorted((run / EVAL).rglob("*")):
+            if path.is_file() and path.suffix in EVAL_SUFFIXES and not path.name.endswith(".episodes.jsonl"):
+                found[path.relative_to(run).as_posix()] = path
+    if grid is not None:
+        if not Path(grid).is_dir():
+            raise RunError(f"--grid {grid}: not a folder of grid results (eval closed-loop / orbitdata fly --json)")
+        for path in sorted(Path(grid).rglob("*.json")):
+            found[f"{GRID}/{path.relative_to(grid).as_posix()}"] = path
+    weights_last = sorted(found, key=lambda rel: (rel.endswith(WEIGHTS), rel))  # configs and evals first
+    return [RunFile(rel, found[rel], found[rel].stat().st_size) for rel in weights_last]
+
+
+def read_json(files: list[RunFile], rel: str) -> dict | None:
+    """The JSON file published at ``rel``, if the push holds it."""
+    match = next((f for f in files if f.rel == rel), None)
+    return None if match is None else json.loads(match.path.read_text())

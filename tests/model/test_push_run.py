@@ -1,0 +1,150 @@
+"""``orbitmodel push``: a run on the (local test) Hub, loaded back by its repo id, flown from it,
+and its card's figures read from its own evaluation files."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+
+import pytest
+import torch
+from huggingface_hub import ModelCard
+from safetensors.torch import load_file, save_file
+from typer.testing import CliRunner
+
+from orbitmodel.cli.app import app
+from publish.hub_server import TOKEN
+
+runner = CliRunner()
+REPO = "tester/tiny-wm"
+GRID = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "4", "--samples", "8",
+        "--horizon", "5"]
+
+
+@pytest.fixture(scope="module")
+def evaluated_run(tiny_run, tiny_dataset_master, tmp_path_factory):
+    """The tiny run with its probe, Table I, the rollout evaluation and one flown grid (eval/grid)."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.probe.train import ProbeRequest, train_probe
+
+    run = tmp_path_factory.mktemp("pushable") / "tiny"
+    shutil.copytree(tiny_run, run)
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
+    data = str(tiny_dataset_master)
+    for args in (["eval", "rollout", str(run), data, "--windows", "2", "--horizon", "3"],
+                 ["eval", "probe", str(run), data, "--windows", "2", "--horizon", "2", "--horizon", "4", "--no-figures"],
+                 ["eval", "closed-loop", str(run), *GRID, "--json", str(run / "eval" / "grid" / "planner.json")]):
+        res = runner.invoke(app, args)
+        assert res.exit_code == 0, res.output
+    return run
+
+
+def state_dicts_equal(a: torch.nn.Module, b: torch.nn.Module) -> bool:
+    sa, sb = a.state_dict(), b.state_dict()
+    return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
+
+
+def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hub_client, monkeypatch):
+    from huggingface_hub import constants
+
+    from orbitmodel import PhysicsProbe, WorldModel
+    from orbitmodel.plan.factory import make_planner
+    from orbitmodel.runs import RunError
+
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO])
+    assert res.exit_code == 0, res.output
+    assert TOKEN not in res.output and "pushed" in res.output
+    files = hub_client.files(REPO, kind="models")
+    assert {"config.json", "model.safetensors", "probe/config.json", "probe/model.safetensors", "training.json",
+            "eval/probe_table.json", "eval/rollout.json", "eval/grid/planner.json", "README.md"} <= set(files)
+    assert not [p for p in files if p.startswith("checkpoints/") or "latents" in p]  # nothing only resuming needs
+    assert files["model.safetensors"] == (evaluated_run / "model.safetensors").read_bytes()
+
+    local = WorldModel.from_pretrained(evaluated_run)
+    hubbed = WorldModel.from_pretrained(REPO)
+    assert state_dicts_equal(local, hubbed) and hubbed.fingerprint == local.fingerprint
+    assert state_dicts_equal(PhysicsProbe.from_pretrained(evaluated_run),
+                             PhysicsProbe.from_pretrained(f"{REPO}@main", world_model=hubbed.fingerprint))
+    pilot = make_planner(_config(), run=REPO, planner="cpu", samples="8", horizon="5")
+    assert pilot.name == "planner" and pilot.config.history == 2
+
+    res = runner.invoke(app, ["eval", "closed-loop", REPO, *GRID])  # flown from the repo id
+    assert res.exit_code == 0, res.output
+    assert "planner pilot, 1 episodes per setting" in res.output
+
+    monkeypatch.setattr(constants, "HF_HUB_OFFLINE", True)  # from the cache alone
+    assert state_dicts_equal(WorldModel.from_pretrained(REPO), local)
+    with pytest.raises(RunError, match="not in the local Hugging Face cache"):
+        WorldModel.from_pretrained("tester/never-pushed")
+
+
+def _config():
+    from orbitdata.config import GenerationConfig
+    from orbitdata.sim.config import CameraConfig
+
+    config = GenerationConfig()
+    return config.__class__(**{**config.__dict__, "sim": config.sim.__class__(
+        **{**config.sim.__dict__, "camera": CameraConfig(image_size=64)})})
+
+
+def test_the_cards_figures_are_the_eval_files(evaluated_run, hub_client):
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO])
+    assert res.exit_code == 0, res.output
+    card = ModelCard(hub_client.files(REPO, kind="models")["README.md"].decode())
+    assert card.data.license == "apache-2.0" and card.data.library_name == "orbitmodel"
+    table = json.loads((evaluated_run / "eval" / "probe_table.json").read_text())
+    for q, unit in (("position", "m"), ("velocity", "m/s"), ("rotation", "rad"), ("fuel", "ratio")):
+        for h in (2, 4):
+            e = table["table"]["probe"][q][f"h{h}"]
+            assert f"| {q} ({unit}) | {h} | {e['mean']:.4f} ± {e['std']:.4f} |" in card.text, (q, h)
+    rollout = json.loads((evaluated_run / "eval" / "rollout.json").read_text())
+    assert f"effective rank {rollout['effective_rank']:.1f} of {rollout['latent_dim']}" in card.text
+    grid = json.loads((evaluated_run / "eval" / "grid" / "planner.json").read_text())
+    k, n = grid["settings"][0]["success"], grid["settings"][0]["episodes"]
+    assert re.search(rf"\| planner \| {k}/{n} \| [0-9.]+ % \[[0-9.]+, [0-9.]+\] \({k}/{n}\) \|", card.text)
+    segment = json.loads((evaluated_run / "training.json").read_text())["segments"][0]
+    assert segment["hardware"] in card.text and "tiny" in card.text and f"--seed {0}" in card.text
+
+
+def test_an_incomplete_run_is_refused_in_one_line(tiny_run, evaluated_run, hub_client, tmp_path):
+    no_probe = tmp_path / "no-probe"
+    shutil.copytree(tiny_run, no_probe)
+    unfinished = tmp_path / "unfinished"
+    shutil.copytree(evaluated_run, unfinished)
+    (unfinished / "model.safetensors").unlink()
+    retrained = tmp_path / "retrained"  # the world model changed after its probe was trained
+    shutil.copytree(evaluated_run, retrained)
+    weights = load_file(retrained / "model.safetensors")
+    weights["predictor.pos"] = weights["predictor.pos"] + 1.0
+    save_file(weights, retrained / "model.safetensors")
+    for run, reason in ((no_probe, "no physics probe"), (unfinished, "training has not finished"),
+                        (retrained, "another world model"), (tmp_path / "nothing", "not an orbitmodel run")):
+        res = runner.invoke(app, ["push", str(run), REPO])
+        lines = [line for line in res.output.splitlines() if line.strip()]
+        assert res.exit_code == 2 and len(lines) == 1 and reason in lines[0], res.output
+    assert not hub_client.state.repos  # nothing was created
+
+
+def test_dry_run_needs_no_token_and_a_missing_token_is_one_line(evaluated_run, hub_client, monkeypatch):
+    monkeypatch.delenv("HF_TOKEN")
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO, "--dry-run"])
+    assert res.exit_code == 0, res.output
+    assert "probe/model.safetensors" in res.output and "Table I" in res.output and "apache-2.0" in res.output
+    assert not hub_client.state.requests  # no network
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO])
+    assert res.exit_code == 1 and "no Hugging Face token found" in res.output and "Traceback" not in res.output
+
+
+def test_a_policy_run_round_trips(hub_client, tmp_path):
+    from orbitmodel.baselines.diffusion import DiffusionPolicy
+    from test_diffusion_pilot import PRESET, save_policy_run
+
+    torch.manual_seed(0)
+    policy = DiffusionPolicy(PRESET.model).eval()
+    run = save_policy_run(policy, tmp_path / "dp").path
+    res = runner.invoke(app, ["push", str(run), "tester/tiny-dp"])
+    assert res.exit_code == 0, res.output
+    assert state_dicts_equal(DiffusionPolicy.from_pretrained("tester/tiny-dp"), policy)
+    card = hub_client.files("tester/tiny-dp", kind="models")["README.md"].decode()
+    assert "Diffusion Policy" in card and "No closed-loop results" in card
