@@ -85,13 +85,17 @@ def eval_probe(
     out: Annotated[Optional[Path], typer.Option(help="folder for the table and figures (default RUN/eval)")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "cpu",
     figures: Annotated[bool, typer.Option(help="write Figure 5 (needs matplotlib)")] = True,
+    history: Annotated[Optional[int], typer.Option(
+        min=1, help="latents the world model sees per imagined step, as the planner flies it (the cpu planner "
+                    "preset: 2) [default: the model's own]")] = None,
 ) -> None:
     """The paper's Table I: probe MAE at h = 25 and 50 steps beside the paper's, the state-only
     MLP's and constant velocity's, on the same windows; and Figure 5."""
     from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe, markdown
 
     req = EvalRequest(run=run, dataset=dataset, windows=windows, seed=seed,
-                      horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures)
+                      horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures,
+                      history=history)
     try:
         result = evaluate_probe(req)
     except MissingExtra as err:

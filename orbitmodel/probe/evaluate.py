@@ -49,6 +49,7 @@ class EvalRequest:
     out: Path | None = None  # default RUN/eval
     device: str = "cpu"
     figures: bool = True
+    history: int | None = None  # latents the world model sees per imagined step (None: its own, config.history)
 
 
 def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -82,7 +83,8 @@ def select_windows(dataset: str, context: int, horizon: int, count: int, seed: i
 
 
 @torch.no_grad()
-def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, device) -> dict[str, torch.Tensor]:
+def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, device,
+            history: int | None = None) -> dict[str, torch.Tensor]:
     """Every row's states (K, n, 16) for windows (K, context + n, ...) of frames, and the truth.
 
     A world model with ``frame_step`` s > 1 encodes every s-th context frame (``context`` = its
@@ -91,7 +93,7 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
     m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
-    z_future = world_model.rollout(z, group_actions(actions[:, :m - 1 + n], s))  # (K, n / s, D)
+    z_future = world_model.rollout(z, group_actions(actions[:, :m - 1 + n], s), history)  # (K, n / s, D)
     pred = probe(z_future, states[:, m - 1], z[:, -1])  # (K, n / s, 16)
     out = {"truth": states[:, m:m + n].float(),
            "probe": pred if s == 1 else interpolate_frames(states[:, m - 1].float(), pred, s),
@@ -125,7 +127,9 @@ def markdown(result: dict) -> str:
     """The table: ours beside the paper and the reference rows, one line per quantity and horizon."""
     t = result["table"]
     lines = [f"Physics probe, {result['windows']} collision-free test windows (seed {result['seed']}), "
-             f"context {result['context']}, MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
+             f"context {result['context']}"
+             + (f", the world model seeing {result['history']} latents per imagined step" if "history" in result else "")
+             + ", MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
              + (f"; the world model steps {result['frame_step']} frames at a time and its probe's states are "
                 "interpolated to every frame, as the planner reads them." if result.get("frame_step", 1) > 1 else "."),
              f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
@@ -161,6 +165,9 @@ def evaluate_probe(req: EvalRequest) -> dict:
     world_model, probe = world_model.to(device), probe.to(device)
     state_mlp = state_mlp.to(device) if state_mlp is not None else None
     s = world_model.config.frame_step
+    if req.history is not None and not 1 <= req.history <= world_model.config.history:
+        raise RunError(f"--history {req.history}: the world model of {req.run} rolls out from 1 to "
+                       f"{world_model.config.history} latents")
     if any(h % s for h in req.horizons):
         raise RunError(f"{req.run} predicts {s} frames per step; give horizons that are multiples of {s} "
                        f"(got {', '.join(map(str, req.horizons))})")
@@ -170,25 +177,28 @@ def evaluate_probe(req: EvalRequest) -> dict:
     windows = load_windows(req.dataset, split="test", context=context, horizon=n, stride=1,
                            columns=[S.IMAGE, S.STATE, S.ACTION])
     errors: dict[str, dict[str, list]] = {}
-    first = None
+    first, first_frames = None, []
     for i in range(0, len(chosen), BATCH):
         batch = collate_windows(windows.__getitems__(chosen[i:i + BATCH]))
-        states = predict(world_model, probe, state_mlp, batch, context, n, device)
+        states = predict(world_model, probe, state_mlp, batch, context, n, device, req.history)
         first = first or {"batch": batch, "states": states}
+        first_frames += [int(f) for f in batch[S.FRAME_INDEX][:, 0]]
         for row in (r for r in ROWS if r in states):
             for q, e in step_errors(states[row], states["truth"]).items():
                 errors.setdefault(row, {}).setdefault(q, []).append(e)
     table = summarise({r: {q: torch.cat(v) for q, v in per_q.items()} for r, per_q in errors.items()},
                       req.horizons)
     table.setdefault("state_mlp", None)
+    history = req.history or world_model.config.history
     result = {"run": str(req.run), "dataset": str(req.dataset), "preset": world_model.run.preset.name,
-              "windows": len(chosen), "seed": req.seed, "context": context, "frame_step": s,
+              "windows": len(chosen), "seed": req.seed, "context": context, "frame_step": s, "history": history,
               "horizons": list(req.horizons),
               "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
               "probe_inputs": probe.config.inputs,
               "integrators": {"probe": probe.config.integrator,
                               **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
-              "episodes": [int(windows.index.episode[c]) for c in chosen], "table": table}
+              "episodes": [int(windows.index.episode[c]) for c in chosen],
+              "first_frames": first_frames, "table": table}
     out = Path(req.out) if req.out is not None else Path(req.run) / "eval"
     out.mkdir(parents=True, exist_ok=True)
     (out / TABLE_JSON).write_text(json.dumps(result, indent=2) + "\n")
@@ -200,6 +210,7 @@ def evaluate_probe(req: EvalRequest) -> dict:
         crash = None
         if collided is not None:
             batch = collate_windows(windows.__getitems__([collided]))
-            crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device)}
+            crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device,
+                                                       req.history)}
         result["files"] += figure5(first, crash, req.dataset, context, S.DT, out)
     return result

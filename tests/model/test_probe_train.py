@@ -163,3 +163,53 @@ def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, ti
                               "--inputs", "latent+change", "--epochs", "2"])  # flags change single settings
     probe = json.loads((custom / "probe" / "config.json").read_text())
     assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["epochs"] == 2
+
+
+def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset_master, tmp_path):
+    """eval probe, checked from outside: the windows it names (episode, first frame) are read
+    straight from the Parquet shards, encoded, rolled out at the planner's history and probed here,
+    and the errors recomputed in numpy (the attitude as |log(R_true^T R_pred)|); the same Table I."""
+    import cv2
+    import numpy as np
+    import pyarrow.parquet as pq
+
+    from orbitdata.state import rot6d_to_matrix, so3_log
+    from orbitmodel import WorldModel
+    from orbitmodel.train.stage1 import Stage1Request, train_world_model
+
+    run = tmp_path / "wm"  # trained long enough that its predictor, and so the history, matters
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), device="cpu", out=run,
+                                    preset=get_preset("tiny").with_train(max_steps=30, lr=1e-2)))
+    train_probe(request(run, tiny_dataset_master, epochs=20, lr=1e-2))  # a probe whose output the latents move
+    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "2",
+                              "--horizon", "4", "--history", "2", "--no-figures"])
+    assert res.exit_code == 0, res.output
+    table = json.loads((run / "eval" / TABLE_JSON).read_text())
+    assert table["history"] == 2 and "seeing 2 latents" in res.output
+    model, probe = WorldModel.from_pretrained(run), PhysicsProbe.from_pretrained(run)
+    steps = pq.read_table(sorted((tiny_dataset_master / "data").glob("test-*.parquet"))).to_pylist()
+    m, n = table["context"], max(table["horizons"])
+    errors = {q: [] for q in ("position", "velocity", "rotation", "angular_velocity", "fuel")}
+    for episode, first in zip(table["episodes"], table["first_frames"]):
+        rows = sorted((r for r in steps if r[S.EPISODE_INDEX] == episode and first <= r[S.FRAME_INDEX] < first + m + n),
+                      key=lambda r: r[S.FRAME_INDEX])
+        assert len(rows) == m + n
+        images = np.stack([cv2.cvtColor(cv2.imdecode(np.frombuffer(r[S.IMAGE]["bytes"], np.uint8), cv2.IMREAD_COLOR),
+                                        cv2.COLOR_BGR2RGB) for r in rows[:m]])  # (m, H, W, 3)
+        states = np.array([r[S.STATE] for r in rows], np.float32)  # (m + n, 16)
+        actions = np.array([r[S.ACTION] for r in rows], np.float32)
+        with torch.no_grad():
+            z = model.encode(torch.from_numpy(images).permute(0, 3, 1, 2)[None], torch.from_numpy(states[None, :m]))
+            z_future = model.rollout(z, torch.from_numpy(actions[None, :m - 1 + n]), history=2)
+            pred = probe(z_future, torch.from_numpy(states[None, m - 1]), z[:, -1])[0].double().numpy()  # (n, 16)
+        true = states[m:].astype(np.float64)
+        rel = np.swapaxes(rot6d_to_matrix(true[:, 6:12]), -1, -2) @ rot6d_to_matrix(pred[:, 6:12])
+        errors["position"].append(np.abs(pred[:, 0:3] - true[:, 0:3]).mean(-1))
+        errors["velocity"].append(np.abs(pred[:, 3:6] - true[:, 3:6]).mean(-1))
+        errors["rotation"].append(np.linalg.norm(so3_log(rel), axis=-1))
+        errors["angular_velocity"].append(np.abs(pred[:, 12:15] - true[:, 12:15]).mean(-1))
+        errors["fuel"].append(np.abs(pred[:, 15] - true[:, 15]))
+    for q, per_window in errors.items():
+        for h in table["horizons"]:
+            mine = float(np.mean([e[:h].mean() for e in per_window]))
+            assert mine == pytest.approx(table["table"]["probe"][q][f"h{h}"]["mean"], rel=1e-4, abs=1e-6), (q, h)
