@@ -54,19 +54,22 @@ class Pilot(ABC):
     """Flies one episode at a time: ``reset(task)``, then ``act(obs)`` every control step.
 
     Observations (see :class:`orbitdata.sim.CubeSatEnv`): ``state`` (16,) float32 always;
-    ``image`` (H, W, 3) uint8, ``depth`` (H, W) float32 metres (0 = no return) and
-    ``depth_low`` (16, 16) float32 metres when the env renders. ``act`` returns 8 thrusts in
-    [0, 1]. One pilot may fly many episodes: ``reset`` starts each one afresh.
+    ``image`` (H, W, 3) uint8 when the env renders; and only for a pilot that ``sees_depth``, the
+    rendered ``depth`` (H, W) float32 metres (0 = no return) and ``depth_low`` (16, 16) float32
+    metres: a perfect depth sensor, which a camera-only pilot does not have. ``act`` returns 8
+    thrusts in [0, 1]. One pilot may fly many episodes: ``reset`` starts each one afresh.
 
     Class attributes:
         name: the registry name (and the ``level`` column for the built-in levels).
         privileged: ``reset`` also gets ``scenario=``, the ground truth (obstacles included).
         needs_images: ``act`` reads the camera, so the env must render.
+        sees_depth: ``act`` is given the rendered depth as well (a privileged sensor).
     """
 
     name: ClassVar[str] = ""
     privileged: ClassVar[bool] = False
     needs_images: ClassVar[bool] = False
+    sees_depth: ClassVar[bool] = False
 
     @abstractmethod
     def reset(self, task: Task) -> None:

@@ -44,6 +44,14 @@ class EpisodeResult:
         return len(self.states)
 
 
+SENSOR_KEYS = ("depth", "depth_low")  # the rendered depth: only a pilot that sees_depth gets it
+
+
+def without_depth(obs: dict) -> dict:
+    """The observation a camera-only pilot gets: the state and the image, not the rendered depth."""
+    return {k: v for k, v in obs.items() if k not in SENSOR_KEYS}
+
+
 def fly_episode(
     env: CubeSatEnv,
     pilot: Pilot,
@@ -84,7 +92,8 @@ def fly_episode(
             frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
         if info["outcome"] is not None:
             break
-        action = np.asarray(pilot.act(obs), dtype=np.float32)
+        seen = obs if getattr(pilot, "sees_depth", False) else without_depth(obs)
+        action = np.asarray(pilot.act(seen), dtype=np.float32)
         actions[t] = action
         obs, _, _, _, info = env.step(action.astype(np.float64))
         t += 1

@@ -116,6 +116,7 @@ class PlannerPilot(Pilot):
         self.variant, self.config = variant, config
         self.name = variant.value
         self.needs_images = bool(dynamics.needs_images or depth is not None)
+        self.sees_depth = variant.obstacles == "sensor"  # only the sensor oracle reads the rendered depth
         self.dynamics, self.depth, self.camera = dynamics, depth, camera
         self.timings = timings or getattr(dynamics, "timings", None) or Timings()
         basis = wrench_noise_basis(sim, config.torque_noise) if config.noise == "wrench" else None

@@ -31,12 +31,15 @@ def stub_registered(monkeypatch):
     return "stub"
 
 
-def check_sees_images_not_obstacles(episodes: list[dict], size: int) -> None:
+def check_sees_images_not_obstacles(episodes: list[dict], size: int, depth: bool = False) -> None:
+    """It saw the camera and its state, the rendered depth only if it declared ``sees_depth``,
+    and never the ground truth."""
     assert episodes and all(ep["steps"] > 0 for ep in episodes)
     for ep in episodes:
-        assert ep["keys"] == ["depth", "depth_low", "image", "state"]
+        assert ep["keys"] == (["depth", "depth_low", "image", "state"] if depth else ["image", "state"])
         assert ep["image"] == [[size, size, 3, "uint8"]]
-        assert ep["depth"] == [[size, size, "float32"]] and ep["depth_low"] == [[16, 16, "float32"]]
+        if depth:
+            assert ep["depth"] == [[size, size, "float32"]] and ep["depth_low"] == [[16, 16, "float32"]]
         assert ep["ground_truth"] == []
         assert set(ep["task"]) == {"goal", "goal_radius", "initial_velocity", "seed"}
 
@@ -67,6 +70,17 @@ def test_a_registered_pilot_flies_the_grid_with_rendering(stub_registered, tmp_p
     cells = fly_grid("stub", [1], [2.0], 2, config=TINY, log=str(log))
     assert sum(c.success + c.collision + c.timeout + c.out_of_fuel for c in cells) == 2
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
+
+
+def test_only_a_pilot_that_declares_it_sees_the_rendered_depth(tmp_path):
+    """The rendered depth is a perfect sensor: a camera-only pilot is not handed it."""
+    class DepthSensing(SeeingPilot):
+        sees_depth = True
+
+    for cls, depth in ((SeeingPilot, False), (DepthSensing, True)):
+        log = tmp_path / f"{cls.__name__}.json"
+        fly_grid(lambda config, cls=cls, log=log: cls(str(log)), [1], [1.0], 1, config=TINY)
+        check_sees_images_not_obstacles(json.loads(log.read_text()), 32, depth=depth)
 
 
 def test_fly_grid_takes_a_factory_and_one_pilot_flies_every_episode(tmp_path):
