@@ -71,7 +71,8 @@ def fly_grid(
 
     Args:
         pilot: a registered pilot name, or a factory ``factory(config, **options) -> Pilot``.
-        render: render the camera (``obs["image"]``, ``obs["depth"]``, ``obs["depth_low"]``);
+        render: render the camera (``obs["image"]``; ``obs["depth"]`` and ``obs["depth_low"]`` for a
+            pilot that ``sees_depth``);
             ``None``: when the pilot needs images or ``frame_sink`` wants frames.
         frame_sink: called with every rendered frame (``t`` restarts at 0 each episode).
         on_episode: called after every episode (progress bars, videos).

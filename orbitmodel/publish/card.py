@@ -81,67 +81,73 @@ def _grids(files: list[RunFile]) -> str:
     return "\n".join(out)
 
 
+def _policy_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_sentence: str) -> dict:
+    """The template's parts for a Diffusion Policy run."""
+    from orbitmodel.baselines.diffusion.config import PolicyPreset
+    from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+
+    preset = raw["preset"]
+    params = DiffusionPolicy(PolicyPreset.from_dict(preset).model).num_parameters()
+    title = f"Diffusion Policy ({preset['name']} preset) for CubeSat obstacle avoidance"
+    return dict(
+        title=title,
+        summary=(f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, {params / 1e6:.2f} M "
+                 f"parameters, trained on {data_sentence}."),
+        contents="`config.json` and `model.safetensors` (with the EMA weights), and its evaluations",
+        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
+                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} "
+                   f"--image-size {raw['dataset']['image_size']}"),
+        python_usage=(f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot\n"
+                      f"policy = DiffusionPolicy.from_pretrained(\"{repo_id}\")\n"
+                      f"pilot = load_policy_pilot(\"{repo_id}\")           # an orbitdata.fly pilot: reset(task), act(obs)"),
+        training=_training(run, "policy"), results=_grids(files),
+        reproduce=f"orbitmodel train-policy DATA --preset {preset['name']} --out RUN")
+
+
+def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_sentence: str) -> dict:
+    """The template's parts for a Stage I run with its sub-runs."""
+    from orbitmodel.config import Preset
+    from orbitmodel.model.world_model import WorldModel
+
+    preset, size = raw["preset"], raw["dataset"]["image_size"]
+    model = Preset.from_dict(preset).model
+    params = WorldModel(model).num_parameters()
+    subs = [f"`{sub}/`" for sub in ("probe", "probe-state", "depth") if any(f.rel.startswith(sub + "/") for f in files)]
+    refit = ", the depth head refitted for the planner" if any(f.rel.startswith("depth/") for f in files) else ""
+    return dict(
+        title=f"Orbit-Planner world model ({preset['name']} preset)",
+        summary=(f"A latent world model of a free-floating 1U CubeSat (the Stage I model of Orbit-Planner), preset "
+                 f"`{preset['name']}`: {params / 1e6:.2f} M parameters, {model.image_size} px images, a "
+                 f"{model.latent_dim}-dimensional latent, {model.frame_step} frame(s) per prediction; trained on "
+                 f"{data_sentence}. With it: its physics probe (Stage II){refit}, and the evaluations below."),
+        contents=f"the Stage I run (`config.json`, `model.safetensors`) and its sub-runs ({', '.join(subs)}), with `eval/`",
+        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --planner cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
+                   f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option planner=cpu "
+                   f"--image-size {size}"),
+        python_usage=(f"from orbitmodel import PhysicsProbe, WorldModel\n"
+                      f"model = WorldModel.from_pretrained(\"{repo_id}\")\n"
+                      f"probe = PhysicsProbe.from_pretrained(\"{repo_id}\", world_model=model.fingerprint)\n\n"
+                      f"from orbitmodel.plan import build_pilot, planner_config\n"
+                      f"pilot, sim = build_pilot(\"planner\", \"{repo_id}\", planner_config(\"cpu\"))   # an orbitdata.fly pilot"),
+        training="\n".join([_training(run, "Stage I"), _training(run / "probe", "physics probe")]),
+        results=("### Table I: the physics probe (`eval/probe_table.json`)\n\n" + _table1(files)
+                 + "\n### Stage I: latent rollout (`eval/rollout.json`)\n\n" + _rollout(files)
+                 + "\n### Closed loop (`eval/grid/`)\n\n" + _grids(files)),
+        reproduce=(f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
+                   f"--seed {raw['dataset']['root_seed']}\n"
+                   f"orbitmodel train DATA --preset {preset['name']} --out RUN     # config.json records every setting\n"
+                   f"orbitmodel probe RUN DATA && orbitmodel depth RUN DATA\n"
+                   f"orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA\n"
+                   f"bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)"))
+
+
 def model_card(run: Path, repo_id: str, stage: str, files: list[RunFile], dataset_repo: str | None = None):
     """The ``huggingface_hub.ModelCard`` of a push of ``run`` to ``repo_id``."""
     from huggingface_hub import ModelCard, ModelCardData
 
     raw = RunDir(run).read_config()
     datasets, data_sentence = _dataset(raw, dataset_repo)
-    preset = raw["preset"]
-    if stage == POLICY:
-        from orbitmodel.baselines.diffusion.config import PolicyPreset
-        from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
-
-        params = DiffusionPolicy(PolicyPreset.from_dict(preset).model).num_parameters()
-        title = f"Diffusion Policy ({preset['name']} preset) for CubeSat obstacle avoidance"
-        summary = (f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, "
-                   f"{params / 1e6:.2f} M parameters, trained on {data_sentence}.")
-        contents = "`config.json` and `model.safetensors` (with the EMA weights), and its evaluations"
-        cli = (f"orbitmodel eval closed-loop {repo_id} --obstacles 1,3,5 --speeds 1,2 --episodes 20 --seed 3\n"
-               f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --image-size {raw['dataset']['image_size']}")
-        py = (f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot\n"
-              f"policy = DiffusionPolicy.from_pretrained(\"{repo_id}\")\n"
-              f"pilot = load_policy_pilot(\"{repo_id}\")           # an orbitdata.fly pilot: reset(task), act(obs)")
-        results = _grids(files)
-        reproduce = f"orbitmodel train-policy DATA --preset {preset['name']} --out RUN"
-        training = _training(run, "policy")
-    else:
-        from orbitmodel.config import Preset
-        from orbitmodel.model.world_model import WorldModel
-
-        model = Preset.from_dict(preset).model
-        params = WorldModel(model).num_parameters()
-        title = f"Orbit-Planner world model ({preset['name']} preset)"
-        summary = (f"A latent world model of a free-floating 1U CubeSat (the Stage I model of Orbit-Planner), preset "
-                   f"`{preset['name']}`: {params / 1e6:.2f} M parameters, {model.image_size} px "
-                   f"images, a {model.latent_dim}-dimensional latent, {model.frame_step} frame(s) per prediction; "
-                   f"trained on {data_sentence}. With it: its physics probe (Stage II)"
-                   + (", the depth head refitted for the planner" if any(f.rel.startswith("depth/") for f in files) else "")
-                   + ", and the evaluations below.")
-        contents = "the Stage I run (`config.json`, `model.safetensors`) and its sub-runs (`probe/`"
-        contents += ", `probe-state/`" if any(f.rel.startswith("probe-state/") for f in files) else ""
-        contents += ", `depth/`" if any(f.rel.startswith("depth/") for f in files) else ""
-        contents += "), with `eval/`"
-        size = raw["dataset"]["image_size"]
-        cli = (f"orbitmodel eval closed-loop {repo_id} --planner cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20 --seed 3\n"
-               f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option planner=cpu --image-size {size}")
-        py = (f"from orbitmodel import PhysicsProbe, WorldModel\n"
-              f"model = WorldModel.from_pretrained(\"{repo_id}\")\n"
-              f"probe = PhysicsProbe.from_pretrained(\"{repo_id}\", world_model=model.fingerprint)\n\n"
-              f"from orbitmodel.plan import build_pilot, planner_config\n"
-              f"pilot, sim = build_pilot(\"planner\", \"{repo_id}\", planner_config(\"cpu\"))   # an orbitdata.fly pilot")
-        results = ("### Table I: the physics probe (`eval/probe_table.json`)\n\n" + _table1(files)
-                   + "\n### Stage I: latent rollout (`eval/rollout.json`)\n\n" + _rollout(files)
-                   + "\n### Closed loop (`eval/grid/`)\n\n" + _grids(files))
-        reproduce = (f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
-                     f"--seed {raw['dataset']['root_seed']}\n"
-                     f"orbitmodel train DATA --preset {preset['name']} --out RUN     # config.json records every setting\n"
-                     f"orbitmodel probe RUN DATA && orbitmodel depth RUN DATA\n"
-                     f"orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA\n"
-                     f"bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)")
-        training = "\n".join([_training(run, "Stage I"), _training(run / "probe", "physics probe")])
+    parts = (_policy_card if stage == POLICY else _world_model_card)(run, repo_id, raw, files, data_sentence)
     data = ModelCardData(license="apache-2.0", library_name="orbitmodel", tags=TAGS, datasets=datasets or None,
-                         model_name=title)
-    return ModelCard.from_template(data, template_path=str(TEMPLATE), title=title, summary=summary, contents=contents,
-                                   repo_id=repo_id, cli_usage=cli, python_usage=py, training=training,
-                                   results=results, reproduce=reproduce)
+                         model_name=parts["title"])
+    return ModelCard.from_template(data, template_path=str(TEMPLATE), repo_id=repo_id, **parts)
