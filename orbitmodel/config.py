@@ -121,6 +121,9 @@ class TrainConfig:
         num_workers: DataLoader worker processes.
         log_every, save_every: steps between metric lines and between checkpoints.
         seed: data order, augmentation, SIGReg projections and initialisation.
+        val_fraction, val_seed: hold this seeded fraction of the train split's episodes (per
+            level) out of Stage I and of the run's probe and depth refit: the validation split
+            that choices are made on (``orbitmodel.data.validation_split``; 0: none).
     """
 
     window: int = 20
@@ -140,8 +143,12 @@ class TrainConfig:
     log_every: int = 10
     save_every: int = 500
     seed: int = 42
+    val_fraction: float = 0.0
+    val_seed: int = 0
 
     def __post_init__(self):
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction={self.val_fraction} must be in [0, 1)")
         if self.window < 2:
             raise ValueError(f"window={self.window}: teacher forcing needs at least 2 frames")
         if self.batch_size < 2:

@@ -139,3 +139,76 @@ def load_model_windows(source, frame_step: int = 1, context: int = 1, horizon: i
     frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride,
                           **kwargs)
     return frames if frame_step == 1 else ModelStepWindows(frames, frame_step)
+
+
+# ---- the validation split: held-out training episodes, where every choice is made ----------------
+VAL = "val"  # a split name of orbitmodel's evaluations: the run's validation episodes of the train split
+EVAL_SPLITS = (VAL, "test")
+
+
+@dataclass(frozen=True)
+class ValidationSplit:
+    """A seeded fraction of the train split's episodes, held out of every training stage of a run
+    (Stage I, the probe, the depth refit) and recorded in its config.json: choices (recipes,
+    knobs, epochs) are made on these, the test split only reports."""
+
+    fraction: float
+    seed: int
+    episodes: tuple[int, ...]
+
+    def to_dict(self) -> dict:
+        return {"fraction": self.fraction, "seed": self.seed, "episodes": list(self.episodes)}
+
+    @classmethod
+    def from_dict(cls, d: dict | None) -> "ValidationSplit":
+        d = d or {"fraction": 0.0, "seed": 0, "episodes": []}
+        return cls(float(d["fraction"]), int(d["seed"]), tuple(int(e) for e in d["episodes"]))
+
+
+def validation_split(source, fraction: float, seed: int) -> ValidationSplit:
+    """``fraction`` of the train split's episodes of every level (rounded, at least one per level
+    when the fraction is > 0), drawn with a generator seeded by ``seed``: the same source, fraction
+    and seed give the same episodes."""
+    from orbitdata.load.tables import load_episode_table
+
+    if not 0.0 <= fraction < 1.0:
+        raise ValueError(f"validation fraction {fraction} must be in [0, 1)")
+    if fraction == 0.0:
+        return ValidationSplit(0.0, seed, ())
+    table = load_episode_table(source, "train", {}).select([S.EPISODE_INDEX, S.LEVEL])
+    index = table.column(S.EPISODE_INDEX).to_numpy().astype(np.int64)
+    level = np.asarray(table.column(S.LEVEL).to_pylist())
+    rng = np.random.default_rng(seed)
+    chosen: list[int] = []
+    for name in sorted(set(level)):  # per level, so the held-out mix is the training mix
+        ids = np.sort(index[level == name])
+        take = min(len(ids) - 1, max(1, round(fraction * len(ids))))
+        chosen += rng.choice(ids, size=take, replace=False).tolist() if take > 0 else []
+    return ValidationSplit(fraction, seed, tuple(sorted(int(e) for e in chosen)))
+
+
+def training_episodes(source, levels, outcomes, held_out: ValidationSplit | None):
+    """The ``episodes=`` filter of a training stage: the level / outcome selection without the
+    run's validation episodes."""
+    chosen = episode_filter(list(levels), list(outcomes))
+    if held_out is None or not held_out.episodes:
+        return chosen
+    from orbitdata.load.select import select_episodes
+    from orbitdata.load.tables import load_episode_table
+
+    keep = select_episodes(load_episode_table(source, "train", {}), chosen, "train")
+    out = set(held_out.episodes)
+    return [int(e) for e in keep if int(e) not in out]
+
+
+def split_selection(split: str, held_out: ValidationSplit) -> tuple[str, list[int] | None]:
+    """(dataset split, episodes=) of an evaluation on ``split``: "test", or "val", the run's
+    validation episodes of the train split."""
+    if split not in EVAL_SPLITS:
+        raise ValueError(f"split {split!r}: choose one of {', '.join(EVAL_SPLITS)}")
+    if split == "test":
+        return "test", None
+    if not held_out.episodes:
+        raise ValueError("this run holds out no validation episodes; train it with --val-fraction (e.g. 0.1) to "
+                         "make choices on a validation split")
+    return "train", list(held_out.episodes)

@@ -34,7 +34,7 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 
 from orbitmodel.config import Preset
-from orbitmodel.data import DatasetMeta
+from orbitmodel.data import DatasetMeta, ValidationSplit
 
 CONFIG = "config.json"
 WEIGHTS = "model.safetensors"
@@ -237,11 +237,16 @@ def stage_of(path: str | Path) -> str:
 # ---- Stage I runs ---------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class RunConfig:
-    """A Stage I run's preset and dataset facts (and the raw config.json)."""
+    """A Stage I run's preset, dataset facts and held-out validation episodes (and the raw config.json)."""
 
     preset: Preset
     dataset: DatasetMeta
     raw: dict
+
+    @property
+    def validation(self) -> ValidationSplit:
+        """The train-split episodes the run held out (none for a run without a validation split)."""
+        return ValidationSplit.from_dict(self.raw.get("validation"))
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,9 @@ def register(app: typer.Typer) -> None:
 def rollout(
     run: Annotated[Path, typer.Argument(help="a Stage I run folder (orbitmodel train --out RUN)")],
     dataset: Annotated[str, typer.Argument(help="the orbitdata dataset (its test split is used)")],
-    windows: Annotated[int, typer.Option(min=2, help="test windows, chosen at random with --seed")] = 100,
+    windows: Annotated[int, typer.Option(min=2, help="windows, chosen at random with --seed")] = 100,
+    split: Annotated[str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
+    ] = "test",
     horizon: Annotated[int, typer.Option(min=1, max=200, help="rollout steps")] = 50,
     seed: Annotated[int, typer.Option(min=0)] = 0,
     out: Annotated[Optional[Path], typer.Option(help="folder for rollout.json/.png and depth.png [RUN/eval]")] = None,
@@ -28,7 +30,7 @@ def rollout(
     from orbitmodel.evaluate.rollout import RolloutEvalConfig, evaluate_rollout, summary_lines, write_rollout_report
 
     result = evaluate_rollout(run, dataset, RolloutEvalConfig(horizon=horizon, windows=windows, seed=seed,
-                                                              check_h=min(12, horizon)))
+                                                              check_h=min(12, horizon), split=split))
     paths = write_rollout_report(result, out or Path(run) / "eval")
     for line in summary_lines(result):
         typer.echo(line)

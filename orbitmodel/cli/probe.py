@@ -85,6 +85,8 @@ def eval_probe(
     out: Annotated[Optional[Path], typer.Option(help="folder for the table and figures (default RUN/eval)")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "cpu",
     figures: Annotated[bool, typer.Option(help="write Figure 5 (needs matplotlib)")] = True,
+    split: Annotated[str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
+    ] = "test",
     history: Annotated[Optional[int], typer.Option(
         min=1, help="latents the world model sees per imagined step, as the planner flies it (the cpu planner "
                     "preset: 2) [default: the model's own]")] = None,
@@ -95,7 +97,7 @@ def eval_probe(
 
     req = EvalRequest(run=run, dataset=dataset, windows=windows, seed=seed,
                       horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures,
-                      history=history)
+                      history=history, split=split)
     try:
         result = evaluate_probe(req)
     except MissingExtra as err:

@@ -35,6 +35,10 @@ def train(
     preset: Annotated[Preset, typer.Option(help="model size and recipe; see `orbitmodel presets`")] = "cpu",
     epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    val_fraction: Annotated[Optional[float], typer.Option(
+        min=0.0, max=0.99, help="hold this seeded fraction of the train episodes out of Stage I, the probe and the "
+                                "depth refit: the validation split of `eval ... --split val` [default: the preset's, 0]")
+    ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=2, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
     lambda_sigreg: Annotated[Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
@@ -62,7 +66,8 @@ def train(
 
     p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool,
                                              frame_step=frame_step)
-    p = p.with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr, num_workers=workers, seed=seed)
+    p = p.with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr, num_workers=workers, seed=seed,
+                     val_fraction=val_fraction)
     req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
                         outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,
                         resume=resume, overwrite=overwrite)

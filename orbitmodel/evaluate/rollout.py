@@ -27,7 +27,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import load_windows
-from orbitmodel.data import load_model_windows, read_dataset_meta
+from orbitmodel.data import load_model_windows, read_dataset_meta, split_selection
 from orbitmodel.model.world_model import WorldModel, effective_rank
 from orbitmodel.plan.config import MAX_RANGE
 from orbitmodel.plan.depth_bands import DEPTH_BANDS_M, band_lines, depth_by_band
@@ -44,7 +44,8 @@ class RolloutEvalConfig:
     seed: int = 0
     batch: int = 16
     check_h: int = 12  # where the shuffled-action ratio is reported
-    frames: int = 4000  # independent test frames for the latent variance and the collapse diagnostics
+    frames: int = 4000  # independent frames for the latent variance and the collapse diagnostics
+    split: str = "test"  # or "val": the run's validation episodes of the train split (orbitmodel.data)
     depth_bands: tuple[float, ...] = DEPTH_BANDS_M
     depth_range: float = MAX_RANGE  # metres: cells beyond it are no obstacle to the planner
 
@@ -83,9 +84,10 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
     stats_mean = _depth_mean(dataset)
     step = model.config.frame_step  # context and horizon count the model's steps of `step` frames
-    windows = load_model_windows(dataset, step, split="test", context=cfg.context, horizon=cfg.horizon,
+    split, episodes = split_selection(cfg.split, model.run.validation)
+    windows = load_model_windows(dataset, step, split=split, episodes=episodes, context=cfg.context, horizon=cfg.horizon,
                                  columns=list(COLUMNS))
-    chosen = _select(len(windows), cfg.windows, cfg.seed, f"the test split of {dataset} (windows of "
+    chosen = _select(len(windows), cfg.windows, cfg.seed, f"the {cfg.split} split of {dataset} (windows of "
                      f"{cfg.context}+{cfg.horizon} steps of {step} frame{'s' * (step > 1)})")
     shuffle = derangement(len(chosen), cfg.seed)  # each window rolls out another window's actions
     m, n = cfg.context, cfg.horizon
@@ -112,7 +114,7 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
         episodes += [int(b[S.EPISODE_INDEX][0]) for b in batch]
     z_true, z_pred, z_shuf = torch.cat(z_true), torch.cat(z_pred), torch.cat(z_shuf)  # (N, T, D), (N, n, D)
     future = z_true[:, m:]  # (N, n, D)
-    flat = _frame_latents(model, dataset, cfg)  # (F, D) independent test frames
+    flat = _frame_latents(model, dataset, cfg, split, episodes)  # (F, D) independent frames of the split
     var = float(flat.var(0).mean())
     mse = ((z_pred - future) ** 2).mean(-1)  # (N, n)
     persistence = ((z_true[:, m - 1:m] - future) ** 2).mean(-1)
@@ -144,10 +146,10 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     return result
 
 
-def _frame_latents(model: WorldModel, dataset: str, cfg: RolloutEvalConfig) -> torch.Tensor:
+def _frame_latents(model: WorldModel, dataset: str, cfg: RolloutEvalConfig, split: str, episodes) -> torch.Tensor:
     """z of ``cfg.frames`` test frames drawn at random over the whole split (F, D). The frames of a
     window are nearly alike, so the windows alone would understate the latents' spread."""
-    frames = load_windows(dataset, split="test", context=1, horizon=0, columns=[S.IMAGE, S.STATE])
+    frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.STATE], episodes=episodes)
     idx = np.sort(np.random.default_rng(cfg.seed + 3).choice(len(frames), min(cfg.frames, len(frames)), replace=False))
     out = []
     for start in range(0, len(idx), 256):
@@ -192,7 +194,7 @@ def write_rollout_report(result: dict, out: Path) -> list[Path]:
 def summary_lines(result: dict) -> list[str]:
     c = result["checks"]
     h = result["config"]["check_h"]
-    rows = [f"latent rollout on {result['config']['windows']} test windows "
+    rows = [f"latent rollout on {result['config']['windows']} {result['config'].get('split', 'test')} windows "
             f"(context {result['config']['context']}, horizon {result['config']['horizon']}"
             + (f"; h counts steps of {result['frame_step']} frames" if result.get("frame_step", 1) > 1 else "") + "):",
             "   h   NMSE   persistence   shuffled actions"]
@@ -205,6 +207,6 @@ def summary_lines(result: dict) -> list[str]:
              f"depth MAE {result['depth_mae_m']:.3f} m vs mean baseline {result['depth_mean_baseline_mae_m']:.3f} m "
              f"({100 * c['depth_mae_reduction_vs_mean']:.0f} % lower)",
              *band_lines(result.get("depth_by_band")),
-             f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} test frames; "
+             f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} frames; "
              f"z std min {result['z_std_min']:.3f}, median {result['z_std_median']:.3f}"]
     return rows

@@ -51,7 +51,8 @@ def band_lines(bands: dict | None) -> list[str]:
 
 def comparison_lines(result: dict) -> list[str]:
     """Two heads' bands side by side (``orbitmodel depth``: Stage I -> refit)."""
-    rows = [f"depth head on {result['config']['test_frames']} test frames: Stage I -> refit "
+    rows = [f"depth head on {result['config']['test_frames']} {result['config'].get('eval_split', 'test')} frames: "
+            "Stage I -> refit "
             f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"]
     before, after = result["stage1"], result["refit"]
     rows.append(f"  all cells: MAE {before['mae_m']:.2f} -> {after['mae_m']:.2f} m")

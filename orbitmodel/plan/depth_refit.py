@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
-from orbitmodel.data import read_dataset_meta
+from orbitmodel.data import EVAL_SPLITS, read_dataset_meta, split_selection, training_episodes
 from orbitmodel.model.world_model import WorldModel, images_to_float
 from orbitmodel.plan.config import MAX_RANGE
 from orbitmodel.plan.depth_bands import depth_by_band
@@ -44,7 +44,8 @@ class DepthRefitConfig:
     Args:
         frames: random training frames whose patch tokens are encoded once (a dataset with fewer
             training frames needs ``--frames``; the 3000-episode 64 px dataset has ~330,000).
-        test_frames: random test frames for the before/after comparison.
+        test_frames: random frames of ``eval_split`` for the before/after comparison.
+        eval_split: "test" (to report) or "val": the run's validation episodes (to choose a recipe).
         epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
         near_weight: extra weight of a cell whose true depth is below ``near_m``.
         near_m: metres; the planner's range (``plan.config.MAX_RANGE``).
@@ -59,10 +60,13 @@ class DepthRefitConfig:
     near_weight: float = 25.0
     near_m: float = MAX_RANGE
     seed: int = 0
+    eval_split: str = "test"
 
     def __post_init__(self):
         if min(self.frames, self.test_frames, self.epochs, self.batch_size) < 1:
             raise ValueError("frames, test_frames, epochs and batch_size must be >= 1")
+        if self.eval_split not in EVAL_SPLITS:
+            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
         if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
             raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
 
@@ -71,11 +75,12 @@ def depth_folder(run: str | Path) -> Path:
     return Path(run) / FOLDER
 
 
-def _patches(model, dataset: str, split: str, n: int, seed: int, where: str) -> tuple[torch.Tensor, torch.Tensor]:
+def _patches(model, dataset: str, split: str, n: int, seed: int, where: str,
+             episodes=None) -> tuple[torch.Tensor, torch.Tensor]:
     """Patch tokens (n, P, width) float16 and true depth (n, 16, 16) of n random frames of ``split``."""
     from orbitdata.load import load_windows
 
-    frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.DEPTH_LOW])
+    frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.DEPTH_LOW], episodes=episodes)
     if len(frames) < n:
         raise RunError(f"the {split} split of {dataset} has {len(frames)} frames, fewer than the {n} asked; "
                        f"pass {where} {len(frames)} or less")
@@ -104,8 +109,11 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
     model = WorldModel.from_pretrained(run)
     check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
     start = time.perf_counter()
-    train_x, train_d = _patches(model, dataset, "train", cfg.frames, cfg.seed, "--frames")
-    test_x, test_d = _patches(model, dataset, "test", cfg.test_frames, cfg.seed + 1, "--test-frames")
+    held_out = model.run.validation  # the run's validation episodes: never fitted, scored with eval_split "val"
+    train_x, train_d = _patches(model, dataset, "train", cfg.frames, cfg.seed, "--frames",
+                                training_episodes(dataset, (), (), held_out))
+    split, episodes = split_selection(cfg.eval_split, held_out)
+    test_x, test_d = _patches(model, dataset, split, cfg.test_frames, cfg.seed + 1, "--test-frames", episodes)
     encoded = time.perf_counter() - start
     scale = float(model.depth_scale)
     head = copy.deepcopy(model.depth_head).train()

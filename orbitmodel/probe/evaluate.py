@@ -21,7 +21,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
-from orbitmodel.data import group_actions, read_dataset_meta
+from orbitmodel.data import group_actions, read_dataset_meta, split_selection
 from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, interpolate_frames, rot6d_to_matrix
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
@@ -50,6 +50,7 @@ class EvalRequest:
     device: str = "cpu"
     figures: bool = True
     history: int | None = None  # latents the world model sees per imagined step (None: its own, config.history)
+    split: str = "test"  # or "val": the run's validation episodes (choices are made there; test only reports)
 
 
 def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -60,10 +61,13 @@ def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tenso
             "angular_velocity": d[..., W].mean(-1), "fuel": d[..., FUEL].mean(-1)}
 
 
-def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int):
-    """(collision-free window indices, a window ending on a collision or None) into the test
-    windows of ``context + horizon`` frames (stride 1); one window per episode, seeded."""
-    flags = load_windows(dataset, split="test", context=context, horizon=horizon, stride=1, columns=[S.COLLISION])
+def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int, split: str = "test",
+                   episodes=None):
+    """(collision-free window indices, a window ending on a collision or None) into the windows of
+    ``context + horizon`` frames (stride 1) of ``split`` (``episodes`` of it); one window per
+    episode, seeded."""
+    flags = load_windows(dataset, split=split, context=context, horizon=horizon, stride=1, columns=[S.COLLISION],
+                         episodes=episodes)
     episode = flags.index.episode  # (N,) episode_index of each window
     rng = np.random.default_rng(seed)
     chosen, collided = [], []
@@ -77,7 +81,7 @@ def select_windows(dataset: str, context: int, horizon: int, count: int, seed: i
                     chosen.append(int(c))
                     break
     if len(chosen) < count:
-        raise RunError(f"only {len(chosen)} test episodes of {dataset} hold a collision-free window of "
+        raise RunError(f"only {len(chosen)} {split} episodes of {dataset} hold a collision-free window of "
                        f"{context} + {horizon} frames; ask for --windows {len(chosen)} or fewer, or shorter horizons")
     return chosen, (collided[0] if collided else None)
 
@@ -126,7 +130,8 @@ def _cell(row: dict | None, q: str, h: int) -> str:
 def markdown(result: dict) -> str:
     """The table: ours beside the paper and the reference rows, one line per quantity and horizon."""
     t = result["table"]
-    lines = [f"Physics probe, {result['windows']} collision-free test windows (seed {result['seed']}), "
+    lines = [f"Physics probe, {result['windows']} collision-free {result.get('split', 'test')} windows (seed "
+             f"{result['seed']}), "
              f"context {result['context']}"
              + (f", the world model seeing {result['history']} latents per imagined step" if "history" in result else "")
              + ", MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
@@ -173,8 +178,9 @@ def evaluate_probe(req: EvalRequest) -> dict:
                        f"(got {', '.join(map(str, req.horizons))})")
     # the context frames: every s-th of (steps - 1) s + 1, the last one where the probe starts
     context, n = (int(probe_config["train"]["context"]) - 1) * s + 1, max(req.horizons)
-    chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed)
-    windows = load_windows(req.dataset, split="test", context=context, horizon=n, stride=1,
+    split, episodes = split_selection(req.split, world_model.run.validation)
+    chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed, split, episodes)
+    windows = load_windows(req.dataset, split=split, context=context, horizon=n, stride=1, episodes=episodes,
                            columns=[S.IMAGE, S.STATE, S.ACTION])
     errors: dict[str, dict[str, list]] = {}
     first, first_frames = None, []
@@ -191,7 +197,8 @@ def evaluate_probe(req: EvalRequest) -> dict:
     table.setdefault("state_mlp", None)
     history = req.history or world_model.config.history
     result = {"run": str(req.run), "dataset": str(req.dataset), "preset": world_model.run.preset.name,
-              "windows": len(chosen), "seed": req.seed, "context": context, "frame_step": s, "history": history,
+              "windows": len(chosen), "split": req.split, "seed": req.seed, "context": context, "frame_step": s,
+              "history": history,
               "horizons": list(req.horizons),
               "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
               "probe_inputs": probe.config.inputs,
@@ -212,5 +219,5 @@ def evaluate_probe(req: EvalRequest) -> dict:
             batch = collate_windows(windows.__getitems__([collided]))
             crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device,
                                                        req.history)}
-        result["files"] += figure5(first, crash, req.dataset, context, S.DT, out)
+        result["files"] += figure5(first, crash, req.dataset, context, S.DT, out, split)
     return result

@@ -81,10 +81,10 @@ def plot_3d(panels: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _obstacles(dataset: str, episode: int, path_xyz: np.ndarray) -> list[tuple[np.ndarray, float]]:
+def _obstacles(dataset: str, episode: int, path_xyz: np.ndarray, split: str) -> list[tuple[np.ndarray, float]]:
     from orbitdata.load.tables import load_episode_table
 
-    table = load_episode_table(dataset, "test", {})
+    table = load_episode_table(dataset, split, {})
     row = next(r for r in table.to_pylist() if r[S.EPISODE_INDEX] == episode)
     near = []
     for ob in Scenario.from_dict(row).obstacles:
@@ -94,7 +94,7 @@ def _obstacles(dataset: str, episode: int, path_xyz: np.ndarray) -> list[tuple[n
     return near
 
 
-def _panel(window: dict, j: int, context: int, dataset: str, title: str) -> dict:
+def _panel(window: dict, j: int, context: int, dataset: str, title: str, split: str) -> dict:
     states = {k: v[j].numpy() for k, v in window["states"].items()}
     ctx = window["batch"][S.STATE][j, :context, P].numpy()
     episode = int(window["batch"][S.EPISODE_INDEX][j, 0])
@@ -102,19 +102,20 @@ def _panel(window: dict, j: int, context: int, dataset: str, title: str) -> dict
     path_xyz = np.concatenate([ctx, states["truth"][:, P]])
     return {"title": f"{title}: episode {episode}, frames {first}..{first + len(path_xyz) - 1}", "context": ctx,
             "paths": {row: s[:, P] for row, s in states.items()},
-            "obstacles": _obstacles(dataset, episode, path_xyz)}
+            "obstacles": _obstacles(dataset, episode, path_xyz, split)}
 
 
-def figure5(first: dict, crash: dict | None, dataset: str, context: int, dt: float, out: Path) -> list[str]:
+def figure5(first: dict, crash: dict | None, dataset: str, context: int, dt: float, out: Path,
+            split: str = "test") -> list[str]:
     """Write Figure 5 into ``out``: the states of the first evaluated window, and 3-D views of it
     and of the collision window (when the test split has one). Returns the files written."""
     states = {k: v[0].numpy() for k, v in first["states"].items()}
     episode = int(first["batch"][S.EPISODE_INDEX][0, 0])
     n = len(states["truth"])
     plot_states(first["batch"][S.STATE][0, :context].numpy(), states, dt, out / FIG_STATES,
-                f"Predicted vs true state over {n} steps ({n * dt:.1f} s), test episode {episode}")
-    panels = [_panel(first, 0, context, dataset, "collision-free")]
+                f"Predicted vs true state over {n} steps ({n * dt:.1f} s), {split} episode {episode}")
+    panels = [_panel(first, 0, context, dataset, "collision-free", split)]
     if crash is not None:
-        panels.append(_panel(crash, 0, context, dataset, "ends in a collision"))
+        panels.append(_panel(crash, 0, context, dataset, "ends in a collision", split))
     plot_3d(panels, out / FIG_3D)
     return [str(out / FIG_STATES), str(out / FIG_3D)]

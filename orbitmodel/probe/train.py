@@ -27,7 +27,7 @@ from torch import nn
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
 from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig
-from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta
+from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
 from orbitmodel.kinematics import FUEL, P, ROT, V, W
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
@@ -135,11 +135,12 @@ def run_recipe(run: str | Path) -> ProbeRecipe:
     return read_run_config(run).preset.probe
 
 
-def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1) -> torch.Tensor:
+def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1,
+                    episodes=None) -> torch.Tensor:
     """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
     (a seeded draw), the probe's output units; a step is ``frame_step`` frames."""
     windows = load_model_windows(dataset, frame_step, split="train", context=train.context, horizon=train.horizon,
-                                 stride=train.window_stride, columns=[S.STATE])
+                                 stride=train.window_stride, columns=[S.STATE], episodes=episodes)
     g = torch.Generator().manual_seed(train.seed)
     chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
     states = collate_windows(windows.__getitems__(chosen))[S.STATE]  # (N, T, 16)
@@ -148,7 +149,7 @@ def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, 
 
 
 def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
-             folder: Path) -> dict:
+             folder: Path, held_out: tuple[int, ...] = ()) -> dict:
     """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
     # The rollout depends on the weights, the model's config (its history) and the code that
     # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
@@ -156,7 +157,7 @@ def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, met
     t = req.recipe.train
     key = cache_key(world_model=wm_print, config=asdict(world_model.config), package=version("orbitdata"),
                     dataset=meta.to_dict(), windows=chosen, context=t.context, horizon=t.horizon,
-                    stride=t.window_stride)
+                    stride=t.window_stride, **({"held_out": list(held_out)} if held_out else {}))
     cached = load_cache(folder, key)
     if cached is None:
         cached = imagine(world_model.to(device), windows, chosen, t.context, device)
@@ -199,13 +200,15 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     if latent:
         parts["world_model"] = wm_print  # a probe reads one world model's latents only
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite)
+    episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
     windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
-                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]))
+                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]), episodes=episodes)
     data = windows
     if t.cache_windows:
         chosen = subset(len(windows), t.cache_windows, t.seed)
         if latent:
-            data = TensorWindows(imagined(world_model, windows, chosen, req, wm_print, meta, device, out))
+            data = TensorWindows(imagined(world_model, windows, chosen, req, wm_print, meta, device, out,
+                                          stage1.validation.episodes))
         else:
             data = TensorWindows(gather(windows, chosen, (S.STATE, S.ACTION)))
     torch.manual_seed(t.seed)  # initialisation
@@ -217,7 +220,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         model.set_state_stats(stage1.dataset.state_mean, stage1.dataset.state_std)
         module = StateObjective(model, t)
     if not req.resume:
-        model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step))
+        model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step, episodes))
     job = ProbeJob(module, model, req.kind, t.context)
     return fit(job, data, LoopSettings.of(t), run, device, resume=req.resume,
                label="probe" if latent else "state-only", on_log=on_log)

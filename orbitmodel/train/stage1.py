@@ -10,7 +10,8 @@ import torch
 
 from orbitdata import schema as S
 from orbitmodel.config import Preset
-from orbitmodel.data import DatasetMeta, episode_filter, load_model_windows, read_dataset_meta
+from orbitmodel.data import (DatasetMeta, ValidationSplit, load_model_windows, read_dataset_meta, training_episodes,
+                             validation_split)
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
@@ -62,12 +63,14 @@ class Stage1Request:
 
 
 def upgrade_config(old: dict) -> dict:
-    """A Stage I config.json as this version writes it: a run from before presets carried their
-    probe recipe gets its named preset's (``Preset.from_dict``), so it resumes."""
+    """A Stage I config.json as this version writes it, so that a run of an earlier version
+    resumes: a preset from before presets carried their probe recipe gets its named preset's
+    (``Preset.from_dict``), and a run from before validation splits held none out."""
     if "preset" not in old:
         return old
     try:
-        return {**old, "preset": Preset.from_dict(old["preset"]).to_dict()}
+        return {**old, "preset": Preset.from_dict(old["preset"]).to_dict(),
+                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
     except (KeyError, TypeError, ValueError):
         return old  # not a preset this version reads: the comparison says what differs
 
@@ -91,13 +94,14 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     run = RunDir(req.out)
     t = req.preset.train
     rank = int(os.environ.get("RANK", 0))
+    held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
     if rank == 0:
         config = run_config(WORLD_MODEL, preset=req.preset.to_dict(), dataset=meta.to_dict(), levels=list(req.levels),
-                            outcomes=list(req.outcomes))
+                            outcomes=list(req.outcomes), validation=held_out.to_dict())
         run.start(config, resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_config)
     windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
                                  horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
-                                 episodes=episode_filter(list(req.levels), list(req.outcomes)))
+                                 episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out))
     torch.manual_seed(t.seed)  # initialisation
     model = WorldModel(req.preset.model)
     model.set_normalisation(meta.state_mean, meta.state_std, meta.depth_max)

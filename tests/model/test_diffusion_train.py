@@ -100,7 +100,7 @@ def test_goal_join_reads_only_goals(tiny_dataset_master, monkeypatch):
     for idx, goal in zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.GOAL).to_pylist()):
         np.testing.assert_allclose(goals[idx].numpy(), goal, rtol=1e-6)
     assert S.OBSTACLES not in T.COLUMNS
-    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, T.DEFAULT_LEVELS, ())
+    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, {"level": list(T.DEFAULT_LEVELS)})
     levels = dict(zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.LEVEL).to_pylist()))
     assert {levels[int(e)] for e in windows.episodes} == {"expert"}
     item = windows[0]
@@ -110,7 +110,7 @@ def test_goal_join_reads_only_goals(tiny_dataset_master, monkeypatch):
 def test_job_inputs(tiny_dataset_master):
     meta = read_dataset_meta(tiny_dataset_master)
     policy = T.build_policy(PRESET, meta)
-    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, T.DEFAULT_LEVELS, ())
+    windows = T.policy_windows(tiny_dataset_master, "train", PRESET, {"level": list(T.DEFAULT_LEVELS)})
     from orbitdata.load import collate_windows
 
     batch = collate_windows(windows.__getitems__([0, 1, 2]))

@@ -16,7 +16,7 @@ from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, STATE_DIM
 from orbitmodel.config import replace_given
-from orbitmodel.data import DatasetMeta
+from orbitmodel.data import DatasetMeta, ValidationSplit
 from orbitmodel.runs import CONFIG, POLICY, RunDir, RunError
 
 GOAL_DIM = 3  # the goal in the body frame, metres
@@ -116,6 +116,8 @@ class PolicyTrainConfig:
         num_workers: DataLoader worker processes.
         log_every, save_every: steps between metric lines and between checkpoints.
         seed: data order, noise draws, augmentation and initialisation.
+        val_fraction, val_seed: hold this seeded fraction of the train split's episodes (per
+            level) out of training, for choices (``eval policy --split val``; 0: none).
     """
 
     window_stride: int = 1
@@ -135,8 +137,12 @@ class PolicyTrainConfig:
     log_every: int = 10
     save_every: int = 500
     seed: int = 42
+    val_fraction: float = 0.0
+    val_seed: int = 0
 
     def __post_init__(self):
+        if not 0.0 <= self.val_fraction < 1.0:
+            raise ValueError(f"val_fraction={self.val_fraction} must be in [0, 1)")
         if self.window_stride < 1:
             raise ValueError(f"window_stride={self.window_stride}: use 1 or more frames")
         if self.batch_size < 1:
@@ -212,6 +218,11 @@ class PolicyRun:
     preset: PolicyPreset
     dataset: DatasetMeta
     raw: dict
+
+    @property
+    def validation(self) -> ValidationSplit:
+        """The train-split episodes the run held out (none for a run without a validation split)."""
+        return ValidationSplit.from_dict(self.raw.get("validation"))
 
 
 def read_policy_run(path: str | Path) -> PolicyRun:

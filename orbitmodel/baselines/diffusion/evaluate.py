@@ -24,8 +24,9 @@ from orbitdata.load.select import select_episodes
 from orbitdata.load.tables import load_episode_table, load_steps
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.baselines.diffusion.train import COLUMNS, DEFAULT_LEVELS, episode_goals
-from orbitmodel.data import episode_filter, read_dataset_meta
-from orbitmodel.runs import check_image_size
+from orbitmodel.baselines.diffusion.config import read_policy_run
+from orbitmodel.data import ValidationSplit, episode_filter, read_dataset_meta, split_selection, training_episodes
+from orbitmodel.runs import check_image_size, resolve_run
 
 
 @dataclass(frozen=True)
@@ -48,10 +49,12 @@ class ActionMSE:
         return {**asdict(self), "levels": list(self.levels), "ratio": self.ratio}
 
 
-def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=()) -> np.ndarray:
-    """(8,) mean thrust over the non-terminal frames of the chosen training episodes."""
-    chosen = select_episodes(load_episode_table(source, "train", {}), episode_filter(list(levels), list(outcomes)),
-                             "train")
+def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out: ValidationSplit | None = None
+                ) -> np.ndarray:
+    """(8,) mean thrust over the non-terminal frames of the chosen training episodes (not the
+    held-out validation ones)."""
+    chosen = select_episodes(load_episode_table(source, "train", {}),
+                             training_episodes(source, levels, outcomes, held_out), "train")
     table = load_steps(source, "train", False, {}).data.table.select([S.EPISODE_INDEX, S.ACTION, S.IS_LAST])
     keep = pc.and_(pc.is_in(table.column(S.EPISODE_INDEX), value_set=pc.cast(chosen, table.column(S.EPISODE_INDEX).type)),
                    pc.invert(table.column(S.IS_LAST)))
@@ -71,11 +74,16 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
     check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
-    windows = load_windows(dataset, split=split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
-                           stride=stride, pad=True, columns=[*COLUMNS, S.IS_LAST],
-                           episodes=episode_filter(list(levels), list(outcomes)))
-    goals = episode_goals(dataset, split)
-    baseline = torch.as_tensor(mean_action(dataset, levels, outcomes), dtype=torch.float32)  # (8,)
+    held_out = read_policy_run(resolve_run(run)).validation
+    source_split, episodes = split_selection(split, held_out)
+    chosen = episode_filter(list(levels), list(outcomes))
+    if episodes is not None:  # the held-out episodes of the chosen levels and outcomes
+        keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())
+        chosen = [e for e in episodes if e in keep]
+    windows = load_windows(dataset, split=source_split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
+                           stride=stride, pad=True, columns=[*COLUMNS, S.IS_LAST], episodes=chosen)
+    goals = episode_goals(dataset, source_split)
+    baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
     generator = torch.Generator().manual_seed(seed)
     executed = slice(c.action_start, c.action_start + c.n_action_steps)

@@ -26,7 +26,7 @@ from orbitdata.load import load_windows
 from orbitdata.load.tables import load_episode_table
 from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
-from orbitmodel.data import DatasetMeta, episode_filter, read_dataset_meta
+from orbitmodel.data import DatasetMeta, ValidationSplit, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.kinematics import P
 from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
@@ -95,12 +95,11 @@ class PolicyJob:
         self.module.ema_update(step, t.ema_power, t.ema_max)
 
 
-def policy_windows(source: str | Path, split: str, preset: PolicyPreset, levels, outcomes, stride: int | None = None):
-    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the chosen episodes."""
+def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None):
+    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the ``episodes=`` selection."""
     m = preset.model
     return load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
-                        stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS),
-                        episodes=episode_filter(list(levels), list(outcomes)))
+                        stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS), episodes=episodes)
 
 
 # ---- runs ------------------------------------------------------------------------------------
@@ -116,10 +115,22 @@ class PolicyRequest:
     overwrite: bool = False
 
 
-def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes) -> dict:
+def upgrade_config(old: dict) -> dict:
+    """A policy run's config.json as this version writes it (new settings at their defaults, no
+    validation split for a run from before them), so that an earlier version's run resumes."""
+    try:
+        return {**old, "preset": PolicyPreset.from_dict(old["preset"]).to_dict(),
+                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
+    except (KeyError, TypeError, ValueError):
+        return old  # not a config this version reads: the comparison says what differs
+
+
+def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes,
+                      held_out: ValidationSplit | None = None) -> dict:
     """The run's config.json (``runs.run_config``)."""
+    held_out = held_out or ValidationSplit(0.0, 0, ())
     return run_config(POLICY, policy=FAMILY, preset=preset.to_dict(), dataset=meta.to_dict(), levels=list(levels),
-                      outcomes=list(outcomes))
+                      outcomes=list(outcomes), validation=held_out.to_dict())
 
 
 def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
@@ -139,10 +150,13 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     policy = build_policy(req.preset, meta)  # checks the image size before the run folder is claimed
     run = RunDir(req.out)
     rank = int(os.environ.get("RANK", 0))
+    t = req.preset.train
+    held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
     if rank == 0:
-        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes), resume=req.resume,
-                  overwrite=req.overwrite)
-    windows = policy_windows(req.dataset, "train", req.preset, req.levels, req.outcomes)
+        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
+                  overwrite=req.overwrite, upgrade=upgrade_config)
+    windows = policy_windows(req.dataset, "train", req.preset,
+                             training_episodes(req.dataset, req.levels, req.outcomes, held_out))
     goals = episode_goals(req.dataset, "train")
     return fit(PolicyJob(policy, req.preset, goals, rank), windows, LoopSettings.of(req.preset.train), run, device,
                resume=req.resume, label="train-policy", on_log=on_log)
