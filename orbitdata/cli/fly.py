@@ -69,6 +69,9 @@ def register(app: typer.Typer) -> None:
                                     help="Render the camera [default: when the pilot needs images or --video]."),
         image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
                                        help="Camera image size in pixels, a multiple of 16."),
+        image_codec: bool = typer.Option(False, "--image-codec/--raw-images",
+                                         help="Hand the pilot its camera through the dataset's JPEG codec (the "
+                                              "config's quality), as the dataset stores it [default: raw renders]."),
         config: Path = typer.Option(None, help="TOML config (scenario/sim/pilots settings)."),
         pilot_option: list[str] = typer.Option([], help="KEY=VALUE passed to the pilot's factory (repeatable)."),
     ):
@@ -112,7 +115,8 @@ def register(app: typer.Typer) -> None:
                 bar.advance(task)
 
             cells = fly_grid(factory, obstacles, speeds, episodes, seed, cfg, render=render,
-                             frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode, **options)
+                             frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode,
+                             image_codec=image_codec, **options)
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")

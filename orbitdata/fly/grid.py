@@ -65,6 +65,7 @@ def fly_grid(
     render: bool | None = None,
     frame_sink: FrameSink | None = None,
     on_episode: EpisodeHook | None = None,
+    image_codec: bool = False,
     **options,
 ) -> list[CellResult]:
     """Fly ``episodes`` seeded episodes per (obstacles, speed) cell.
@@ -76,6 +77,9 @@ def fly_grid(
             ``None``: when the pilot needs images or ``frame_sink`` wants frames.
         frame_sink: called with every rendered frame (``t`` restarts at 0 each episode).
         on_episode: called after every episode (progress bars, videos).
+        image_codec: hand the pilot its camera through the dataset's JPEG codec (at
+            ``config.dataset.jpeg_quality``), as the dataset stores it: what a pilot trained on
+            the dataset saw.
         **options: passed to the pilot's factory.
     """
     check_grid(obstacles, speeds, episodes)
@@ -94,7 +98,8 @@ def fly_grid(
             for v in speeds:
                 cell = CellResult(obstacles=n, speed=float(v), episodes=episodes)
                 for k in range(episodes):
-                    result = fly_episode(env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink)
+                    result = fly_episode(env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink,
+                                         image_quality=config.dataset.jpeg_quality if image_codec else None)
                     cell.add(result.outcome)
                     if on_episode:
                         on_episode(cell, k, result)

@@ -52,6 +52,18 @@ def without_depth(obs: dict) -> dict:
     return {k: v for k, v in obs.items() if k not in SENSOR_KEYS}
 
 
+def pilot_view(obs: dict, pilot, image_quality: int | None = None) -> dict:
+    """What ``pilot`` is handed of ``obs``: the rendered depth only if it ``sees_depth``, and with
+    ``image_quality`` the image round-tripped through the dataset's JPEG codec at that quality,
+    so that a pilot trained on the dataset sees what it trained on."""
+    seen = obs if getattr(pilot, "sees_depth", False) else without_depth(obs)
+    if image_quality is not None and "image" in seen:
+        from orbitdata.codecs import decode_rgb, encode_rgb
+
+        seen = {**seen, "image": decode_rgb(encode_rgb(seen["image"], image_quality))}
+    return seen
+
+
 def fly_episode(
     env: CubeSatEnv,
     pilot: Pilot,
@@ -60,8 +72,11 @@ def fly_episode(
     speed: float | None = None,
     scenario: Scenario | None = None,
     frame_sink: FrameSink | None = None,
+    image_quality: int | None = None,
 ) -> EpisodeResult:
-    """Reset ``env`` with ``seed`` (or the given scenario), fly ``pilot`` until the episode ends."""
+    """Reset ``env`` with ``seed`` (or the given scenario), fly ``pilot`` until the episode ends.
+    ``image_quality``: hand the pilot its camera through the dataset's JPEG codec (see
+    :func:`pilot_view`); the recorded frames stay the raw renders."""
     options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
     if pilot.needs_images and not env.sim.render:
         raise ValueError(f"pilot {pilot.name!r} needs camera images, but the env does not render: "
@@ -92,8 +107,7 @@ def fly_episode(
             frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
         if info["outcome"] is not None:
             break
-        seen = obs if getattr(pilot, "sees_depth", False) else without_depth(obs)
-        action = np.asarray(pilot.act(seen), dtype=np.float32)
+        action = np.asarray(pilot.act(pilot_view(obs, pilot, image_quality)), dtype=np.float32)
         actions[t] = action
         obs, _, _, _, info = env.step(action.astype(np.float64))
         t += 1

@@ -69,6 +69,12 @@ def closed_loop(
                                                                "[default: the preset's]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
+    image_codec: Annotated[bool, typer.Option("--image-codec/--raw-images", help="hand the pilot its camera through "
+                                              "the dataset's JPEG codec, as it trained on it")] = False,
+    action_steps: Annotated[Optional[int], typer.Option(min=1, help="a policy run: actions executed per sampled "
+                                                                    "chunk [default: its config's]")] = None,
+    ensemble: Annotated[Optional[float], typer.Option(min=0.0, help="a policy run: temporal ensembling of "
+                                                                    "overlapping chunks with this decay")] = None,
     compile_rollout: Annotated[Optional[bool], typer.Option(
         "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
                                        "[default: the preset's, off]")] = None,
@@ -95,7 +101,8 @@ def closed_loop(
         speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
         planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
-        max_steps=max_steps, video_dir=video, video_format=f".{video_format.value}")
+        max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, video_dir=video,
+        video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     if loop.name != req.variant.value and (options or planner.value != "paper"):
         fail(f"{run} holds a policy, which takes no planner settings; drop --planner and the MPPI and depth flags")

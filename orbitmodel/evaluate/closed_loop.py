@@ -45,6 +45,8 @@ class ClosedLoopRequest:
             from (None: built some other way), for the report.
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
+        image_codec: hand the pilot its camera through the dataset's JPEG codec (``orbitdata.fly``).
+        action_steps, ensemble: how a policy run executes its chunks (``DiffusionPilot``).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
     """
 
@@ -58,6 +60,9 @@ class ClosedLoopRequest:
     planner_preset: str | None = None
     config: GenerationConfig = field(default_factory=GenerationConfig)
     max_steps: int | None = None
+    image_codec: bool = False
+    action_steps: int | None = None
+    ensemble: float | None = None
     video_dir: Path | None = None
     video_format: str = ".mp4"
 
@@ -109,8 +114,11 @@ def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfi
 
         if req.variant != Variant.PLANNER:
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
-        pilot = load_policy_pilot(run)
+        pilot = load_policy_pilot(run, action_steps=req.action_steps, ensemble=req.ensemble)
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
+    if req.action_steps is not None or req.ensemble is not None:
+        raise RunError(f"--action-steps and --ensemble are for a policy run; {req.run or 'a rigid-body oracle'} is "
+                       "flown by a planning pilot")
     pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value
 
@@ -146,6 +154,7 @@ class ClosedLoop:
         self.timings = Timings()
         planner = dataclasses.replace(req.planner, record=req.video_dir is not None)
         self.pilot, sim, self.name = load_pilot(req, run, planner, req.config.sim, self.timings)
+        self.image_quality = req.config.dataset.jpeg_quality if req.image_codec else None
         self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
                                        max_steps=req.max_steps or sim.max_steps)
 
@@ -167,7 +176,7 @@ class ClosedLoop:
             for n, v, k, seed in order:
                 frames: list[np.ndarray] = []
                 sink = (lambda t, rgb, *_: frames.append(rgb)) if req.video_dir is not None else None
-                result = fly_episode(env, pilot, seed, n, v, frame_sink=sink)
+                result = fly_episode(env, pilot, seed, n, v, frame_sink=sink, image_quality=self.image_quality)
                 cell = cells[(n, v)]
                 cell.add(result.outcome)
                 record = episode_record(n, v, k, seed, result)
@@ -209,6 +218,7 @@ def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: 
         "run": None if req.run is None else str(req.run),
         "planner_preset": req.planner_preset if planning else None,
         "planner": dataclasses.asdict(req.planner) if planning else None,
+        "image_codec": req.image_codec,
         "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
         "time_share": {k: v / total for k, v in sorted(result.timings.items())},
         "episodes": result.episodes,

@@ -153,3 +153,24 @@ def test_an_entry_point_pilot_flies_the_real_command(tmp_path):
                          text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
+
+
+def test_image_codec_hands_the_pilot_the_datasets_jpeg_of_its_camera():
+    """--image-codec: the pilot sees each frame as the dataset would store it (JPEG at the config's
+    quality); the raw render is what it sees without, and what the frame sink always gets."""
+    from orbitdata.codecs import decode_rgb, encode_rgb
+
+    class Recorder(SeeingPilot):
+        def act(self, obs):
+            self.images.append(obs["image"].copy())
+            return np.zeros(8)
+
+    for codec in (False, True):
+        pilot, raw = Recorder(), []
+        pilot.images = []
+        fly_grid(lambda config: pilot, [1], [1.0], 1, config=TINY.replace(sim={"max_steps": 4}), image_codec=codec,
+                 frame_sink=lambda t, rgb, *_: raw.append(rgb.copy()))
+        quality = TINY.dataset.jpeg_quality
+        expected = [decode_rgb(encode_rgb(r, quality)) if codec else r for r in raw[:len(pilot.images)]]
+        assert len(pilot.images) == 3 and all(np.array_equal(a, b) for a, b in zip(pilot.images, expected))
+        assert codec == any(not np.array_equal(a, r) for a, r in zip(pilot.images, raw))

@@ -177,3 +177,41 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 2 and "flies as itself" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--samples", "8", *grid])
     assert res.exit_code == 2 and "takes no planner settings" in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--action-steps", "2", "--ensemble", "0.1",
+                                   *grid, "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(out.read_text())["episodes"][0]["action_steps"] == 2
+
+
+class ChunkPolicy(torch.nn.Module):
+    """Stands in for a trained policy: sample k (0-based) is the chunk k * 100 + frame offset, so an
+    executed action says which sample and which offset it came from."""
+
+    def __init__(self):
+        super().__init__()
+        self.config, self.samples = PRESET.model, 0
+
+    def sample_actions(self, images, states, goal, generator=None, use_ema=True):
+        c = self.config
+        chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
+        self.samples += 1
+        return chunk[None, :, None].expand(1, c.horizon, c.action_dim)
+
+
+def _fly_steps(pilot, steps: int) -> list[float]:
+    obs = {"image": np.zeros((64, 64, 3), np.uint8), "state": np.zeros(16, np.float32)}
+    pilot.reset(Task((1.0, 0.0, 0.0), 0.5, (0.0, 0.0, 0.0), 0))
+    return [float(pilot.act(obs)[0]) for _ in range(steps)]
+
+
+def test_action_steps_and_temporal_ensembling_are_honoured():
+    chunked = DiffusionPilot(ChunkPolicy(), action_steps=3)
+    assert _fly_steps(chunked, 7) == [0, 1, 2, 100, 101, 102, 200] and chunked.policy.samples == 3
+    assert _fly_steps(DiffusionPilot(ChunkPolicy()), 9)[7:] == [7, 100]  # the config's 8 by default
+    ensembled = DiffusionPilot(ChunkPolicy(), action_steps=1, ensemble=0.5)
+    got = _fly_steps(ensembled, 3)
+    w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
+    assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
+    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5}
+    with pytest.raises(ValueError, match="action_steps=16"):
+        DiffusionPilot(ChunkPolicy(), action_steps=16)

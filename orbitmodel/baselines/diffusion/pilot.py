@@ -1,9 +1,12 @@
 """The Diffusion Policy as an orbitdata pilot: it sees the camera and the state, and is told
 only the task (the goal), never the obstacles.
 
-Action chunking as in the reference: every ``n_action_steps`` (8) control steps the policy
-samples 16 actions from its last 2 observations and queues the 8 for frames t .. t+7. At the
-first step of an episode the one observation stands in for both (the reference's padding).
+Action chunking as in the reference: every ``action_steps`` control steps (the config's
+``n_action_steps``, 8, by default) the policy samples 16 actions from its last 2 observations and
+queues those for frames t .. t + action_steps - 1. At the first step of an episode the one
+observation stands in for both (the reference's padding). With ``ensemble`` = m (temporal
+ensembling, as ACT does), every chunk sampled so far that covers the current frame votes, the
+oldest with weight 1 and each newer one exp(-m) times the one before.
 
     pilot = load_policy_pilot("runs/policy")
     pilot.reset(task)                   # task.goal: metres, world frame relative to the start
@@ -36,12 +39,23 @@ class DiffusionPilot(Pilot):
     privileged = False
     needs_images = True
 
-    def __init__(self, policy: DiffusionPolicy, use_ema: bool = True):
+    def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
+                 ensemble: float | None = None):
+        c = policy.config
         self.policy = policy.eval()
         self.use_ema = use_ema
+        self.action_steps = int(action_steps or c.n_action_steps)
+        most = c.horizon - c.n_obs_steps + 1  # actions a sample holds from the current frame on
+        if not 1 <= self.action_steps <= most:
+            raise ValueError(f"action_steps={self.action_steps}: execute 1 to {most} actions of each sampled chunk")
+        if ensemble is not None and not ensemble >= 0:
+            raise ValueError(f"ensemble={ensemble}: give a decay >= 0 (0: every covering chunk votes alike)")
+        self.ensemble = None if ensemble is None else float(ensemble)
         self._goal: torch.Tensor | None = None
-        self._history: deque = deque(maxlen=policy.config.n_obs_steps)
+        self._history: deque = deque(maxlen=c.n_obs_steps)
         self._queue: deque = deque()
+        self._chunks: list[tuple[int, np.ndarray]] = []  # (first frame, actions (n, 8) from it on), oldest first
+        self._t = 0
         self._generator = torch.Generator()
 
     def reset(self, task) -> None:
@@ -50,6 +64,8 @@ class DiffusionPilot(Pilot):
         self._generator.manual_seed(int(rng(int(task.seed), "pilot").integers(2 ** 62)))
         self._history.clear()
         self._queue.clear()
+        self._chunks.clear()
+        self._t = 0
 
     def act(self, obs: dict) -> np.ndarray:
         """(8,) thrusts in [0, 1] from obs["image"] (S, S, 3) uint8 and obs["state"] (16,)."""
@@ -65,28 +81,44 @@ class DiffusionPilot(Pilot):
         while len(self._history) < c.n_obs_steps - 1:  # first step: repeat the first observation
             self._history.append(frame)
         self._history.append(frame)
-        if not self._queue:
-            images = torch.stack([f[0] for f in self._history])[None]  # (1, To, 3, S, S)
-            states = torch.stack([f[1] for f in self._history])[None]  # (1, To, 16)
-            actions = self.policy.sample_actions(images, states, self._goal, self._generator, self.use_ema)[0]
-            start = c.action_start
-            self._queue.extend(actions[start:start + c.n_action_steps].cpu().numpy().astype(np.float32))
-        return self._queue.popleft()
+        t, self._t = self._t, self._t + 1
+        if self.ensemble is None:
+            if not self._queue:
+                self._queue.extend(self._sample()[:self.action_steps])
+            return self._queue.popleft()
+        if t % self.action_steps == 0:
+            self._chunks.append((t, self._sample()))
+        self._chunks = [(t0, a) for t0, a in self._chunks if t - t0 < len(a)]  # those that cover frame t
+        votes = np.stack([a[t - t0] for t0, a in self._chunks])  # (n, 8), oldest first
+        weights = np.exp(-self.ensemble * np.arange(len(votes)))
+        return (weights @ votes / weights.sum()).astype(np.float32)
+
+    def _sample(self) -> np.ndarray:
+        """A chunk from the last observations: (n, 8) thrusts for the current frame on."""
+        images = torch.stack([f[0] for f in self._history])[None]  # (1, To, 3, S, S)
+        states = torch.stack([f[1] for f in self._history])[None]  # (1, To, 16)
+        actions = self.policy.sample_actions(images, states, self._goal, self._generator, self.use_ema)[0]
+        return actions[self.policy.config.action_start:].cpu().numpy().astype(np.float32)
 
     def metadata(self) -> dict:
-        return {}
+        return {"action_steps": self.action_steps, "ensemble": self.ensemble}
 
 
-def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True) -> DiffusionPilot:
-    """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``)."""
-    return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema)
+def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True, action_steps: int | None = None,
+                      ensemble: float | None = None) -> DiffusionPilot:
+    """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub repo id."""
+    return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema, action_steps=action_steps,
+                          ensemble=ensemble)
 
 
-def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu") -> DiffusionPilot:
-    """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``."""
+def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", action_steps=None,
+                         ensemble=None) -> DiffusionPilot:
+    """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
+    (``--pilot-option action_steps=4``, ``--pilot-option ensemble=0.1``: see :class:`DiffusionPilot`)."""
     if run is None:
         raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
-    pilot = load_policy_pilot(run, device)
+    pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
+                              ensemble=None if ensemble is None else float(ensemble))
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
