@@ -89,3 +89,11 @@ def eval_policy(
         return
     typer.echo(f"action MSE on {result.windows} {split.value} windows ({result.frames} frames, {'/'.join(levels)}): "
                f"policy {result.policy:.5f}, mean action {result.mean_action:.5f} (ratio {result.ratio:.3f})")
+    for title, rows, label in (("executed index", result.per_index, lambda r: f"t+{r['index']}"),
+                               ("distance to the goal at t", result.per_band,
+                                lambda r: f"{r['from_m']:g}-{r['to_m']:g} m" if r["to_m"] else f">= {r['from_m']:g} m")):
+        typer.echo(f"  by {title}:")
+        for r in rows:
+            ratio = "-" if r["ratio"] is None else f"{r['ratio']:.3f}"
+            typer.echo(f"    {label(r):>9}: {r['frames']:6d} frames, ratio {ratio}"
+                       + (f" (policy {r['policy']:.5f}, mean action {r['mean_action']:.5f})" if r["frames"] else ""))

@@ -116,7 +116,7 @@ def test_job_inputs(tiny_dataset_master):
     batch = collate_windows(windows.__getitems__([0, 1, 2]))
     job = T.PolicyJob(policy, PRESET, T.episode_goals(tiny_dataset_master, "train"))
     inputs = job.inputs(batch, step=0, device=torch.device("cpu"))
-    assert set(inputs) == {"images", "states", "goal", "actions", "generator"}
+    assert set(inputs) == {"images", "states", "goal", "actions", "real", "generator"}
     assert inputs["images"].shape == (3, 2, 3, 64, 64) and inputs["images"].dtype == torch.uint8
     assert inputs["states"].shape == (3, 2, 16) and inputs["goal"].shape == (3, 3)
     assert not torch.isnan(inputs["goal"]).any()
@@ -133,10 +133,19 @@ def test_evaluate(trained, tiny_dataset_master):
     assert np.isfinite(result.policy) and result.mean_action > 0
     again = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
     assert again == result  # seeded sampling
+    # the same frames, split by executed index and by distance to the goal: the parts add up to the whole
+    for parts in (result.per_index, result.per_band):
+        assert sum(r["frames"] for r in parts) == result.frames
+        total = sum(r["policy"] * r["frames"] for r in parts if r["frames"])
+        assert total / result.frames == pytest.approx(result.policy, rel=1e-9)
+    assert [r["index"] for r in result.per_index] == list(range(8))
+    assert [(r["from_m"], r["to_m"]) for r in result.per_band] == [(0, 1), (1, 2), (2, 4), (4, 8), (8, None)]
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
                               "--device", "cpu", "--max-windows", "3"])
     assert cli.exit_code == 0, cli.output
     assert json.loads(cli.stdout.strip().splitlines()[-1])["windows"] == 3
+    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--device", "cpu"])
+    assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
 
 
 def one_line_error(args) -> str:
@@ -162,3 +171,32 @@ def test_clear_errors(trained, tiny_dataset_master, tmp_path):
     assert "not an orbitmodel run" in one_line_error(["eval", "policy", str(tmp_path), str(tiny_dataset_master)])
     assert "exploratory" in one_line_error(["eval", "policy", str(out), str(tiny_dataset_master),
                                             "--level", "exploratory", "--device", "cpu"])
+
+
+def test_padded_and_terminal_frames_add_no_loss(tiny_dataset_master, monkeypatch):
+    """Windows that run past an episode's end: the loss has no term for their terminal and padded
+    frames (a denoiser that answers the same whatever it is shown makes the terms visible), and it
+    does have one for every real frame."""
+    from orbitdata.load import collate_windows
+
+    preset = replace(PRESET, model=replace(PRESET.model, prediction_type="sample"))  # the target is the actions
+    policy = T.build_policy(preset, read_dataset_meta(tiny_dataset_master)).eval()
+    monkeypatch.setattr(policy.net.unet, "forward", lambda sample, step, cond: torch.zeros_like(sample))
+    windows = T.policy_windows(tiny_dataset_master, "train", preset, None)
+    ends = [i for i in range(len(windows)) if windows[i]["is_pad"].any()][:4]  # windows past an episode's end
+    batch = collate_windows(windows.__getitems__(ends))
+    inputs = T.PolicyJob(policy, preset, T.episode_goals(tiny_dataset_master, "train")).inputs(batch, 0,
+                                                                                                 torch.device("cpu"))
+    real = inputs["real"]
+    assert ends and (~real).any() and real.any()
+
+    def loss(actions):
+        return float(policy.loss(inputs["images"], inputs["states"], inputs["goal"], actions,
+                                 torch.Generator().manual_seed(0), real)[0])
+
+    base = loss(inputs["actions"])
+    changed = inputs["actions"].clone()
+    changed[~real] = torch.rand(int((~real).sum()), 8, generator=torch.Generator().manual_seed(1))
+    assert loss(changed) == pytest.approx(base, rel=1e-6)
+    changed[real] = 1.0 - changed[real]
+    assert abs(loss(changed) - base) > 1e-3

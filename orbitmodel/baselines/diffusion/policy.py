@@ -123,9 +123,12 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
 
     # ---- training ---------------------------------------------------------------------------
     def loss(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor, actions: torch.Tensor,
-             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+             generator: torch.Generator | None = None, real: torch.Tensor | None = None
+             ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """DDPM loss on the noise (or the clean sample). images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
-        actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU)."""
+        actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU). ``real``
+        (B, H) bool: the frames whose action was really taken; the others (the terminal frame's
+        zero thrust, and the padding that repeats it past an episode's end) add no loss."""
         B = len(actions)
         a0 = self.normalise_actions(actions)  # (B, H, 8)
         k = torch.randint(0, self.config.train_timesteps, (B,), generator=generator).to(a0.device)
@@ -133,11 +136,15 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         noisy = self.noise_scheduler.add_noise(a0, eps, k)
         pred = self.net.unet(noisy, k, self.condition(self.net, images, states, goal))
         target = eps if self.config.prediction_type == "epsilon" else a0
-        return F.mse_loss(pred.float(), target), {}
+        if real is None:
+            return F.mse_loss(pred.float(), target), {}
+        weight = real.to(pred.device, torch.float32)[..., None]  # (B, H, 1)
+        error = ((pred.float() - target) ** 2 * weight).sum() / (weight.sum() * pred.shape[-1]).clamp(min=1.0)
+        return error, {"real_frames": weight.mean().detach()}
 
-    def forward(self, images, states, goal, actions, generator=None):
+    def forward(self, images, states, goal, actions, generator=None, real=None):
         """The training loss (so DDP sees a forward): see :meth:`loss`."""
-        return self.loss(images, states, goal, actions, generator)
+        return self.loss(images, states, goal, actions, generator, real)
 
     @torch.no_grad()
     def ema_update(self, step: int, power: float, max_decay: float) -> None:

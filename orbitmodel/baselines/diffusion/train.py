@@ -3,7 +3,8 @@
 A training window is ``horizon`` (16) frames starting at t-1: its first ``n_obs_steps`` (2)
 frames are the observations, and all 16 actions are the target. The horizon may run past the
 episode end (``pad=True``); padded frames repeat the terminal frame, whose action is zero
-thrust. The goal is joined from the episodes table by ``episode_index``. Only the image, the
+thrust, so the loss skips both (they are no action the expert took). The goal is joined from
+the episodes table by ``episode_index``. Only the image, the
 state, the action and the goal are read: never the obstacles.
 
 EMA: the weights' moving average lives in the policy module (``policy.ema``), so checkpoints
@@ -22,7 +23,7 @@ import torch
 import torch.nn.functional as F
 
 from orbitdata import schema as S
-from orbitdata.load import load_windows
+from orbitdata.load import IS_PAD, load_windows
 from orbitdata.load.tables import load_episode_table
 from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
@@ -31,7 +32,8 @@ from orbitmodel.kinematics import P
 from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
-COLUMNS = (S.IMAGE, S.STATE, S.ACTION)  # plus episode_index, always loaded; the goal comes from the episodes table
+COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad, always loaded; the goal comes
+# from the episodes table
 DEFAULT_LEVELS = ("expert",)
 STREAM_NOISE, STREAM_SHIFT = 0, 1
 
@@ -86,8 +88,10 @@ class PolicyJob:
         t, To = self.preset.train, self.preset.model.n_obs_steps
         images = random_shift(batch[S.IMAGE][:, :To], t.shift, step_generator(t.seed, step, STREAM_SHIFT, self.rank))
         goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
+        real = ~(batch[IS_PAD] | batch[S.IS_LAST])  # (B, H): the terminal frame's and the padding's zero thrust are
+        # no action anyone took; they add no loss (else the policy learns to cut thrust near the goal)
         return {"images": images.to(device), "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
-                "actions": batch[S.ACTION].to(device),
+                "actions": batch[S.ACTION].to(device), "real": real.to(device),
                 "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
 
     def after_step(self, step: int) -> None:
