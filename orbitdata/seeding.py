@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-STREAMS = {"scenario": 0, "pilot": 1, "planner": 2, "split": 3, "level": 4}
+STREAMS = {"scenario": 0, "pilot": 1, "planner": 2, "split": 3, "level": 4, "thrust-noise": 5}
 
 
 def _fold(key: list[int]) -> int:

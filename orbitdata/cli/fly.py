@@ -69,6 +69,10 @@ def register(app: typer.Typer) -> None:
                                     help="Render the camera [default: when the pilot needs images or --video]."),
         image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
                                        help="Camera image size in pixels, a multiple of 16."),
+        thrust_noise: float = typer.Option(0.0, min=0.0, help="Add Gaussian noise of this sigma (normalised "
+                                           "thrust) to every action the pilot takes."),
+        noise_hold: int = typer.Option(1, min=1, help="Redraw the thrust noise every N control steps (8: held per "
+                                       "action chunk) [default: every step]."),
         image_codec: bool = typer.Option(False, "--image-codec/--raw-images",
                                          help="Hand the pilot its camera through the dataset's JPEG codec (the "
                                               "config's quality), as the dataset stores it [default: raw renders]."),
@@ -116,7 +120,7 @@ def register(app: typer.Typer) -> None:
 
             cells = fly_grid(factory, obstacles, speeds, episodes, seed, cfg, render=render,
                              frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode,
-                             image_codec=image_codec, **options)
+                             image_codec=image_codec, thrust_noise=thrust_noise, noise_hold=noise_hold, **options)
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")
@@ -126,4 +130,5 @@ def register(app: typer.Typer) -> None:
         Console().print(table)
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
-            json_out.write_text(json.dumps(grid_report(pilot, seed, cells), indent=2) + "\n")
+            name = pilot if not (thrust_noise or noise_hold != 1) else f"{pilot}+noise{thrust_noise:g}x{noise_hold}"
+            json_out.write_text(json.dumps(grid_report(name, seed, cells), indent=2) + "\n")

@@ -66,6 +66,8 @@ def fly_grid(
     frame_sink: FrameSink | None = None,
     on_episode: EpisodeHook | None = None,
     image_codec: bool = False,
+    thrust_noise: float = 0.0,
+    noise_hold: int = 1,
     **options,
 ) -> list[CellResult]:
     """Fly ``episodes`` seeded episodes per (obstacles, speed) cell.
@@ -80,12 +82,18 @@ def fly_grid(
         image_codec: hand the pilot its camera through the dataset's JPEG codec (at
             ``config.dataset.jpeg_quality``), as the dataset stores it: what a pilot trained on
             the dataset saw.
+        thrust_noise, noise_hold: add Gaussian noise of this sigma to every action, redrawn every
+            ``noise_hold`` control steps (``orbitdata.fly.noise.ThrustNoise``; 0: none).
         **options: passed to the pilot's factory.
     """
     check_grid(obstacles, speeds, episodes)
     flyer: Pilot = make_pilot(pilot, config, **options) if isinstance(pilot, str) else pilot(config, **options)
     if not isinstance(flyer, Pilot):
         raise TypeError(f"the pilot factory returned {type(flyer).__name__}, not an orbitdata.fly.Pilot")
+    if thrust_noise or noise_hold != 1:
+        from orbitdata.fly.noise import ThrustNoise
+
+        flyer = ThrustNoise(flyer, thrust_noise, noise_hold)
     if render is None:
         render = flyer.needs_images or frame_sink is not None
     elif not render and (flyer.needs_images or frame_sink is not None):
