@@ -200,3 +200,23 @@ def test_padded_and_terminal_frames_add_no_loss(tiny_dataset_master, monkeypatch
     assert loss(changed) == pytest.approx(base, rel=1e-6)
     changed[real] = 1.0 - changed[real]
     assert abs(loss(changed) - base) > 1e-3
+
+
+def test_windows_that_start_before_the_first_frame(tiny_dataset_master):
+    """pad_before: per episode, a window whose first observation repeats frame 0 (as the pilot's
+    first step does), its padded frame marked, batched and single alike."""
+    from orbitdata.load import collate_windows
+
+    plain = T.policy_windows(tiny_dataset_master, "train", PRESET, None)
+    padded = T.policy_windows(tiny_dataset_master, "train", PRESET, None, pad_before=1)
+    episodes = sorted(set(plain.index.episode.tolist()))
+    assert len(padded) == len(plain) + len(episodes)
+    first = next(i for i in range(len(plain)) if int(plain[i][S.FRAME_INDEX][0]) == 0)
+    extra = next(j for j in range(len(plain), len(padded)) if padded.extra[j - len(plain)][0] == first)
+    a, b = plain[first], padded[extra]
+    assert b[S.FRAME_INDEX].tolist() == [0] + a[S.FRAME_INDEX].tolist()[:-1]
+    assert torch.equal(b[S.IMAGE][0], b[S.IMAGE][1]) and torch.equal(b[S.ACTION][1:], a[S.ACTION][:-1])
+    assert b["is_pad"][0] and not b["is_pad"][1]
+    batch = collate_windows(padded.__getitems__([first, extra]))
+    assert torch.equal(batch[S.ACTION][1], b[S.ACTION]) and torch.equal(batch[S.ACTION][0], a[S.ACTION])
+    assert len(list(padded.sampler(seed=0))) == len(padded)

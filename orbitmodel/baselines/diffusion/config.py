@@ -118,6 +118,9 @@ class PolicyTrainConfig:
         seed: data order, noise draws, augmentation and initialisation.
         val_fraction, val_seed: hold this seeded fraction of the train split's episodes (per
             level) out of training, for choices (``eval policy --split val``; 0: none).
+        pad_before: per episode, this many extra windows that start before its first frame
+            (the first observation repeated in front, as the pilot does at its first step; the
+            reference's ``n_obs_steps - 1``; 0: none).
     """
 
     window_stride: int = 1
@@ -139,10 +142,13 @@ class PolicyTrainConfig:
     seed: int = 42
     val_fraction: float = 0.0
     val_seed: int = 0
+    pad_before: int = 1
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction={self.val_fraction} must be in [0, 1)")
+        if self.pad_before < 0:
+            raise ValueError(f"pad_before={self.pad_before}: give 0 or more frames")
         if self.window_stride < 1:
             raise ValueError(f"window_stride={self.window_stride}: use 1 or more frames")
         if self.batch_size < 1:

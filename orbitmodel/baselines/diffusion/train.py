@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch.utils.data import Dataset, DistributedSampler
 
 from orbitdata import schema as S
 from orbitdata.load import IS_PAD, load_windows
+from orbitdata.load.collate import WindowBatch
 from orbitdata.load.tables import load_episode_table
 from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
@@ -99,11 +101,65 @@ class PolicyJob:
         self.module.ema_update(step, t.ema_power, t.ema_max)
 
 
-def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None):
-    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the ``episodes=`` selection."""
+def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None,
+                   pad_before: int = 0):
+    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the ``episodes=`` selection;
+    with ``pad_before`` > 0 also, per episode, windows that start that many frames before its first
+    (:class:`PadBefore`)."""
     m = preset.model
-    return load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
-                        stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS), episodes=episodes)
+    windows = load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
+                           stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS),
+                           episodes=episodes)
+    return PadBefore(windows, pad_before) if pad_before else windows
+
+
+def shift_in(window: dict, s: int, time_dim: int = 0) -> dict:
+    """A window of T frames moved s frames later in its episode's past: its first frame repeated s
+    times in front, its last s frames dropped, the repeats marked ``is_pad``."""
+    out = {}
+    for key, x in window.items():
+        first = x.narrow(time_dim, 0, 1)
+        front = torch.ones_like(first, dtype=torch.bool) if key == IS_PAD else first
+        shape = list(first.shape)
+        shape[time_dim] = s
+        out[key] = torch.cat([front.expand(shape), x.narrow(time_dim, 0, x.shape[time_dim] - s)], time_dim)
+    return out
+
+
+class PadBefore(Dataset):
+    """The policy's windows plus, per episode, ``pad`` windows that start before its first frame:
+    the first observation (and action) repeated in front, marked ``is_pad`` (so they add no loss),
+    as the reference pads (``pad_before = n_obs_steps - 1``). Without them no training window is
+    what the pilot sees at an episode's first step, where its one observation stands in for two."""
+
+    def __init__(self, windows, pad: int):
+        self.windows, self.pad = windows, int(pad)
+        episode = np.asarray(windows.index.episode)
+        firsts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]]) if len(episode) else []
+        self.extra = [(int(f), s) for f in firsts for s in range(1, self.pad + 1)]  # (window, frames in front)
+
+    def __len__(self) -> int:
+        return len(self.windows) + len(self.extra)
+
+    def __getitem__(self, i: int) -> dict:
+        if i < len(self.windows):
+            return self.windows[i]
+        base, s = self.extra[i - len(self.windows)]
+        return shift_in(self.windows[base], s)
+
+    def __getitems__(self, indices) -> WindowBatch:
+        n = len(self.windows)
+        bases = [i if i < n else self.extra[i - n][0] for i in indices]
+        stacked = self.windows.__getitems__(bases).stacked  # key -> (B, T, ...)
+        rows = [shift_in({k: v[j] for k, v in stacked.items()}, self.extra[i - n][1]) if i >= n else
+                {k: v[j] for k, v in stacked.items()} for j, i in enumerate(indices)]
+        return WindowBatch({k: torch.stack([r[k] for r in rows]) for k in stacked})
+
+    def sampler(self, shuffle: bool = True, seed: int = 0, drop_last: bool = False, rank: int | None = None,
+                world_size: int | None = None) -> DistributedSampler:
+        """Order a pure function of (seed, epoch), as ``WindowDataset.sampler``."""
+        return DistributedSampler(self, num_replicas=world_size or 1, rank=rank or 0, shuffle=shuffle, seed=seed,
+                                  drop_last=drop_last)
 
 
 # ---- runs ------------------------------------------------------------------------------------
@@ -160,7 +216,8 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
         run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
                   overwrite=req.overwrite, upgrade=upgrade_config)
     windows = policy_windows(req.dataset, "train", req.preset,
-                             training_episodes(req.dataset, req.levels, req.outcomes, held_out))
+                             training_episodes(req.dataset, req.levels, req.outcomes, held_out),
+                             pad_before=t.pad_before)
     goals = episode_goals(req.dataset, "train")
     return fit(PolicyJob(policy, req.preset, goals, rank), windows, LoopSettings.of(req.preset.train), run, device,
                resume=req.resume, label="train-policy", on_log=on_log)
