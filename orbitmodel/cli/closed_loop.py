@@ -24,6 +24,7 @@ def register(app: typer.Typer) -> None:
     app.command("figure6")(figure6)
     app.command("merge")(merge)
     app.command("table")(table)
+    app.command("flips")(flips)
 
 
 def _numbers(text: str, kind, flag: str) -> list:
@@ -219,3 +220,23 @@ def table(
 
     reports = [read_report(p) for p in results]
     typer.echo(markdown_table(reports, [str(p) for p in results] if links else None, per_setting), nl=False)
+
+
+@friendly
+def flips(
+    first: Annotated[Path, typer.Argument(help="a grid's --json table (eval closed-loop)")],
+    second: Annotated[Path, typer.Argument(help="the same grid flown again with a tiny perturbation")],
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="write the comparison here")] = None,
+) -> None:
+    """Count the episodes whose outcome differs between two flights of one grid (e.g. --threads 1
+    and 2, or two machines): a planner whose figures hold flips few."""
+    from orbitmodel.evaluate.success import outcome_flips
+
+    result = outcome_flips(json.loads(first.read_text()), json.loads(second.read_text()))
+    typer.echo(f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
+               f"{result['successes'][1]})")
+    for f in result["flipped"]:
+        typer.echo(f"  {f['obstacles']} obstacles, {f['speed']:g} m/s, episode {f['episode']}: {f['first']} -> "
+                   f"{f['second']}")
+    if json_out is not None:
+        json_out.write_text(json.dumps(result, indent=2) + "\n")

@@ -71,3 +71,24 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
         row = f"| {label} | " + " | ".join(cells) + f" | {rate_text(*report_totals(r))} | {failures_text(r)} |"
         lines.append(row + (f" [{Path(sources[i]).name}]({sources[i]}) |" if sources else ""))
     return "\n".join(lines) + "\n"
+
+
+def outcome_flips(a: dict, b: dict) -> dict:
+    """Episodes of two flights of one grid (the same pilot and seeds, e.g. on 1 and 2 torch threads,
+    or on two machines) whose outcome differs: the robustness of a figure to a tiny perturbation.
+    Episodes are matched by seed; both reports need their ``episodes``."""
+    def by_seed(report: dict, name: str) -> dict[int, dict]:
+        episodes = report.get("episodes")
+        if not episodes:
+            raise ValueError(f"{name} holds no episodes: compare the --json tables of eval closed-loop")
+        return {int(e["seed"]): e for e in episodes}
+
+    ea, eb = by_seed(a, "the first report"), by_seed(b, "the second report")
+    common = sorted(set(ea) & set(eb))
+    if not common:
+        raise ValueError("the two reports share no episode seed: fly the same grid (--seed, settings) twice")
+    flips = [{"obstacles": ea[s]["obstacles"], "speed": ea[s]["speed"], "episode": ea[s]["episode"], "seed": s,
+              "first": ea[s]["outcome"], "second": eb[s]["outcome"]}
+             for s in common if ea[s]["outcome"] != eb[s]["outcome"]]
+    success = (sum(ea[s]["outcome"] == "success" for s in common), sum(eb[s]["outcome"] == "success" for s in common))
+    return {"episodes": len(common), "flips": len(flips), "successes": list(success), "flipped": flips}

@@ -41,3 +41,23 @@ def test_the_table_gives_counts_the_interval_and_the_failures(tmp_path):
     res = CliRunner().invoke(app, ["eval", "table", str(tmp_path / "expert.json"), str(tmp_path / "planner.json")])
     assert res.exit_code == 0, res.output
     assert "(40/40)" in res.output and f"[planner.json]({tmp_path / 'planner.json'})" in res.output
+
+
+def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
+    from orbitmodel.evaluate.success import outcome_flips
+
+    def report(outcomes):
+        return {"episodes": [{"obstacles": 1, "speed": 1.0, "episode": k, "seed": 100 + k, "outcome": o}
+                             for k, o in enumerate(outcomes)]}
+
+    a, b = report(["success", "success", "collision", "timeout"]), report(["success", "collision", "collision", "success"])
+    result = outcome_flips(a, b)
+    assert (result["episodes"], result["flips"], result["successes"]) == (4, 2, [2, 2])
+    assert [(f["episode"], f["first"], f["second"]) for f in result["flipped"]] == [(1, "success", "collision"),
+                                                                                    (3, "timeout", "success")]
+    with pytest.raises(ValueError, match="share no episode seed"):
+        outcome_flips(a, {"episodes": [{**e, "seed": e["seed"] + 50} for e in a["episodes"]]})
+    (tmp_path / "a.json").write_text(json.dumps(a))
+    (tmp_path / "b.json").write_text(json.dumps(b))
+    res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
+    assert res.exit_code == 0 and "2 of 4 episodes flip" in res.output and "success -> collision" in res.output
