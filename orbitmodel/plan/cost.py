@@ -3,7 +3,8 @@
 For imagined states (K, H, 16) and their thrusts (K, H, 8), per candidate and summed over the
 steps before it reaches the goal (the episode ends there, so nothing after counts)::
 
-    collision  w_c  * ramp(clearance)^2              ramp: 1 at the hull, 0 at hull + margin
+    collision  w_c  * u_k * ramp(clearance)^2        ramp: 1 at the hull, 0 at hull + margin (+ margin_per_speed |v|)
+                                                      u_k = 1 + urgency (1 - k / H): a contact sooner costs more
     crash      w_x  * [any clearance < hull]          once per candidate
     progress   w_p  * |p - goal| / H                  metres, so arriving sooner is cheaper
     terminal   w_T  * |p_H - goal|                    where it ends up, unless it arrived
@@ -35,6 +36,10 @@ class CostConfig:
     Args:
         hull_radius: metres, the bounding sphere of the 1U hull (orbitdata's ``CubeSatConfig``).
         margin: metres of clearance beyond the hull where the collision ramp starts.
+        margin_per_speed: seconds: the ramp starts ``margin + margin_per_speed * |v|`` beyond the
+            hull, a wider berth at speed (0: a fixed margin).
+        urgency: the collision term of step k of H is weighted 1 + urgency (1 - k / H), so the
+            same clearance costs more the sooner it comes (0: every step alike).
         collision, crash, progress, terminal, effort, spin, heading, speed: the weights above.
         max_speed: m/s above which the speed term applies.
         goal_fraction: a candidate counts as arrived within this fraction of the goal radius
@@ -43,6 +48,8 @@ class CostConfig:
 
     hull_radius: float = HULL_RADIUS
     margin: float = 0.4
+    margin_per_speed: float = 0.0
+    urgency: float = 0.0
     collision: float = 20.0
     crash: float = 200.0
     progress: float = 1.0
@@ -58,14 +65,16 @@ class CostConfig:
         if self.margin <= 0 or self.hull_radius < 0:
             raise ValueError(f"margin={self.margin} must be > 0 and hull_radius={self.hull_radius} >= 0")
         if any(getattr(self, k) < 0 for k in ("collision", "crash", "progress", "terminal", "effort", "spin",
-                                                "heading", "speed")):
+                                                "heading", "speed", "margin_per_speed", "urgency")):
             raise ValueError("cost weights must be >= 0")
 
 
-def collision_ramp(clearance: torch.Tensor, config: CostConfig) -> torch.Tensor:
-    """(...,) metres centre-to-surface -> (...,) in [0, 1]: 0 beyond hull + margin, 1 at the hull."""
+def collision_ramp(clearance: torch.Tensor, config: CostConfig, speed: torch.Tensor | None = None) -> torch.Tensor:
+    """(...,) metres centre-to-surface -> (...,) in [0, 1]: 0 beyond hull + margin, 1 at the hull;
+    with ``speed`` (...,) m/s the margin grows by ``margin_per_speed`` seconds of it."""
+    margin = config.margin if speed is None else config.margin + config.margin_per_speed * speed
     gap = clearance - config.hull_radius
-    return (1 - gap / config.margin).clamp(0, 1) ** 2
+    return (1 - gap / margin).clamp(0, 1) ** 2
 
 
 def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Tensor, goal_radius: float,
@@ -81,8 +90,9 @@ def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Ten
     live = torch.cat([torch.ones_like(arrived[:, :1]), ~arrived[:, :-1]], 1).float()  # (K, H)
     clearance = obstacles.clearance(p)  # (K, H) metres
     speed = v.norm(dim=-1)  # (K, H)
+    urgency = 1 + c.urgency * (1 - torch.arange(H, dtype=states.dtype) / H)  # (H,) sooner contacts cost more
     terms = {
-        "collision": c.collision * (collision_ramp(clearance, c) * live).sum(1),
+        "collision": c.collision * (collision_ramp(clearance, c, speed) * urgency * live).sum(1),
         "crash": c.crash * ((clearance < c.hull_radius).float() * live).amax(1),
         "progress": c.progress * (dist * live).sum(1) / H,
         "terminal": c.terminal * dist[:, -1] * (~arrived[:, -1]).float(),

@@ -71,3 +71,28 @@ def test_effort_spin_heading_and_speed_terms():
     fast[..., 12] = 2.0  # spinning
     _, terms = trajectory_cost(fast, torch.ones(1, 5, 8), torch.ones(3), 0.5, empty, c)
     assert terms["speed"][0] > 0 and terms["spin"][0] > 0 and torch.isclose(terms["effort"][0], torch.tensor(8 * c.effort))
+
+
+def test_a_speed_scaled_margin_and_urgency_make_fast_and_soon_contacts_costlier():
+    from orbitmodel.kinematics import HULL_RADIUS
+
+    cloud = PointCloud(np.array([[0.0, 1.0, 0.0]]), np.array([0.05]), reach=2.0)
+    near = torch.tensor([[[0.0, 1.0 - 0.05 - HULL_RADIUS - 0.5, 0.0]]])  # 0.5 m of clearance, beyond a 0.4 m margin
+    goal = torch.tensor([50.0, 0.0, 0.0])
+
+    def collision(config, velocity, positions=near):
+        states = states_along(positions, velocity)
+        _, terms = trajectory_cost(states, torch.zeros(*states.shape[:2], 8), goal, 0.5, cloud, config)
+        return float(terms["collision"][0])
+
+    fixed = CostConfig()
+    assert collision(fixed, (0.5, 0, 0)) == collision(fixed, (2.0, 0, 0)) == 0.0  # outside the fixed margin
+    wide = CostConfig(margin_per_speed=0.2)  # 0.4 + 0.2 |v| m
+    assert 0.0 < collision(wide, (1.0, 0, 0)) < collision(wide, (2.0, 0, 0))  # monotone in speed
+    far = torch.tensor([[0.0, -5.0, 0.0]]) + torch.zeros(1, 4, 3)
+    soon, late = far.clone(), far.clone()
+    soon[0, 0], late[0, 3] = near[0, 0], near[0, 0]  # the same near pass at step 0 or at step 3 of 4
+    eager = CostConfig(margin=0.6, urgency=1.0)
+    assert collision(eager, (1, 0, 0), soon) > collision(eager, (1, 0, 0), late) > 0  # monotone in time to contact
+    flat = CostConfig(margin=0.6)
+    assert collision(flat, (1, 0, 0), soon) == collision(flat, (1, 0, 0), late)
