@@ -59,21 +59,39 @@ class RunError(ValueError):
     """A run folder that cannot be used as asked (the CLI turns it into one line, exit 2)."""
 
 
+def is_hub_run(run: str | Path) -> bool:
+    """True when ``run`` names a Hub model repo (``owner/name[@revision]``), not a local path: no
+    such file here, and not even its first folder (``runs/x`` with a ``runs/`` here is local)."""
+    text = str(run)
+    if isinstance(run, Path) and not REPO_ID.match(text):
+        return False
+    match = REPO_ID.match(text)
+    if match is None or text.startswith((".", "/", "~")) or Path(text).exists():
+        return False
+    from orbitdata.load.source import is_repo_id
+
+    return is_repo_id(match["repo"]) and not Path(match["repo"].split("/")[0]).exists()
+
+
 def resolve_run(run: str | Path, revision: str | None = None) -> Path:
-    """The local folder of a run: ``run`` itself when it exists here, else the Hugging Face Hub model
-    repo it names (``owner/name``, ``owner/name@revision`` or ``revision=``), downloaded into the
-    ``huggingface_hub`` cache, or found there alone in offline mode (``HF_HUB_OFFLINE=1``).
-    ``orbitmodel push`` makes such repos. Anything else comes back as the path it is, for the
-    caller's own "not a run" error."""
-    path = Path(run)
-    match = REPO_ID.match(str(run))
-    if path.exists() or match is None:
-        return path
+    """The local folder of a run: ``run`` itself when it is a path here, else the Hugging Face Hub
+    model repo it names (``owner/name``, ``owner/name@revision`` or ``revision=``; see
+    :func:`is_hub_run`), downloaded into the ``huggingface_hub`` cache, or found there alone in
+    offline mode (``HF_HUB_OFFLINE=1``). ``orbitmodel push`` makes such repos. A path comes back as
+    it is, for the caller's own "not a run" error."""
+    if not is_hub_run(run):
+        if revision is not None:
+            raise RunError(f"revision={revision!r} is for a Hub repo id; {run} is a local path")
+        return Path(run)
     from huggingface_hub import constants, snapshot_download
     from huggingface_hub.errors import (HfHubHTTPError, LocalEntryNotFoundError, RepositoryNotFoundError,
                                         RevisionNotFoundError)
 
-    repo, rev = match["repo"], match["revision"] or revision
+    match = REPO_ID.match(str(run))
+    repo = match["repo"]
+    if match["revision"] and revision and match["revision"] != revision:
+        raise RunError(f"{run} names revision {match['revision']!r} but revision={revision!r} was given too; give one")
+    rev = match["revision"] or revision
     where = f"{repo}" + (f"@{rev}" if rev else "")
     try:
         return Path(snapshot_download(repo, revision=rev, repo_type="model"))
@@ -81,11 +99,11 @@ def resolve_run(run: str | Path, revision: str | None = None) -> Path:
         raise RunError(f"{where}: the model repo has no revision {rev!r}; give a branch, tag or commit it has") \
             from None
     except RepositoryNotFoundError:
-        raise RunError(f"{run} is neither a run folder here nor a model repo on {constants.ENDPOINT} (not found, "
-                       "or private without a token that may read it)") from None
+        raise RunError(f"{run} is neither a run folder here (no such path) nor a model repo on "
+                       f"{constants.ENDPOINT} (not found, or private without a token that may read it)") from None
     except LocalEntryNotFoundError:
-        raise RunError(f"{where} is not in the local Hugging Face cache and the Hub cannot be reached (offline "
-                       "mode, or no network); download it once online, or give a local run folder") from None
+        raise RunError(f"{run} is no run folder here (no such path), and as a Hub repo id it is not in the local "
+                       "Hugging Face cache while the Hub cannot be reached (offline mode, or no network)") from None
     except HfHubHTTPError as err:
         status = err.response.status_code if err.response is not None else "?"
         raise RunError(f"the Hub refused {where} (HTTP {status}); check the repo id and your token") from None
@@ -195,7 +213,8 @@ class RunDir:
         """Record one training segment (a run and each resume of it) in training.json."""
         path = self.path / TRAINING
         done = json.loads(path.read_text())["segments"] if path.is_file() else []
-        write_json_atomic(path, {"segments": [s for s in done if s["to_step"] <= segment["from_step"]] + [segment]})
+        kept = [s for s in done if s["to_step"] <= segment["from_step"] and s["from_step"] != segment["from_step"]]
+        write_json_atomic(path, {"segments": kept + [segment]})
 
     def save_final(self, weights: dict[str, torch.Tensor], step: int) -> None:
         tmp = self.path / f".{WEIGHTS}.tmp"
@@ -276,6 +295,15 @@ def load_run(path: str | Path, revision: str | None = None) -> Run:
     newest checkpoint's) weights; RunError with the fix."""
     local = resolve_run(path, revision)
     return Run(local, read_run_config(local), load_weights(local))
+
+
+def local_run_folder(run: str | Path, what: str) -> Path:
+    """``run`` as a local folder that ``what`` may write into; RunError for a Hub repo id (its
+    downloaded copy in the cache is not ours to write to)."""
+    if is_hub_run(run):
+        raise RunError(f"{run} is a Hub repo id and {what} writes into the run folder: download it first "
+                       f"(`hf download {str(run).split('@')[0]} --local-dir DIR`) and give DIR")
+    return Path(run)
 
 
 def check_image_size(meta: DatasetMeta, size: int, user: str, resize: bool = False) -> None:

@@ -130,5 +130,5 @@ def register(app: typer.Typer) -> None:
         Console().print(table)
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
-            name = pilot if not (thrust_noise or noise_hold != 1) else f"{pilot}+noise{thrust_noise:g}x{noise_hold}"
+            name = f"{pilot}+noise{thrust_noise:g}x{noise_hold}" if thrust_noise else pilot  # ThrustNoise's name
             json_out.write_text(json.dumps(grid_report(name, seed, cells), indent=2) + "\n")

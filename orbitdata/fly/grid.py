@@ -90,7 +90,7 @@ def fly_grid(
     flyer: Pilot = make_pilot(pilot, config, **options) if isinstance(pilot, str) else pilot(config, **options)
     if not isinstance(flyer, Pilot):
         raise TypeError(f"the pilot factory returned {type(flyer).__name__}, not an orbitdata.fly.Pilot")
-    if thrust_noise or noise_hold != 1:
+    if thrust_noise:
         from orbitdata.fly.noise import ThrustNoise
 
         flyer = ThrustNoise(flyer, thrust_noise, noise_hold)

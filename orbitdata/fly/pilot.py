@@ -5,7 +5,8 @@ episode seed) and then maps each observation to 8 thrusts in [0, 1]::
 
     class MyPilot(Pilot):
         name = "mine"
-        needs_images = True                  # it reads obs["image"] / obs["depth"] / obs["depth_low"]
+        needs_images = True                  # it reads obs["image"] (and with sees_depth = True, the
+                                             # rendered obs["depth"] / obs["depth_low"])
 
         def reset(self, task: Task) -> None:
             self.goal = np.asarray(task.goal)  # metres, world frame relative to the start

@@ -39,8 +39,9 @@ def _numbers(text: str, kind, flag: str) -> list:
 
 @friendly
 def closed_loop(
-    run: Annotated[Optional[Path], typer.Argument(help="Stage I run folder (with its probe), or a policy run "
-                                                        "(`orbitmodel train-policy`); optional for the rigid-body oracles")
+    run: Annotated[Optional[Path], typer.Argument(help="Stage I run folder (with its probe) or a policy run "
+                                                        "(`orbitmodel train-policy`), or the Hub repo id of either "
+                                                        "(owner/name[@revision]); optional for the rigid-body oracles")
                    ] = None,
     pilot: Annotated[PilotName, typer.Option(help="planner, or an oracle (true dynamics and/or obstacles)")] = "planner",
     planner: Annotated[PlannerPresetName, typer.Option(

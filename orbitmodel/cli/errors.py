@@ -28,8 +28,10 @@ def friendly(func):
         except KeyboardInterrupt:
             typer.secho("interrupted; run the same command with --resume to continue", err=True)
             sys.exit(130)
-        except ImportError as exc:  # MissingExtra, or an optional package's own ImportError (ffmpeg, ...)
-            fail(str(exc).splitlines()[0] if str(exc) else f"a package is missing: {exc.name}", code=1)
+        except ImportError as exc:  # MissingExtra, or an optional package's ImportError with its install hint
+            if "pip install" not in str(exc):
+                raise  # a real import bug keeps its traceback
+            fail(str(exc).splitlines()[0], code=1)
         except BAD_INPUT as exc:
             fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
         except OSError as exc:

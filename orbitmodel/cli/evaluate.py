@@ -28,10 +28,14 @@ def rollout(
     """Latent rollout error vs horizon with persistence and shuffled-action baselines (Fig. 3),
     depth predictions vs ground truth (Fig. 4), and collapse diagnostics."""
     from orbitmodel.evaluate.rollout import RolloutEvalConfig, evaluate_rollout, summary_lines, write_rollout_report
+    from orbitmodel.runs import local_run_folder
+
+    if out is None:
+        local_run_folder(run, "eval rollout without --out")  # before minutes of evaluation
 
     result = evaluate_rollout(run, dataset, RolloutEvalConfig(horizon=horizon, windows=windows, seed=seed,
                                                               check_h=min(12, horizon), split=split))
-    paths = write_rollout_report(result, out or Path(run) / "eval")
+    paths = write_rollout_report(result, out or local_run_folder(run, "eval rollout without --out") / "eval")
     for line in summary_lines(result):
         typer.echo(line)
     typer.echo("wrote " + ", ".join(str(p) for p in paths))

@@ -14,7 +14,7 @@ from orbitmodel.cli.errors import friendly
 from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
 PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
-Split = Enum("Split", {"test": "test", "val": "val"}, type=str)
+Split = Enum("Split", {"test": "test", "val": "val", "train": "train"}, type=str)
 
 
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
@@ -29,6 +29,11 @@ def train_policy(
     preset: Annotated[PolicyPresetName, typer.Option(help="policy size and recipe: cpu or tiny")] = "cpu",
     epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    pad_before: Annotated[Optional[int], typer.Option(
+        min=0, help="windows per episode that start before its first frame [default: the preset's, 1]")] = None,
+    mask_padding: Annotated[Optional[bool], typer.Option(
+        help="no loss on the terminal frame and the padding past an episode's end [default: the preset's, on; a run "
+             "made before this option resumes with --pad-before 0 --no-mask-padding]")] = None,
     val_fraction: Annotated[Optional[float], typer.Option(
         min=0.0, max=0.99, help="hold this seeded fraction of the train episodes out, for choices (eval policy "
                                 "--split val) [default: the preset's, 0]")] = None,
@@ -52,7 +57,8 @@ def train_policy(
     from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, PolicyRequest, train_policy as train
 
     p = get_policy_preset(preset.value).with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr,
-                                                   val_fraction=val_fraction,
+                                                   val_fraction=val_fraction, pad_before=pad_before,
+                                                   mask_padding=mask_padding,
                                                    num_workers=workers, seed=seed)
     req = PolicyRequest(dataset=dataset, preset=p, out=out,
                         levels=tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS,
@@ -65,8 +71,8 @@ def train_policy(
 def eval_policy(
     run: Annotated[Path, typer.Argument(help="policy run folder (from `orbitmodel train-policy`)")],
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset folder with held-out windows")],
-    split: Annotated[Split, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
-    ] = "test",
+    split: Annotated[Split, typer.Option(help="test (to report), val: the run's validation episodes (to choose), or "
+                                              "train (how well it fits)")] = "test",
     level: Annotated[Optional[list[Level]], typer.Option("--level", "--levels",
                      help="levels to measure on (repeatable; default: expert)")] = None,
     stride: Annotated[int, typer.Option(min=1, help="frames between window starts")] = 4,

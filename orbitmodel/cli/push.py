@@ -19,8 +19,9 @@ def push(
     run: Annotated[Path, typer.Argument(help="a run folder: `orbitmodel train` (with its probe) or `train-policy`")],
     repo_id: Annotated[str, typer.Argument(help="the model repo to create or update, e.g. user/orbit-wm-cpu-step5")],
     dry_run: Annotated[bool, typer.Option(help="list the files and print the card; no token, no upload")] = False,
-    grid: Annotated[Optional[Path], typer.Option(help="a folder of grid results (eval closed-loop / orbitdata fly "
-                                                      "--json) to publish under eval/grid/ and on the card")] = None,
+    grid: Annotated[Optional[list[Path]], typer.Option(help="a folder of grid results (eval closed-loop / orbitdata "
+                                                            "fly --json), published under eval/grid/FOLDER/ and on the "
+                                                            "card (repeatable)")] = None,
     dataset: Annotated[Optional[str], typer.Option(help="the Hub id of the training dataset, for the card (when the "
                                                         "run was trained on a local folder)")] = None,
     private: Annotated[bool, typer.Option(help="create the repo private")] = False,
@@ -33,7 +34,12 @@ def push(
     from orbitdata.publish.hub import HubError
     from orbitmodel.publish.push import RunPushOptions, plan_push, push_run
 
-    options = RunPushOptions(private=private, revision=branch, message=message, grid=grid, dataset_repo=dataset)
+    if dataset is not None:
+        from orbitdata.load.source import check_repo_id
+
+        check_repo_id(dataset)
+    options = RunPushOptions(private=private, revision=branch, message=message, grids=tuple(grid or ()),
+                             dataset_repo=dataset)
     if dry_run:
         plan = plan_push(run, repo_id, options)
         typer.echo(f"dry run: {len(plan.files) + 1} file(s), {plan.bytes / 1e6:.2f} MB would go to {repo_id} "

@@ -219,6 +219,7 @@ def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: 
         "planner_preset": req.planner_preset if planning else None,
         "planner": dataclasses.asdict(req.planner) if planning else None,
         "image_codec": req.image_codec,
+        "max_steps": req.max_steps or req.config.sim.max_steps,  # an episode's frames at most (300: 12 s)
         "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
         "time_share": {k: v / total for k, v in sorted(result.timings.items())},
         "episodes": result.episodes,

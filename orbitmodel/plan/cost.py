@@ -90,7 +90,7 @@ def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Ten
     live = torch.cat([torch.ones_like(arrived[:, :1]), ~arrived[:, :-1]], 1).float()  # (K, H)
     clearance = obstacles.clearance(p)  # (K, H) metres
     speed = v.norm(dim=-1)  # (K, H)
-    urgency = 1 + c.urgency * (1 - torch.arange(H, dtype=states.dtype) / H)  # (H,) sooner contacts cost more
+    urgency = 1 + c.urgency * (1 - torch.arange(H, dtype=states.dtype, device=states.device) / H)  # (H,) sooner: more
     terms = {
         "collision": c.collision * (collision_ramp(clearance, c, speed) * urgency * live).sum(1),
         "crash": c.crash * ((clearance < c.hull_radius).float() * live).amax(1),

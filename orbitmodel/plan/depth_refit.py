@@ -29,8 +29,8 @@ from orbitmodel.data import EVAL_SPLITS, read_dataset_meta, split_selection, tra
 from orbitmodel.model.world_model import WorldModel, images_to_float
 from orbitmodel.plan.config import MAX_RANGE
 from orbitmodel.plan.depth_bands import depth_by_band
-from orbitmodel.runs import CONFIG, DEPTH_REFIT, WEIGHTS, RunDir, RunError, check_image_size, load_weights, run_config, \
-    write_json_atomic
+from orbitmodel.runs import (CONFIG, DEPTH_REFIT, WEIGHTS, RunDir, RunError, check_image_size, load_weights,
+                             local_run_folder, run_config, write_json_atomic)
 
 FOLDER = "depth"
 EVAL = "eval.json"
@@ -103,7 +103,7 @@ def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
 def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(),
                      overwrite: bool = False) -> dict:
     """Refit ``run``'s depth head (see the module docstring); returns the before/after evaluation."""
-    out = depth_folder(run)
+    out = depth_folder(local_run_folder(run, "a depth refit"))
     if (out / WEIGHTS).exists() and not overwrite:
         raise RunError(f"{out} already holds a refitted depth head; pass --overwrite to fit it again")
     model = WorldModel.from_pretrained(run)

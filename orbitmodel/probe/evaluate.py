@@ -26,7 +26,7 @@ from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, interpolat
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.probe.train import load_stage1
-from orbitmodel.runs import CONFIG, RunError
+from orbitmodel.runs import CONFIG, RunError, local_run_folder
 from orbitmodel.train.loop import resolve_device
 
 QUANTITIES = {"position": "m", "velocity": "m/s", "rotation": "rad", "angular_velocity": "rad/s", "fuel": "ratio"}
@@ -159,11 +159,13 @@ def evaluate_probe(req: EvalRequest) -> dict:
     """Table I (JSON + markdown) and Figure 5 (PNGs) of a run's probe; returns the result dict."""
     if req.windows < 1 or not req.horizons or min(req.horizons) < 1:
         raise ValueError(f"windows={req.windows}, horizons={req.horizons}: give at least one window and horizons >= 1")
+    if req.out is None:
+        local_run_folder(req.run, "eval probe without --out")  # before the evaluation, not after
     world_model = load_stage1(req.run, read_dataset_meta(req.dataset))
-    probe = PhysicsProbe.from_pretrained(req.run, world_model=world_model.fingerprint)
-    probe_config = json.loads((probe_folder(req.run, "latent") / CONFIG).read_text())
+    probe = PhysicsProbe.from_pretrained(world_model.run_dir, world_model=world_model.fingerprint)
+    probe_config = json.loads((probe_folder(world_model.run_dir, "latent") / CONFIG).read_text())
     try:
-        state_mlp = StateDynamics.from_pretrained(req.run)
+        state_mlp = StateDynamics.from_pretrained(world_model.run_dir)
     except RunError:
         state_mlp = None  # the table says how to add it
     device = resolve_device(req.device)
@@ -206,7 +208,7 @@ def evaluate_probe(req: EvalRequest) -> dict:
                               **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
               "episodes": [int(windows.index.episode[c]) for c in chosen],
               "first_frames": first_frames, "table": table}
-    out = Path(req.out) if req.out is not None else Path(req.run) / "eval"
+    out = Path(req.out) if req.out is not None else local_run_folder(req.run, "eval probe without --out") / "eval"
     out.mkdir(parents=True, exist_ok=True)
     (out / TABLE_JSON).write_text(json.dumps(result, indent=2) + "\n")
     (out / TABLE_MD).write_text(markdown(result))

@@ -36,7 +36,8 @@ from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cac
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import increments_of
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
-from orbitmodel.runs import PROBE, RunDir, RunError, check_image_size, read_run_config, run_config
+from orbitmodel.runs import (PROBE, RunDir, RunError, check_image_size, local_run_folder, read_run_config, resolve_run,
+                             run_config)
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device
 
 COLUMNS = {"latent": (S.IMAGE, S.STATE, S.ACTION), "state": (S.STATE, S.ACTION)}
@@ -123,6 +124,7 @@ def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
     """A Stage I run's world model, frozen, in eval mode, on CPU (``WorldModel.from_pretrained``:
     ``.run`` its config, ``.fingerprint`` its weights'); RunError with the fix when the run is
     missing or untrained, or when the dataset ``meta`` does not give the images it takes."""
+    run = resolve_run(run)  # a folder, or a Hub repo id downloaded once
     if meta is not None:  # before loading weights that may not fit this dataset's images
         config = read_run_config(run)
         check_image_size(meta, config.preset.model.image_size,
@@ -178,6 +180,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     """Train (or resume) the probe of a Stage I run; returns the loop's summary."""
     if req.kind not in KINDS:
         raise ValueError(f"probe kind {req.kind!r}: choose one of {', '.join(KINDS)}")
+    local_run_folder(req.run, "training a probe")
     meta = read_dataset_meta(req.dataset)
     world_model = load_stage1(req.run, meta)
     stage1, wm_print = world_model.run, world_model.fingerprint

@@ -10,10 +10,13 @@ import json
 from collections import defaultdict
 from pathlib import Path
 
+from orbitdata.schema import DT
+from orbitdata.sim.config import SimConfig
 from orbitmodel.publish.files import GRID, RunFile, read_json
 from orbitmodel.runs import POLICY, REPO_ID, TRAINING, RunDir
 
 TEMPLATE = Path(__file__).with_name("model_card.md")
+DEFAULT_MAX_STEPS = SimConfig().max_steps  # a grid result that does not record its episode length flew this
 TAGS = ["robotics", "world-model", "space", "cubesat", "mujoco", "orbitdata", "orbitmodel"]
 
 
@@ -67,16 +70,17 @@ def _grids(files: list[RunFile]) -> str:
     for f in files:
         if f.rel.startswith(GRID + "/") and f.rel.endswith(".json"):
             report = read_report(f.path)
-            key = (report.get("seed"), tuple((s["obstacles"], s["speed"], s["episodes"]) for s in report["settings"]))
+            key = (report.get("seed"), report.get("max_steps", DEFAULT_MAX_STEPS),
+                   tuple((s["obstacles"], s["speed"], s["episodes"]) for s in report["settings"]))
             groups[key].append((f.rel, report))
     if not groups:
         return ("No closed-loop results: fly the grid (`orbitmodel eval closed-loop RUN ... --json DIR/NAME.json`) "
                 "and push with `--grid DIR`.\n")
     out = []
-    for (seed, settings), rows in sorted(groups.items(), key=lambda kv: str(kv[0])):
+    for (seed, frames, settings), rows in sorted(groups.items(), key=lambda kv: str(kv[0])):
         per = {e for *_, e in settings}
         out.append(f"Grid seed {seed}, {'/'.join(map(str, sorted(per)))} episodes per setting; success means "
-                   "entering the 0.5 m goal sphere within 12 s:\n")
+                   f"entering the 0.5 m goal sphere within {frames * DT:g} s ({frames} frames):\n")
         out.append(markdown_table([r for _, r in rows], [rel for rel, _ in rows]))
     return "\n".join(out)
 

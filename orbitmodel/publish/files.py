@@ -10,6 +10,7 @@ resuming, not for using.
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,19 +46,33 @@ def check_complete(run: Path) -> str:
             "has no weights"
         raise RunError(f"{run} {state}; finish it (`{MAKES[stage]} --resume`) before pushing")
     if stage == WORLD_MODEL:
+        from orbitmodel.model.world_model import WorldModel
+        from orbitmodel.plan.depth_refit import load_refit_head
         from orbitmodel.probe.model import load_probe
-        from orbitmodel.runs import fingerprint, load_weights
 
+        model = WorldModel.from_pretrained(run)
         try:
-            load_probe(run, "latent", fingerprint(load_weights(run)))
+            load_probe(run, "latent", model.fingerprint)
+            if (run / "depth" / WEIGHTS).is_file():  # a refit the planner would refuse must not go up either
+                load_refit_head(run, model)
         except RunError as err:
             raise RunError(f"incomplete run, not pushed: {err}") from None
     return stage
 
 
-def run_files(run: Path, grid: Path | None = None) -> list[RunFile]:
-    """Every file a push of ``run`` uploads (the card aside), in upload order; ``grid``: a folder
-    of grid results to publish under eval/grid/ as well."""
+def is_grid_result(path: Path) -> bool:
+    """A ``--json`` table of eval closed-loop / orbitdata fly (pilot and settings)."""
+    try:
+        report = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return False
+    return isinstance(report, dict) and "pilot" in report and isinstance(report.get("settings"), list)
+
+
+def run_files(run: Path, grids: tuple[Path, ...] = ()) -> list[RunFile]:
+    """Every file a push of ``run`` uploads (the card aside), in upload order; ``grids``: folders
+    of grid results (their own JSON tables, not their sub-folders') to publish under
+    eval/grid/FOLDER/ as well."""
     run = Path(run)
     found: dict[str, Path] = {}
     for name in (CONFIG, WEIGHTS, METRICS, TRAINING):
@@ -71,11 +86,13 @@ def run_files(run: Path, grid: Path | None = None) -> list[RunFile]:
         for path in sorted((run / EVAL).rglob("*")):
             if path.is_file() and path.suffix in EVAL_SUFFIXES and not path.name.endswith(".episodes.jsonl"):
                 found[path.relative_to(run).as_posix()] = path
-    if grid is not None:
-        if not Path(grid).is_dir():
-            raise RunError(f"--grid {grid}: not a folder of grid results (eval closed-loop / orbitdata fly --json)")
-        for path in sorted(Path(grid).rglob("*.json")):
-            found[f"{GRID}/{path.relative_to(grid).as_posix()}"] = path
+    for grid in map(Path, grids):
+        results = sorted(p for p in grid.glob("*.json") if is_grid_result(p)) if grid.is_dir() else []
+        if not results:
+            raise RunError(f"--grid {grid}: no grid results there (the --json tables of eval closed-loop / orbitdata "
+                           "fly); give the folder that holds them")
+        for path in results:
+            found[f"{GRID}/{grid.resolve().name}/{path.name}"] = path
     weights_last = sorted(found, key=lambda rel: (rel.endswith(WEIGHTS), rel))  # configs and evals first
     return [RunFile(rel, found[rel], found[rel].stat().st_size) for rel in weights_last]
 
@@ -84,3 +101,27 @@ def read_json(files: list[RunFile], rel: str) -> dict | None:
     """The JSON file published at ``rel``, if the push holds it."""
     match = next((f for f in files if f.rel == rel), None)
     return None if match is None else json.loads(match.path.read_text())
+
+
+ABSOLUTE = re.compile(r"(?<![\w:/.])/(?:[\w.+-]+/)+([\w.+-]+)")  # a POSIX absolute path in text: keep its last part
+
+
+def scrub_paths(value):
+    """``value`` (JSON data or text) with every absolute local path cut to its last part, so that a
+    push publishes no home folder or machine layout (``/home/me/runs/wm`` -> ``wm``)."""
+    if isinstance(value, dict):
+        return {k: scrub_paths(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [scrub_paths(v) for v in value]
+    if isinstance(value, str):
+        return ABSOLUTE.sub(lambda m: m.group(1), value)
+    return value
+
+
+def published_bytes(f: RunFile) -> bytes:
+    """What goes up for ``f``: text files (JSON, markdown) with local paths scrubbed, the rest as is."""
+    if f.path.suffix == ".json":
+        return (json.dumps(scrub_paths(json.loads(f.path.read_text())), indent=2, sort_keys=True) + "\n").encode()
+    if f.path.suffix in (".md", ".jsonl"):
+        return scrub_paths(f.path.read_text()).encode()
+    return f.path.read_bytes()

@@ -5,7 +5,8 @@ line saying what is missing (``files.check_complete``); ``--dry-run`` lists the 
 prints the card without a token or a network; the token comes from the usual places
 (``HF_TOKEN``, then ``hf auth login``'s file) and is never printed. One commit carries the run's
 files and the card (``README.md``); pushing again uploads only what changed (LFS objects the Hub
-already holds are not sent again).
+already holds are not sent again). Text files go up with local absolute paths cut to their last
+part (``files.scrub_paths``): a push publishes no home folder.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ from pathlib import Path
 from typing import Callable
 
 from orbitmodel.publish.card import model_card
-from orbitmodel.publish.files import RunFile, check_complete, run_files
+from orbitmodel.publish.files import RunFile, check_complete, published_bytes, run_files, scrub_paths
 
 CARD = "README.md"
 
@@ -28,8 +29,8 @@ class RunPushOptions:
         private: create the repo private (an existing repo keeps its visibility).
         revision: branch to push to (created from main if missing); None = main.
         message: the commit message.
-        grid: a folder of grid results (``eval closed-loop`` / ``orbitdata fly --json``) to
-            publish under eval/grid/ and show on the card.
+        grids: folders of grid results (``eval closed-loop`` / ``orbitdata fly --json``) to
+            publish under eval/grid/FOLDER/ and show on the card.
         dataset_repo: the Hub id of the dataset the run was trained on, for the card (when the
             run's config names a local folder).
     """
@@ -37,7 +38,7 @@ class RunPushOptions:
     private: bool = False
     revision: str | None = None
     message: str = "Upload orbitmodel run"
-    grid: Path | None = None
+    grids: tuple[Path, ...] = ()
     dataset_repo: str | None = None
 
 
@@ -68,9 +69,9 @@ def plan_push(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOp
     """Check ``run`` and gather what a push would upload, card included: no token, no network."""
     run = Path(run)
     stage = check_complete(run)
-    files = run_files(run, options.grid)
+    files = run_files(run, options.grids)
     card = model_card(run, repo_id, stage, files, options.dataset_repo)
-    return PushPlan(run, repo_id, stage, files, str(card.content))
+    return PushPlan(run, repo_id, stage, files, scrub_paths(str(card.content)))
 
 
 def push_run(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOptions(),
@@ -95,7 +96,7 @@ def push_run(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOpt
         repo_id = getattr(url, "repo_id", None) or repo_id
         if revision != "main":
             api.create_branch(repo_id, branch=revision, repo_type="model", exist_ok=True)
-        ops = [CommitOperationAdd(path_in_repo=f.rel, path_or_fileobj=str(f.path)) for f in plan.files]
+        ops = [CommitOperationAdd(path_in_repo=f.rel, path_or_fileobj=published_bytes(f)) for f in plan.files]
         ops.append(CommitOperationAdd(path_in_repo=CARD, path_or_fileobj=plan.card.encode()))
         log(f"commit: {len(ops)} file(s), {plan.bytes / 1e6:.1f} MB")
         info = api.create_commit(repo_id, operations=ops, commit_message=options.message, revision=revision,

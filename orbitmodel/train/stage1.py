@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
 
 from orbitdata import schema as S
-from orbitmodel.config import Preset
+from orbitmodel.config import PRESETS, Preset
 from orbitmodel.data import (DatasetMeta, ValidationSplit, load_model_windows, read_dataset_meta, training_episodes,
                              validation_split)
 from orbitmodel.model.world_model import WorldModel
@@ -69,7 +69,10 @@ def upgrade_config(old: dict) -> dict:
     if "preset" not in old:
         return old
     try:
-        return {**old, "preset": Preset.from_dict(old["preset"]).to_dict(),
+        preset = Preset.from_dict(old["preset"])
+        if preset.name in PRESETS:  # a built-in's description is text, not a setting: today's wording
+            preset = replace(preset, description=PRESETS[preset.name]().description)
+        return {**old, "preset": preset.to_dict(),
                 "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
     except (KeyError, TypeError, ValueError):
         return old  # not a preset this version reads: the comparison says what differs

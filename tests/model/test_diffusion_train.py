@@ -220,3 +220,23 @@ def test_windows_that_start_before_the_first_frame(tiny_dataset_master):
     batch = collate_windows(padded.__getitems__([first, extra]))
     assert torch.equal(batch[S.ACTION][1], b[S.ACTION]) and torch.equal(batch[S.ACTION][0], a[S.ACTION])
     assert len(list(padded.sampler(seed=0))) == len(padded)
+
+
+def test_a_policy_run_from_before_padding_and_masking_resumes_with_its_own_recipe(tiny_dataset_master, tmp_path):
+    """Its config.json lacks pad_before, mask_padding and the validation split: --resume takes it
+    for what it was (no padding, no masking), and refuses to continue it with another recipe."""
+    out = tmp_path / "old"
+    args = ["train-policy", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "2", "--device", "cpu",
+            "--out", str(out)]
+    assert runner.invoke(app, [*args, "--pad-before", "0", "--no-mask-padding"]).exit_code == 0
+    config = json.loads((out / "config.json").read_text())
+    for key in ("pad_before", "mask_padding", "val_fraction", "val_seed"):
+        del config["preset"]["train"][key]
+    del config["validation"]
+    config["preset"]["description"] = "a few thousand parameters, for tests"  # the earlier wording
+    (out / "config.json").write_text(json.dumps(config))
+    (out / "model.safetensors").unlink()
+    assert "another config" in one_line_error([*args, "--resume"])  # today's defaults are another recipe
+    res = runner.invoke(app, [*args, "--resume", "--pad-before", "0", "--no-mask-padding"])
+    assert res.exit_code == 0, res.output
+    assert (out / "model.safetensors").is_file()

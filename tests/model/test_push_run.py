@@ -45,17 +45,22 @@ def state_dicts_equal(a: torch.nn.Module, b: torch.nn.Module) -> bool:
     return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
 
 
-def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hub_client, monkeypatch):
+def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hub_client, monkeypatch,
+                                                                 tiny_dataset_master, tmp_path):
     from huggingface_hub import constants
 
     from orbitmodel import PhysicsProbe, WorldModel
     from orbitmodel.plan.factory import make_planner
     from orbitmodel.runs import RunError
 
+    monkeypatch.chdir(tmp_path)
     res = runner.invoke(app, ["push", str(evaluated_run), REPO])
     assert res.exit_code == 0, res.output
     assert TOKEN not in res.output and "pushed" in res.output
+    assert not any(TOKEN.encode() in body for body in hub_client.state.bodies)  # the token only in a header
     files = hub_client.files(REPO, kind="models")
+    leaks = [p for p, data in files.items() if p.endswith((".json", ".md")) and str(evaluated_run.parent).encode() in data]
+    assert not leaks, leaks  # no local absolute path is published
     assert {"config.json", "model.safetensors", "probe/config.json", "probe/model.safetensors", "training.json",
             "eval/probe_table.json", "eval/rollout.json", "eval/grid/planner.json", "README.md"} <= set(files)
     assert not [p for p in files if p.startswith("checkpoints/") or "latents" in p]  # nothing only resuming needs
@@ -72,6 +77,10 @@ def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hu
     res = runner.invoke(app, ["eval", "closed-loop", REPO, *GRID])  # flown from the repo id
     assert res.exit_code == 0, res.output
     assert "planner pilot, 1 episodes per setting" in res.output
+    evals = ["eval", "rollout", REPO, str(tiny_dataset_master), "--windows", "2", "--horizon", "2"]
+    res = runner.invoke(app, evals)  # it would write into the repo's cached copy
+    assert res.exit_code == 2 and "--local-dir" in res.output and not (tmp_path / "tester").exists()
+    assert runner.invoke(app, [*evals, "--out", str(tmp_path / "eval")]).exit_code == 0
 
     monkeypatch.setattr(constants, "HF_HUB_OFFLINE", True)  # from the cache alone
     assert state_dicts_equal(WorldModel.from_pretrained(REPO), local)
@@ -103,6 +112,8 @@ def test_the_cards_figures_are_the_eval_files(evaluated_run, hub_client):
     grid = json.loads((evaluated_run / "eval" / "grid" / "planner.json").read_text())
     k, n = grid["settings"][0]["success"], grid["settings"][0]["episodes"]
     assert re.search(rf"\| planner \| {k}/{n} \| [0-9.]+ % \[[0-9.]+, [0-9.]+\] \({k}/{n}\) \|", card.text)
+    assert "within 0.16 s (4 frames)" in card.text  # the episode length the grid was flown with
+    assert str(evaluated_run) not in card.text
     segment = json.loads((evaluated_run / "training.json").read_text())["segments"][0]
     assert segment["hardware"] in card.text and "tiny" in card.text and f"--seed {0}" in card.text
 
@@ -134,6 +145,18 @@ def test_dry_run_needs_no_token_and_a_missing_token_is_one_line(evaluated_run, h
     assert not hub_client.state.requests  # no network
     res = runner.invoke(app, ["push", str(evaluated_run), REPO])
     assert res.exit_code == 1 and "no Hugging Face token found" in res.output and "Traceback" not in res.output
+
+
+def test_what_is_a_hub_repo_id_and_what_a_local_path(tmp_path, monkeypatch):
+    from orbitmodel.runs import RunError, is_hub_run, resolve_run
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "runs").mkdir()
+    assert is_hub_run("owner/name") and is_hub_run("owner/name@v1")
+    assert not is_hub_run("runs/missing")  # its first folder is here: a local path not made yet
+    assert not is_hub_run("./owner/name") and not is_hub_run(str(tmp_path / "x")) and not is_hub_run("a")
+    with pytest.raises(RunError, match="local path"):
+        resolve_run("runs/missing", revision="main")
 
 
 def test_a_policy_run_round_trips(hub_client, tmp_path):

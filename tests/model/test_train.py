@@ -213,6 +213,10 @@ def test_a_run_from_before_presets_carried_their_probe_recipe_resumes(tiny_datas
     _train(tiny_dataset_master, out, steps=2, save_every=1)
     config = json.loads((out / "config.json").read_text())
     del config["preset"]["probe"]
+    config["preset"]["description"] = "a few thousand parameters, for tests"  # the built-in's earlier wording
+    for key in ("val_fraction", "val_seed"):
+        del config["preset"]["train"][key]
+    del config["validation"]
     (out / "config.json").write_text(json.dumps(config))
     (out / "model.safetensors").unlink()
     preset = get_preset("tiny").with_train(max_steps=2, save_every=1)

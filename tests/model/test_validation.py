@@ -36,7 +36,31 @@ def test_the_split_is_a_seeded_fraction_of_every_level(tiny_dataset_master):
         validation_split(tiny_dataset_master, 1.0, 0)
 
 
-def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_dataset_master, tmp_path):
+def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_dataset_master, tmp_path,
+                                                                         monkeypatch):
+    import orbitmodel.plan.depth_refit
+    import orbitmodel.probe.train
+    import orbitmodel.train.stage1
+
+    trained_on: dict[str, list] = {}  # the episodes= each training stage asked the loader for
+
+    def spy(stage, load):
+        def wrapped(*args, **kwargs):
+            if kwargs.get("split") == "train":
+                trained_on.setdefault(stage, []).append(kwargs.get("episodes"))
+            return load(*args, **kwargs)
+        return wrapped
+
+    for module, stage in ((orbitmodel.train.stage1, "stage1"), (orbitmodel.probe.train, "probe")):
+        monkeypatch.setattr(module, "load_model_windows", spy(stage, module.load_model_windows))
+    patches = orbitmodel.plan.depth_refit._patches
+
+    def fitted_frames(model, dataset, split, n, seed, where, episodes=None):  # the refit's training frames
+        if where == "--frames":
+            trained_on.setdefault("refit", []).append(episodes)
+        return patches(model, dataset, split, n, seed, where, episodes)
+
+    monkeypatch.setattr(orbitmodel.plan.depth_refit, "_patches", fitted_frames)
     run, data = tmp_path / "wm", str(tiny_dataset_master)
     res = runner.invoke(app, ["train", data, "--preset", "tiny", "--max-steps", "2", "--val-fraction", "0.5",
                               "--device", "cpu", "--out", str(run)])
@@ -46,6 +70,12 @@ def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_d
     assert held_out == validation_split(tiny_dataset_master, 0.5, 0)
     res = runner.invoke(app, ["probe", str(run), data, "--device", "cpu", "--epochs", "1"])
     assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["depth", str(run), data, "--frames", "32", "--test-frames", "16", "--epochs", "1",
+                              "--eval-split", "val"])
+    assert res.exit_code == 0, res.output
+    assert set(trained_on) == {"stage1", "probe", "refit"}
+    for stage, calls in trained_on.items():  # every training stage left the validation episodes out
+        assert all(isinstance(e, list) and e and not set(e) & set(held_out.episodes) for e in calls), (stage, calls)
     res = runner.invoke(app, ["eval", "probe", str(run), data, "--split", "val", "--windows", "1", "--horizon", "2",
                               "--no-figures"])
     assert res.exit_code == 0, res.output

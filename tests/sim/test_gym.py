@@ -40,7 +40,8 @@ def test_make_keywords_and_the_module_form():
 
 
 def test_an_expert_episode_replayed_through_gymnasium_gives_the_dataset_frames(tiny_dataset_master):
-    """Same world from the episode's seed, same recorded thrusts -> the same states and outcome."""
+    """Same world from the episode's seed, same recorded thrusts -> the recorded states, bit for bit,
+    and the recorded outcome (the images are stored as JPEG, so the states are what is compared)."""
     info, _ = read_meta(tiny_dataset_master)
     config = GenerationConfig.from_dict(info.config)
     episodes = pq.read_table(tiny_dataset_master / "episodes" / "train-00000-of-00001.parquet").to_pylist()

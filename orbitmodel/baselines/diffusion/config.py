@@ -121,6 +121,8 @@ class PolicyTrainConfig:
         pad_before: per episode, this many extra windows that start before its first frame
             (the first observation repeated in front, as the pilot does at its first step; the
             reference's ``n_obs_steps - 1``; 0: none).
+        mask_padding: the terminal frame and the padding past an episode's end add no loss
+            (False: they are targets like any frame, as in runs made before this option).
     """
 
     window_stride: int = 1
@@ -143,6 +145,7 @@ class PolicyTrainConfig:
     val_fraction: float = 0.0
     val_seed: int = 0
     pad_before: int = 1
+    mask_padding: bool = True
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:

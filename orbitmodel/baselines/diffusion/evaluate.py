@@ -104,7 +104,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     c = policy.config
     check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     held_out = read_policy_run(resolve_run(run)).validation
-    source_split, episodes = split_selection(split, held_out)
+    source_split, episodes = ("train", None) if split == "train" else split_selection(split, held_out)
     chosen = episode_filter(list(levels), list(outcomes))
     if episodes is not None:  # the held-out episodes of the chosen levels and outcomes
         keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())

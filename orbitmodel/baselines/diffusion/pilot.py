@@ -44,7 +44,7 @@ class DiffusionPilot(Pilot):
         c = policy.config
         self.policy = policy.eval()
         self.use_ema = use_ema
-        self.action_steps = int(action_steps or c.n_action_steps)
+        self.action_steps = int(c.n_action_steps if action_steps is None else action_steps)
         most = c.horizon - c.n_obs_steps + 1  # actions a sample holds from the current frame on
         if not 1 <= self.action_steps <= most:
             raise ValueError(f"action_steps={self.action_steps}: execute 1 to {most} actions of each sampled chunk")

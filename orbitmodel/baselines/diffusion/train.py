@@ -15,7 +15,7 @@ optimiser step.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,7 @@ from orbitdata import schema as S
 from orbitdata.load import IS_PAD, load_windows
 from orbitdata.load.collate import WindowBatch
 from orbitdata.load.tables import load_episode_table
-from orbitmodel.baselines.diffusion.config import FAMILY, PolicyPreset
+from orbitmodel.baselines.diffusion.config import FAMILY, POLICY_PRESETS, PolicyPreset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, ValidationSplit, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.kinematics import P
@@ -90,11 +90,12 @@ class PolicyJob:
         t, To = self.preset.train, self.preset.model.n_obs_steps
         images = random_shift(batch[S.IMAGE][:, :To], t.shift, step_generator(t.seed, step, STREAM_SHIFT, self.rank))
         goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
-        real = ~(batch[IS_PAD] | batch[S.IS_LAST])  # (B, H): the terminal frame's and the padding's zero thrust are
-        # no action anyone took; they add no loss (else the policy learns to cut thrust near the goal)
-        return {"images": images.to(device), "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
-                "actions": batch[S.ACTION].to(device), "real": real.to(device),
-                "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
+        inputs = {"images": images.to(device), "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
+                  "actions": batch[S.ACTION].to(device), "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
+        if t.mask_padding:  # the terminal frame's and the padding's zero thrust are no action anyone took; they
+            # add no loss (else the policy learns to cut thrust near the goal)
+            inputs["real"] = (~(batch[IS_PAD] | batch[S.IS_LAST])).to(device)
+        return inputs
 
     def after_step(self, step: int) -> None:
         t = self.preset.train
@@ -179,7 +180,11 @@ def upgrade_config(old: dict) -> dict:
     """A policy run's config.json as this version writes it (new settings at their defaults, no
     validation split for a run from before them), so that an earlier version's run resumes."""
     try:
-        return {**old, "preset": PolicyPreset.from_dict(old["preset"]).to_dict(),
+        train = {"pad_before": 0, "mask_padding": False, **old["preset"]["train"]}  # the recipe it was started with
+        preset = PolicyPreset.from_dict({**old["preset"], "train": train})
+        if preset.name in POLICY_PRESETS:  # a built-in's description is text, not a setting: today's wording
+            preset = replace(preset, description=POLICY_PRESETS[preset.name]().description)
+        return {**old, "preset": preset.to_dict(),
                 "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
     except (KeyError, TypeError, ValueError):
         return old  # not a config this version reads: the comparison says what differs
