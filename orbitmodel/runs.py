@@ -26,8 +26,9 @@ import json
 import os
 import re
 import shutil
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Callable, Mapping
 
 import torch
 from safetensors import SafetensorError
@@ -253,19 +254,41 @@ def stage_of(path: str | Path) -> str:
     return str(RunDir(path).read_config().get("stage", "unknown"))
 
 
-# ---- Stage I runs ---------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class RunConfig:
-    """A Stage I run's preset, dataset facts and held-out validation episodes (and the raw config.json)."""
+def upgrade_preset_config(old: dict, parse: Callable[[dict], object], builtins: Mapping[str, Callable]) -> dict:
+    """A run's config.json as this version writes it, so that a run of an earlier version resumes:
+    its preset re-read by ``parse`` (which fills settings added since), a built-in preset's
+    description in today's wording (text, not a setting), and no validation split for a run from
+    before them. A config this version cannot read comes back unchanged: the comparison with the
+    new config then says what differs."""
+    try:
+        preset = parse(old["preset"])
+        if preset.name in builtins:
+            preset = replace(preset, description=builtins[preset.name]().description)
+        return {**old, "preset": preset.to_dict(),
+                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
+    except (KeyError, TypeError, ValueError):
+        return old
 
-    preset: Preset
-    dataset: DatasetMeta
+
+class HeldOut:
+    """The ``validation`` of a run config that keeps its raw config.json as ``raw``."""
+
     raw: dict
 
     @property
     def validation(self) -> ValidationSplit:
         """The train-split episodes the run held out (none for a run without a validation split)."""
         return ValidationSplit.from_dict(self.raw.get("validation"))
+
+
+# ---- Stage I runs ---------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RunConfig(HeldOut):
+    """A Stage I run's preset, dataset facts and held-out validation episodes (and the raw config.json)."""
+
+    preset: Preset
+    dataset: DatasetMeta
+    raw: dict
 
 
 @dataclass(frozen=True)

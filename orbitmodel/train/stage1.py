@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -13,7 +13,7 @@ from orbitmodel.config import PRESETS, Preset
 from orbitmodel.data import (DatasetMeta, ValidationSplit, load_model_windows, read_dataset_meta, training_episodes,
                              validation_split)
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config
+from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config, upgrade_preset_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
@@ -63,19 +63,9 @@ class Stage1Request:
 
 
 def upgrade_config(old: dict) -> dict:
-    """A Stage I config.json as this version writes it, so that a run of an earlier version
-    resumes: a preset from before presets carried their probe recipe gets its named preset's
-    (``Preset.from_dict``), and a run from before validation splits held none out."""
-    if "preset" not in old:
-        return old
-    try:
-        preset = Preset.from_dict(old["preset"])
-        if preset.name in PRESETS:  # a built-in's description is text, not a setting: today's wording
-            preset = replace(preset, description=PRESETS[preset.name]().description)
-        return {**old, "preset": preset.to_dict(),
-                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
-    except (KeyError, TypeError, ValueError):
-        return old  # not a preset this version reads: the comparison says what differs
+    """A Stage I config.json as this version writes it (``runs.upgrade_preset_config``): a preset
+    from before presets carried their probe recipe gets its named preset's (``Preset.from_dict``)."""
+    return upgrade_preset_config(old, Preset.from_dict, PRESETS)
 
 
 def loader_image_size(meta: DatasetMeta, preset: Preset, resize: bool) -> int | None:

@@ -16,8 +16,8 @@ from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, STATE_DIM
 from orbitmodel.config import replace_given
-from orbitmodel.data import DatasetMeta, ValidationSplit
-from orbitmodel.runs import CONFIG, POLICY, RunDir, RunError
+from orbitmodel.data import DatasetMeta
+from orbitmodel.runs import CONFIG, POLICY, HeldOut, RunDir, RunError
 
 GOAL_DIM = 3  # the goal in the body frame, metres
 FAMILY = "diffusion"  # config.json's "policy": the policy family of a policy run
@@ -221,17 +221,12 @@ def get_policy_preset(name: str) -> PolicyPreset:
 
 
 @dataclass(frozen=True)
-class PolicyRun:
+class PolicyRun(HeldOut):
     """A policy run's preset and dataset facts (and the raw config.json)."""
 
     preset: PolicyPreset
     dataset: DatasetMeta
     raw: dict
-
-    @property
-    def validation(self) -> ValidationSplit:
-        """The train-split episodes the run held out (none for a run without a validation split)."""
-        return ValidationSplit.from_dict(self.raw.get("validation"))
 
 
 def read_policy_run(path: str | Path) -> PolicyRun:

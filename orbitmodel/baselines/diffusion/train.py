@@ -15,7 +15,7 @@ optimiser step.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +31,7 @@ from orbitmodel.baselines.diffusion.config import FAMILY, POLICY_PRESETS, Policy
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, ValidationSplit, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.kinematics import P
-from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config
+from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config, upgrade_preset_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad, always loaded; the goal comes
@@ -177,17 +177,11 @@ class PolicyRequest:
 
 
 def upgrade_config(old: dict) -> dict:
-    """A policy run's config.json as this version writes it (new settings at their defaults, no
-    validation split for a run from before them), so that an earlier version's run resumes."""
-    try:
-        train = {"pad_before": 0, "mask_padding": False, **old["preset"]["train"]}  # the recipe it was started with
-        preset = PolicyPreset.from_dict({**old["preset"], "train": train})
-        if preset.name in POLICY_PRESETS:  # a built-in's description is text, not a setting: today's wording
-            preset = replace(preset, description=POLICY_PRESETS[preset.name]().description)
-        return {**old, "preset": preset.to_dict(),
-                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
-    except (KeyError, TypeError, ValueError):
-        return old  # not a config this version reads: the comparison says what differs
+    """A policy run's config.json as this version writes it (``runs.upgrade_preset_config``); a run
+    from before padding and masking settings keeps the recipe it was started with (none of either)."""
+    def parse(preset: dict) -> PolicyPreset:
+        return PolicyPreset.from_dict({**preset, "train": {"pad_before": 0, "mask_padding": False, **preset["train"]}})
+    return upgrade_preset_config(old, parse, POLICY_PRESETS)
 
 
 def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes,
