@@ -10,7 +10,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitmodel.config import PRESETS, Preset
-from orbitmodel.data import (DatasetMeta, ValidationSplit, load_model_windows, read_dataset_meta, training_episodes,
+from orbitmodel.data import (DatasetMeta, load_model_windows, read_dataset_meta, training_episodes,
                              validation_split)
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config, upgrade_preset_config
