@@ -6,10 +6,15 @@
 # head -> train and evaluate the Diffusion Policy -> fly the planner (planner preset cpu), its MPPI
 # oracles (and the depth oracle on the Stage I head), the Diffusion Policy, the expert and the risky
 # pilot on the grid (same seeds, none used by the dataset) -> Figure 6 -> the planner, oracles and
-# references again on a second grid seed (OUT/grid/seed2).
+# references again on a second validation seed (OUT/grid/seed2) -> every pilot on the test seeds
+# 3, 4 and 5 (OUT/grid/seedN/, pooled in OUT/grid/test/, Figure 6 of them).
+# The validation rule: grid seeds 0, 1, 2, 11 and 12 choose (docs/results/validation/), the test
+# seeds only report; dataset-side choices are made on held-out training episodes (--val-fraction).
 # ALL=1 adds the per-frame-predictor comparisons: the cpu preset and upstream's per-frame SIGReg
 # recipe (Stage I, probes and their state-only reference, eval), and the planner, learned-dynamics
 # and depth oracles flown on the cpu run (OUT/grid/cpu-run/).
+# POLICY=0 leaves out the Diffusion Policy (its training, evaluation and flights); a later run
+# without it adds them and flies nothing else again.
 # QUICK=1 runs every command at toy sizes (40 episodes, 3 training steps, 20-frame flights): a check
 # that the chain runs, not the reported numbers.
 # Every step resumes if run again: training, probes and refits whose output exists are skipped
@@ -24,6 +29,7 @@ OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER
 N=${2:-20}
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
+POLICY=${POLICY:-1}
 DATA="$OUT/orbit64"
 WMS="$OUT/wm-cpu-step5"
 WM="$OUT/wm-cpu"
@@ -86,8 +92,10 @@ fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.js
   shift
   fly "$GDIR/$pilot.json" "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@"
 }
+DP_FLY=(--image-codec)  # how the policy flies: 8 actions per chunk (its config), the camera through the dataset's
+# JPEG codec, chosen on validation seed 1 (docs/results/validation/diffusion/)
 fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
-  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}"
+  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}" "${DP_FLY[@]}"
 }
 train_wm() {  # train_wm RUN PRESET [OPTIONS...]: Stage I, resuming a cut run
   local run=$1 preset=$2 resume=()
@@ -119,10 +127,12 @@ train_dp() {
   local resume=()
   [ -f "$DP/model.safetensors" ] && return 0
   [ -d "$DP/checkpoints" ] && resume=(--resume)
-  "$BIN/orbitmodel" train-policy "$DATA" --preset cpu --out "$DP" "${resume[@]}" "${STEPS[@]}"
+  "$BIN/orbitmodel" train-policy "$DATA" --preset cpu --val-fraction 0.05 --out "$DP" "${resume[@]}" "${STEPS[@]}"
 }
-step train-diffusion train_dp
-step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+if [ "$POLICY" = 1 ]; then
+  step train-diffusion train_dp
+  step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+fi
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 # learned_pair FLY / depth_pair FLY: FLY is fly_model (the planner's run) or fly_cpu (ALL=1's cpu run)
 learned_pair() { spawn "$1" planner planner; spawn "$1" oracle-learned-dyn oracle-learned-dyn; join; }
@@ -132,13 +142,17 @@ depth_pair() {  # the refitted depth head, and the Stage I head it replaces
   join
 }
 rigid_pair() { spawn fly_model oracle-true oracle-true; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join; }
-data_pilots() { spawn fly_policy; spawn fly_data expert; join; fly_data risky; }
+data_pilots() {  # the policy (unless POLICY=0), the expert and the risky pilot
+  if [ "$POLICY" = 1 ]; then spawn fly_policy; fi
+  spawn fly_data expert; join; fly_data risky
+}
+with_policy() { if [ "$POLICY" = 1 ]; then echo "$@" diffusion; else echo "$@"; fi; }  # pilot names
 step grid-learned learned_pair fly_model
 step grid-depth depth_pair fly_model
 step grid-rigid rigid_pair
 step grid-data data_pilots
 FIG6=()
-for pilot in expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth oracle-learned-dyn planner diffusion; do
+for pilot in $(with_policy expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth oracle-learned-dyn planner); do
   FIG6+=("$OUT/grid/$pilot.json")
 done
 step figure6 "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/figure6.png"
@@ -150,6 +164,24 @@ seed2_rest() {
 }
 step grid-seed2-learned learned_pair fly_model
 step grid-seed2-rest seed2_rest
+# The test seeds 3, 4 and 5: flown only to report, with every choice above fixed. Each seed flies
+# the planner, every oracle, the references and the policy (grid/seedN/PILOT.json); `eval pool`
+# puts each pilot's three seeds in one table (grid/test/PILOT.json), which Figure 6 plots.
+for seed in 3 4 5; do
+  use_grid "$seed" "$OUT/grid/seed$seed"
+  step "grid-seed$seed-learned" learned_pair fly_model
+  step "grid-seed$seed-depth" depth_pair fly_model
+  step "grid-seed$seed-rigid" rigid_pair
+  step "grid-seed$seed-data" data_pilots
+done
+mkdir -p "$OUT/grid/test"
+FIG6=()
+for pilot in $(with_policy expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth \
+                           oracle-true-dyn-depth-stage1-head oracle-learned-dyn planner); do
+  "$BIN/orbitmodel" eval pool "$OUT"/grid/seed{3,4,5}/"$pilot.json" --json "$OUT/grid/test/$pilot.json"
+  [ "$pilot" = oracle-true-dyn-depth-stage1-head ] || FIG6+=("$OUT/grid/test/$pilot.json")
+done
+step figure6-test "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/test/figure6.png"
 use_grid 0 "$OUT/grid"
 
 if [ "${ALL:-0}" = 1 ]; then

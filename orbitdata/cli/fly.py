@@ -131,4 +131,6 @@ def register(app: typer.Typer) -> None:
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             name = f"{pilot}+noise{thrust_noise:g}x{noise_hold}" if thrust_noise else pilot  # ThrustNoise's name
-            json_out.write_text(json.dumps(grid_report(name, seed, cells), indent=2) + "\n")
+            flight = {"pilot_options": options, "image_codec": image_codec, "thrust_noise": thrust_noise,
+                      "noise_hold": noise_hold}
+            json_out.write_text(json.dumps(grid_report(name, seed, cells, flight), indent=2, default=str) + "\n")

@@ -117,10 +117,13 @@ def fly_grid(
     return cells
 
 
-def grid_report(pilot: str, seed: int, cells: list[CellResult]) -> dict:
+def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | None = None) -> dict:
+    """The ``--json`` table: the pilot, the grid seed, the outcome counts per setting and (``flight``)
+    how it flew (pilot options, codec, thrust noise)."""
     return {
         "pilot": pilot,
         "seed": seed,
+        **({"flight": flight} if flight is not None else {}),
         "settings": [
             {"obstacles": c.obstacles, "speed": c.speed, "episodes": c.episodes,
              **{o: getattr(c, o) for o in OUTCOMES}}

@@ -64,6 +64,7 @@ def load_windows(
     image_size: int | None = WindowConfig.image_size,
     columns: list[str] | tuple[str, ...] | None = None,
     episodes: EpisodeFilter = None,
+    context_only: list[str] | tuple[str, ...] = (),
     streaming: bool = False,
     shuffle_buffer: int = 0,
     seed: int = 0,
@@ -74,8 +75,9 @@ def load_windows(
     Args:
         source: a local dataset folder or a Hub repo id; read with ``datasets.load_dataset``.
         split: "train" or "test".
-        context, horizon, stride, pad, image_size, columns: see :class:`WindowConfig`
-            (``columns=None`` loads every step column; name fewer to skip e.g. full-res depth).
+        context, horizon, stride, pad, image_size, columns, context_only: see :class:`WindowConfig`
+            (``columns=None`` loads every step column; name fewer to skip e.g. full-res depth;
+            ``context_only=["observation.image"]`` decodes images of the context frames only).
         episodes: which episodes to cut windows from, through the episodes table: ``None``
             (all), a dict of column values (``{"level": "expert", "outcome": ["success"]}``),
             a predicate over the episode row (``lambda ep: ep["outcome"] != "collision"``) or
@@ -106,7 +108,7 @@ def load_windows(
         raise ValueError("shuffle_buffer/seed are for streaming=True; "
                          "shuffle a map-style dataset with ds.sampler(seed=...)")
     config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
-                          columns=None if columns is None else tuple(columns))
+                          columns=None if columns is None else tuple(columns), context_only=tuple(context_only))
     try:  # checks the schema version before anything is read
         read_info(source, load_dataset_kwargs.get("revision"), load_dataset_kwargs.get("token"))
     except HubUnavailable:

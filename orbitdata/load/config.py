@@ -29,6 +29,9 @@ class WindowConfig:
         columns: the dataset columns to load; ``None`` = every step column. ``episode_index``
             and ``frame_index`` are always included. Leaving out ``observation.depth`` skips
             the costliest decode.
+        context_only: columns read for the ``context`` frames only (their tensors are
+            ``(context, ...)``): e.g. the image, for a policy that observes the first frames and
+            predicts only actions over the rest. The horizon's frames are never decoded.
     """
 
     context: int = 8
@@ -37,6 +40,7 @@ class WindowConfig:
     pad: bool = False
     image_size: int | None = None
     columns: tuple[str, ...] | None = None
+    context_only: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.context < 1:
@@ -51,6 +55,13 @@ class WindowConfig:
             if isinstance(self.columns, str):
                 raise ValueError(f"columns={self.columns!r}: pass a list of column names, not one string")
             object.__setattr__(self, "columns", tuple(self.columns))
+        if isinstance(self.context_only, str):
+            raise ValueError(f"context_only={self.context_only!r}: pass a list of column names, not one string")
+        object.__setattr__(self, "context_only", tuple(self.context_only))
+        if set(self.context_only) & set(KEY_COLUMNS):
+            raise ValueError(f"context_only={list(self.context_only)}: {', '.join(KEY_COLUMNS)} are read for every frame")
+        if self.columns is not None and set(self.context_only) - set(self.columns):
+            raise ValueError(f"context_only={list(self.context_only)} names columns not in columns={list(self.columns)}")
 
     @property
     def length(self) -> int:
@@ -74,6 +85,7 @@ class WindowConfig:
         if self.columns is None:
             return available
         missing = [c for c in self.columns if c not in available]
+        missing += [c for c in self.context_only if c not in available and c not in missing]
         if missing:
             raise ValueError(f"column(s) {missing} not in the dataset; available: {list(available)}")
         wanted = set(self.columns) | set(KEY_COLUMNS)

@@ -175,9 +175,11 @@ class WindowDecoder:
     def allocate(self, rows: pa.Table, batch: int | None = None) -> dict[str, torch.Tensor]:
         """Uninitialised output for one window (``batch=None``) or ``batch`` windows, like ``rows``."""
         shared = batch is not None and torch.utils.data.get_worker_info() is not None
-        lead = (self.config.length,) if batch is None else (batch, self.config.length)
-        out = {c.name: empty((*lead, *self._frame_shape(c, rows)), c.dtype, shared) for c in self.columns}
-        out[IS_PAD] = empty(lead, torch.bool, shared)
+        def lead(col: str | None = None) -> tuple[int, ...]:
+            T = self.config.context if col in self.config.context_only else self.config.length
+            return (T,) if batch is None else (batch, T)
+        out = {c.name: empty((*lead(c.name), *self._frame_shape(c, rows)), c.dtype, shared) for c in self.columns}
+        out[IS_PAD] = empty(lead(), torch.bool, shared)
         return out
 
     def __call__(self, rows: pa.Table) -> dict[str, torch.Tensor]:
@@ -192,7 +194,10 @@ class WindowDecoder:
         assert 0 < n <= T, f"a window holds 1..{T} real rows, got {n}"
         for col in self.columns:
             try:
-                self._column(col, rows.column(col.name), out[col.name].numpy())
+                values = rows.column(col.name)
+                if col.name in self.config.context_only:  # the context is real (pad only runs past the end)
+                    values = values.slice(0, self.config.context)
+                self._column(col, values, out[col.name].numpy())
             except ValueError as err:
                 raise ValueError(
                     f"{_place(rows)}, column {col.name!r}: {err}; "

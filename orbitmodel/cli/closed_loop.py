@@ -25,6 +25,7 @@ def register(app: typer.Typer) -> None:
     app.command("merge")(merge)
     app.command("table")(table)
     app.command("flips")(flips)
+    app.command("pool")(pool)
 
 
 def _numbers(text: str, kind, flag: str) -> list:
@@ -35,6 +36,16 @@ def _numbers(text: str, kind, flag: str) -> list:
     if not values:
         fail(f"{flag} {text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5")
     return values
+
+
+def _settings(pairs: list[str]) -> dict[str, str]:
+    out = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            fail(f"--set {pair!r}: give KEY=VALUE, e.g. --set margin_per_speed=0.1")
+        out[key.strip()] = value.strip()
+    return out
 
 
 @friendly
@@ -80,6 +91,9 @@ def closed_loop(
     compile_rollout: Annotated[Optional[bool], typer.Option(
         "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
                                        "[default: the preset's, off]")] = None,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="KEY=VALUE: any other planner setting (a field of MPPIConfig, CostConfig or PlannerConfig, "
+                      "e.g. --set margin_per_speed=0.1 --set temperature=0.5); repeatable")] = None,
     config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
 ) -> None:
     """Fly a planning pilot (or a policy run) over the orbitdata fly grid and print the success table.
@@ -91,17 +105,17 @@ def closed_loop(
 
     from orbitdata.config import GenerationConfig
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
-    from orbitmodel.plan.config import planner_config
 
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
                                      replan_every=replan_every, memory_frames=memory_frames, history=history,
                                      support=support, depth_head=depth_head.value if depth_head else None,
                                      compile=compile_rollout).items() if x is not None}
+    options.update(_settings(set_ or []))
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
         variant=Variant(pilot.value), run=run, obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
         speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
-        planner=planner_config(planner.value, **options),
+        planner=_planner(planner.value, options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, video_dir=video,
         video_format=f".{video_format.value}")
@@ -112,6 +126,15 @@ def closed_loop(
     print_table(report, episodes)
     if json_out is not None:
         json_out.write_text(json.dumps(report, indent=2) + "\n")
+
+
+def _planner(preset: str, options: dict):
+    from orbitmodel.plan.config import planner_config
+
+    try:
+        return planner_config(preset, **options)
+    except (TypeError, ValueError) as err:
+        fail(f"planner settings: {err}")
 
 
 def _fly_with_progress(loop, json_out: Path | None):
@@ -221,6 +244,26 @@ def table(
 
     reports = [read_report(p) for p in results]
     typer.echo(markdown_table(reports, [str(p) for p in results] if links else None, per_setting), nl=False)
+
+
+@friendly
+def pool(
+    results: Annotated[list[Path], typer.Argument(help="one pilot's grid results, one per root seed (--seed)")],
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="write the pooled table here")] = None,
+) -> None:
+    """Pool one pilot's grid over several seeds (e.g. the test seeds 3, 4 and 5) into one table: the
+    success rate over every episode with its 95 % Wilson interval, and the worst setting on any seed."""
+    from orbitmodel.evaluate.figure6 import read_report
+    from orbitmodel.evaluate.success import pool_seeds, rate_text, report_totals
+
+    pooled = pool_seeds([read_report(p) for p in results])
+    worst = pooled["worst_setting"]
+    typer.echo(f"{pooled['pilot']}, seeds {', '.join(map(str, pooled['seeds']))}: {rate_text(*report_totals(pooled))}; "
+               f"worst setting: seed {worst['seed']}, {worst['obstacles']} obstacles at {worst['speed']:g} m/s, "
+               f"{worst['success']}/{worst['episodes']}")
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps(pooled, indent=2) + "\n")
 
 
 @friendly

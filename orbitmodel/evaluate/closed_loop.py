@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+import torch
 
 from orbitdata.config import GenerationConfig
 from orbitdata.seeding import episode_seed, grid_seed
@@ -159,8 +160,12 @@ class ClosedLoop:
                                        max_steps=req.max_steps or sim.max_steps)
 
     def report(self, result: ClosedLoopResult) -> dict:
-        """:func:`closed_loop_report` of this flight."""
-        return closed_loop_report(self.req, result, None if self.name == self.req.variant.value else self.name)
+        """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
+        ``action_steps`` and ``ensemble``) and the torch threads it flew on."""
+        planning = self.name == self.req.variant.value
+        report = closed_loop_report(self.req, result, None if planning else self.name)
+        return {**report, "pilot_settings": None if planning else self.pilot.metadata(),
+                "threads": torch.get_num_threads()}
 
     def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
         req, pilot = self.req, self.pilot

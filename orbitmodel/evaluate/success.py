@@ -73,6 +73,40 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
     return "\n".join(lines) + "\n"
 
 
+def pool_seeds(reports: list[dict]) -> dict:
+    """One pilot's grid flown on several root seeds, as one table: per setting, the episodes and
+    outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
+    and ``worst_setting`` names the lowest-rate (seed, setting). Refuses reports of different
+    pilots, grids or a repeated seed: pooling is for fresh episodes only."""
+    if not reports:
+        raise ValueError("give the grid results of at least one seed")
+    first = reports[0]
+    keys = sorted((int(s["obstacles"]), float(s["speed"])) for s in first["settings"])
+    seeds = [int(r["seed"]) for r in reports]
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds {seeds} repeat: pool each root seed once")
+    pooled = {k: {"obstacles": k[0], "speed": k[1], "episodes": 0, "success": 0, **{f: 0 for f in FAILURES}}
+              for k in keys}
+    per_seed, worst = {}, None
+    for r in reports:
+        if r["pilot"] != first["pilot"]:
+            raise ValueError(f"pilots differ ({first['pilot']!r}, {r['pilot']!r}): pool one pilot's seeds")
+        mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
+        if sorted(mine) != keys:
+            raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")
+        per_seed[str(r["seed"])] = r["settings"]
+        for k, x in mine.items():
+            for f in ("episodes", "success", *FAILURES):
+                pooled[k][f] += int(x.get(f, 0))
+            rate = int(x["success"]) / int(x["episodes"])
+            if worst is None or rate < worst["rate"]:
+                worst = {"seed": int(r["seed"]), "obstacles": k[0], "speed": k[1], "rate": rate,
+                         "success": int(x["success"]), "episodes": int(x["episodes"])}
+    out = {key: first[key] for key in ("pilot", "run", "planner_preset", "planner") if key in first}
+    return {**out, "seed": seeds[0] if len(seeds) == 1 else None, "seeds": seeds, "settings": list(pooled.values()),
+            "per_seed": per_seed, "worst_setting": worst}
+
+
 def outcome_flips(a: dict, b: dict) -> dict:
     """Episodes of two flights of one grid (the same pilot and seeds, e.g. on 1 and 2 torch threads,
     or on two machines) whose outcome differs: the robustness of a figure to a tiny perturbation.

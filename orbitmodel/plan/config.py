@@ -100,7 +100,10 @@ def planner_config(preset: str = "paper", **options) -> PlannerConfig:
         if owner is None or key in ("mppi", "cost"):
             raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
         kind = type(getattr(owner(), key))
-        parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
-            else kind(value)
+        try:
+            parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
+                else kind(value)
+        except ValueError:
+            raise ValueError(f"planner option {key}={value!r}: give a {kind.__name__}") from None
     return dataclasses.replace(base, mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),
                                cost=dataclasses.replace(base.cost, **parts[CostConfig]), **parts[PlannerConfig])

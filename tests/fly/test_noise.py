@@ -54,3 +54,4 @@ def test_orbitdata_fly_flies_the_noisy_expert(tmp_path):
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["pilot"] == "expert+noise0.05x8" and report["settings"][0]["episodes"] == 1
+    assert report["flight"] == {"pilot_options": {}, "image_codec": False, "thrust_noise": 0.05, "noise_hold": 8}

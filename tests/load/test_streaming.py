@@ -61,12 +61,13 @@ def test_streaming_yields_exactly_the_map_style_windows(tiny_dataset_master, cac
 
 
 def test_streaming_with_filter_and_padding_matches_map_style(tiny_dataset_master, cache):
-    kwargs = dict(columns=[S.ACTION], pad=True, context=4, horizon=30, cache_dir=cache,
-                  episodes=lambda ep: ep[S.LEVEL] != "expert")
+    kwargs = dict(columns=[S.ACTION, S.IMAGE], context_only=[S.IMAGE], pad=True, context=4, horizon=30,
+                  cache_dir=cache, episodes=lambda ep: ep[S.LEVEL] != "expert")
     mapped = load_windows(tiny_dataset_master, **kwargs)
     streamed = list(load_windows(tiny_dataset_master, streaming=True, **kwargs))
     assert sorted(map(key, streamed)) == sorted(key(mapped[i]) for i in range(len(mapped)))
     assert any(item[IS_PAD].any() for item in streamed)
+    assert all(item[S.IMAGE].shape[0] == 4 for item in streamed)
     by_key = {key(mapped[i]): mapped[i] for i in range(len(mapped))}
     for item in streamed:
         assert all(torch.equal(v, by_key[key(item)][k]) for k, v in item.items())

@@ -134,6 +134,25 @@ def test_columns_select_the_keys(tiny_dataset_master, cache, reference):
     assert_window_matches(reference, item)
 
 
+def test_context_only_columns_hold_the_context_frames_alone(tiny_dataset_master, cache, reference):
+    full = load_windows(tiny_dataset_master, context=2, horizon=14, pad=True, columns=[S.IMAGE, S.ACTION],
+                        cache_dir=cache)
+    cut = load_windows(tiny_dataset_master, context=2, horizon=14, pad=True, columns=[S.IMAGE, S.ACTION],
+                       context_only=[S.IMAGE], cache_dir=cache)
+    assert len(cut) == len(full)
+    last = len(cut) - 1  # a padded window: the horizon runs past the episode's end
+    for items in ([cut[i] for i in (0, 9, last)], [cut.__getitems__([0, 9, last]).stacked]):
+        for j, item in enumerate(items):
+            ref = full[(0, 9, last)[j]] if len(items) == 3 else default_collate([full[i] for i in (0, 9, last)])
+            assert item[S.IMAGE].shape[-4] == 2  # the observed frames, no more
+            assert torch.equal(item[S.IMAGE], ref[S.IMAGE][..., :2, :, :, :])
+            assert torch.equal(item[S.ACTION], ref[S.ACTION]) and torch.equal(item[IS_PAD], ref[IS_PAD])
+    for bad, match in [(dict(context_only=[S.FRAME_INDEX]), "every frame"),
+                       (dict(columns=[S.ACTION], context_only=[S.IMAGE]), "not in columns")]:
+        with pytest.raises(ValueError, match=match):
+            load_windows(tiny_dataset_master, cache_dir=cache, **bad)
+
+
 def test_image_size_resizes_rgb_by_area_and_depth_by_nearest(tiny_dataset_master, cache, reference):
     ds = load_windows(tiny_dataset_master, columns=[S.IMAGE, S.DEPTH], image_size=32, cache_dir=cache)
     item = ds[5]

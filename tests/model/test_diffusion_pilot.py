@@ -180,7 +180,9 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--action-steps", "2", "--ensemble", "0.1",
                                    *grid, "--json", str(out)])
     assert res.exit_code == 0, res.output
-    assert json.loads(out.read_text())["episodes"][0]["action_steps"] == 2
+    report = json.loads(out.read_text())
+    assert report["episodes"][0]["action_steps"] == 2
+    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1} and report["threads"] >= 1
 
 
 class ChunkPolicy(torch.nn.Module):

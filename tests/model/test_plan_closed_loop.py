@@ -86,11 +86,13 @@ def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path)
     out = tmp_path / "planner.json"
     res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
                               "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--samples", "8",
-                              "--horizon", "5", "--max-steps", "4", "--support", "3", "--json", str(out)])
+                              "--horizon", "5", "--max-steps", "4", "--support", "3", "--set", "margin_per_speed=0.15",
+                              "--set", "temperature=0.5", "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
     report = json.loads(out.read_text())
     assert report["planner"]["support"] == 3 and report["planner"]["mppi"]["samples"] == 8
+    assert report["planner"]["cost"]["margin_per_speed"] == 0.15 and report["planner"]["mppi"]["temperature"] == 0.5
     assert [(s["obstacles"], s["speed"]) for s in report["settings"]] == [(1, 1.0), (1, 2.0)]
     # Each episode was streamed as it landed; a grid stopped early is read back from that stream.
     streamed = read_report(tmp_path / "planner.episodes.jsonl")
@@ -133,6 +135,10 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert "64 px" in one_line_error(runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth",
                                                                "--config", str(toml)]))
     assert "not an orbitmodel run" in one_line_error(runner.invoke(app, base + [str(tmp_path)]))
+    rigid = base + ["--pilot", "oracle-true"]
+    assert "KEY=VALUE" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency"]))
+    assert "unknown planner option 'urgncy'" in one_line_error(runner.invoke(app, rigid + ["--set", "urgncy=1"]))
+    assert "urgency='high': give a float" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency=high"]))
 
 
 def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):

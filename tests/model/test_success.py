@@ -61,3 +61,27 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     (tmp_path / "b.json").write_text(json.dumps(b))
     res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
     assert res.exit_code == 0 and "2 of 4 episodes flip" in res.output and "success -> collision" in res.output
+
+
+def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
+    from orbitmodel.evaluate.success import pool_seeds, report_totals
+
+    seeds = [{**grid("planner", k, collisions=[20 - k[0], 20 - k[1]]), "seed": s}
+             for s, k in ((3, [20, 19]), (4, [17, 20]), (5, [20, 20]))]
+    pooled = pool_seeds(seeds)
+    assert report_totals(pooled) == (116, 120) and pooled["seeds"] == [3, 4, 5]
+    assert [s["collision"] for s in pooled["settings"]] == [3, 1]
+    assert pooled["worst_setting"] == {"seed": 4, "obstacles": 1, "speed": 1.0, "rate": 0.85, "success": 17,
+                                       "episodes": 20}
+    assert "116/120" in markdown_table([pooled])  # a pooled table is a grid result like any other
+    for bad, match in (([seeds[0], seeds[0]], "repeat"), ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
+                       ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid")):
+        with pytest.raises(ValueError, match=match):
+            pool_seeds(bad)
+    for s in seeds:
+        (tmp_path / f"seed{s['seed']}.json").write_text(json.dumps(s))
+    res = CliRunner().invoke(app, ["eval", "pool", *(str(tmp_path / f"seed{k}.json") for k in (3, 4, 5)),
+                                   "--json", str(tmp_path / "test.json")])
+    assert res.exit_code == 0, res.output
+    assert "96.7 % [91.7, 98.7] (116/120)" in res.output and "seed 4, 1 obstacles at 1 m/s, 17/20" in res.output
+    assert json.loads((tmp_path / "test.json").read_text())["seeds"] == [3, 4, 5]

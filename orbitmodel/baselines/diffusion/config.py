@@ -192,11 +192,12 @@ class PolicyPreset:
 
 
 def _cpu() -> PolicyPreset:
-    # 1500 steps fit the 2-core machine's half hour (docs/model.md). At this budget the
-    # reference's epsilon prediction samples badly (DDIM samples far from the data, biased by
-    # the clipped x0 estimates of the noisiest steps), so the preset predicts the clean sample
-    # (the reference's other prediction_type) at a 3x higher learning rate.
-    train = PolicyTrainConfig(batch_size=64, lr=3e-4, epochs=100, max_steps=1500, warmup=0.05, num_workers=0,
+    # 16,000 steps (about 5 epochs of the expert windows; the steps-vs-MSE curve in
+    # docs/results.md). The reference's epsilon prediction samples badly at small budgets (DDIM
+    # samples far from the data, biased by the clipped x0 estimates of the noisiest steps), so the
+    # preset predicts the clean sample (the reference's other prediction_type) at a 3x higher
+    # learning rate.
+    train = PolicyTrainConfig(batch_size=64, lr=3e-4, epochs=100, max_steps=16000, warmup=0.05, num_workers=0,
                               log_every=20, save_every=250)
     return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
                         "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction",

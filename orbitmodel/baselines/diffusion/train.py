@@ -4,8 +4,8 @@ A training window is ``horizon`` (16) frames starting at t-1: its first ``n_obs_
 frames are the observations, and all 16 actions are the target. The horizon may run past the
 episode end (``pad=True``); padded frames repeat the terminal frame, whose action is zero
 thrust, so the loss skips both (they are no action the expert took). The goal is joined from
-the episodes table by ``episode_index``. Only the image, the
-state, the action and the goal are read: never the obstacles.
+the episodes table by ``episode_index``. Only the image (of the observed frames), the state,
+the action and the goal are read: never the obstacles.
 
 EMA: the weights' moving average lives in the policy module (``policy.ema``), so checkpoints
 and exact resume carry it; the shared loop calls :meth:`PolicyJob.after_step` after each
@@ -104,13 +104,14 @@ class PolicyJob:
 
 def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None,
                    pad_before: int = 0):
-    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real) of the ``episodes=`` selection;
+    """Windows of ``horizon`` frames (the first ``n_obs_steps`` real; images decoded for those only) of
+    the ``episodes=`` selection;
     with ``pad_before`` > 0 also, per episode, windows that start that many frames before its first
     (:class:`PadBefore`)."""
     m = preset.model
     windows = load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
                            stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS),
-                           episodes=episodes)
+                           episodes=episodes, context_only=[S.IMAGE])
     return PadBefore(windows, pad_before) if pad_before else windows
 
 
