@@ -75,7 +75,8 @@ def main(argv=None) -> int:
         high = [100 * p["success_ci"][1] - r for r, p in zip(rate, fly)]
         b.errorbar(steps, rate, yerr=[low, high], fmt="o-", color="C3", capsize=3)
         b.set(xlabel="training step", ylabel="success %, 95 % CI", ylim=(0, 100),
-              title=f"closed loop, {fly[0]['episodes']} episodes, seed {fly[0]['flight_seed']}")
+              title=f"closed loop: {'/'.join(sorted({str(n) for n, _ in fly[0]['settings']}))} obstacle(s), "
+                    f"{fly[0]['episodes']} episodes, seed {fly[0]['flight_seed']}")
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=120)

@@ -95,9 +95,10 @@ def plot_figure6(reports: list[dict], out: str | Path, title: str | None = None)
     ax.set_ylabel("success %")
     ax.set_ylim(0, 110)
     episodes = {s["episodes"] for r in reports for s in r["settings"]}
-    seeds = {r.get("seed") for r in reports if r.get("seed") is not None}
-    ax.set_title(title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting, "
-                          f"seed {'/'.join(map(str, sorted(seeds, key=str)))}", fontsize=9)
+    seeds = sorted({str(s) for r in reports for s in (r.get("seeds") or [r.get("seed")]) if s is not None})
+    where = f", seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}" if seeds else ""  # eval pool's: every seed
+    ax.set_title(title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting{where}",
+                 fontsize=9)
     ax.legend(fontsize=7, ncols=min(len(rates), 3), loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
     out = Path(out)

@@ -47,11 +47,14 @@ def failures_text(report: dict) -> str:
 def markdown_table(reports: list[dict], sources: list[str] | None = None, per_setting_ci: bool = False) -> str:
     """One row per grid result: successes per setting (k/n, or with ``per_setting_ci`` the rate and
     its interval), the rate over all settings with its 95 % Wilson interval and count, the failures,
-    and (``sources``) the file each row came from. Every report must cover the same settings."""
+    (tables of ``pool_seeds``) the lowest setting on any one seed, and (``sources``) the file each
+    row came from. Every report must cover the same settings."""
     settings = [(int(s["obstacles"]), float(s["speed"])) for s in reports[0]["settings"]]
     head = [f"{n} obst. {v:g} m/s" for n, v in settings]
-    lines = ["| pilot | " + " | ".join(head) + " | all settings, 95 % CI | failures |" + (" JSON |" if sources else ""),
-             "|---" * (len(head) + 3 + bool(sources)) + "|"]
+    pooled = all("worst_setting" in r for r in reports)  # eval pool's tables: add each pilot's worst setting
+    lines = ["| pilot | " + " | ".join(head) + " | all settings, 95 % CI | failures |"
+             + (" lowest setting on one seed |" if pooled else "") + (" JSON |" if sources else ""),
+             "|---" * (len(head) + 3 + pooled + bool(sources)) + "|"]
     for i, r in enumerate(reports):
         mine = {(int(s["obstacles"]), float(s["speed"])): s for s in r["settings"]}
         if sorted(mine) != sorted(settings):
@@ -69,6 +72,9 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
         if sources and Path(sources[i]).name.split(".")[0] != label:  # e.g. the same pilot with another head
             label += f" ({Path(sources[i]).name.split('.')[0]})"
         row = f"| {label} | " + " | ".join(cells) + f" | {rate_text(*report_totals(r))} | {failures_text(r)} |"
+        if pooled:
+            w = r["worst_setting"]
+            row += f" {w['success']}/{w['episodes']} (seed {w['seed']}, {w['obstacles']} obst. {w['speed']:g} m/s) |"
         lines.append(row + (f" [{Path(sources[i]).name}]({sources[i]}) |" if sources else ""))
     return "\n".join(lines) + "\n"
 

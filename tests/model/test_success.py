@@ -73,7 +73,8 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
     assert [s["collision"] for s in pooled["settings"]] == [3, 1]
     assert pooled["worst_setting"] == {"seed": 4, "obstacles": 1, "speed": 1.0, "rate": 0.85, "success": 17,
                                        "episodes": 20}
-    assert "116/120" in markdown_table([pooled])  # a pooled table is a grid result like any other
+    row = markdown_table([pooled]).splitlines()[2]  # a pooled table is a grid result like any other, plus its worst
+    assert row == "| planner | 57/60 | 59/60 | 96.7 % [91.7, 98.7] (116/120) | 4 collisions | 17/20 (seed 4, 1 obst. 1 m/s) |"
     for bad, match in (([seeds[0], seeds[0]], "repeat"), ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
                        ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid")):
         with pytest.raises(ValueError, match=match):
