@@ -88,6 +88,9 @@ def pool_seeds(reports: list[dict]) -> dict:
         raise ValueError("give the grid results of at least one seed")
     first = reports[0]
     keys = sorted((int(s["obstacles"]), float(s["speed"])) for s in first["settings"])
+    if any(r.get("seed") is None for r in reports):
+        raise ValueError("every grid result needs its root seed: pool the --json tables, not the .episodes.jsonl "
+                         "of a stopped grid")
     seeds = [int(r["seed"]) for r in reports]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds {seeds} repeat: pool each root seed once")

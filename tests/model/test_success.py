@@ -76,7 +76,8 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
     row = markdown_table([pooled]).splitlines()[2]  # a pooled table is a grid result like any other, plus its worst
     assert row == "| planner | 57/60 | 59/60 | 96.7 % [91.7, 98.7] (116/120) | 4 collisions | 17/20 (seed 4, 1 obst. 1 m/s) |"
     for bad, match in (([seeds[0], seeds[0]], "repeat"), ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
-                       ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid")):
+                       ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid"),
+                       ([seeds[0], {**seeds[1], "seed": None}], "root seed")):
         with pytest.raises(ValueError, match=match):
             pool_seeds(bad)
     for s in seeds:
