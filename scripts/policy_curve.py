@@ -23,6 +23,8 @@ from pathlib import Path
 
 
 def read_points(folder: Path) -> list[dict]:
+    from orbitmodel.evaluate.success import report_totals, wilson
+
     points = []
     for snap in sorted(folder.glob("step-*"), key=lambda p: int(re.sub(r"\D", "", p.name) or 0)):
         point: dict = {"step": int(snap.name.split("-")[1])}
@@ -33,8 +35,6 @@ def read_points(folder: Path) -> list[dict]:
                          bands={(f"> {b['from_m']:g}" if b["to_m"] is None else f"{b['from_m']:g}-{b['to_m']:g}"): b["ratio"]
                                 for b in e["per_band"]})
         if fly.is_file():
-            from orbitmodel.evaluate.success import report_totals, wilson
-
             f = json.loads(fly.read_text())
             k, n = report_totals(f)
             point.update(success=k, episodes=n, success_ci=list(wilson(k, n)), flight_seed=f["seed"],

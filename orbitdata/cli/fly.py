@@ -9,7 +9,8 @@ from pathlib import Path
 
 import typer
 
-from orbitdata.cli.errors import friendly, usage, usage_errors
+from orbitdata.cli.errors import friendly, usage_errors
+from orbitdata.cli.options import key_values
 from orbitdata.fly.registry import ENTRY_POINT_GROUP, list_pilots
 from orbitdata.sim.config import CameraConfig
 
@@ -38,16 +39,6 @@ def _numbers(kind, flag: str):
         return values
 
     return parse
-
-
-def _options(pairs: list[str]) -> dict[str, str]:
-    options = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip():
-            usage(f"--pilot-option {pair!r} must be KEY=VALUE, e.g. --pilot-option checkpoint=run/model.pt")
-        options[key.strip()] = value
-    return options
 
 
 def register(app: typer.Typer) -> None:
@@ -95,7 +86,7 @@ def register(app: typer.Typer) -> None:
                 import dataclasses
 
                 cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
-        options = _options(pilot_option)
+        options = key_values(pilot_option, "--pilot-option", "checkpoint=run/model.pt")
         factory = pilot_factory(pilot)
         with usage_errors(TypeError):  # an option the pilot's factory does not take
             try:
@@ -133,4 +124,4 @@ def register(app: typer.Typer) -> None:
             name = f"{pilot}+noise{thrust_noise:g}x{noise_hold}" if thrust_noise else pilot  # ThrustNoise's name
             flight = {"pilot_options": options, "image_codec": image_codec, "thrust_noise": thrust_noise,
                       "noise_hold": noise_hold}
-            json_out.write_text(json.dumps(grid_report(name, seed, cells, flight), indent=2, default=str) + "\n")
+            json_out.write_text(json.dumps(grid_report(name, seed, cells, flight), indent=2) + "\n")

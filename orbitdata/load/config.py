@@ -82,11 +82,11 @@ class WindowConfig:
                     f"the steps table has no {name!r} column (it has {list(available)}); "
                     "windows are cut by episode_index/frame_index, so this is not an orbitdata steps table"
                 )
-        if self.columns is None:
-            return available
-        missing = [c for c in self.columns if c not in available]
-        missing += [c for c in self.context_only if c not in available and c not in missing]
+        asked = dict.fromkeys((self.columns or ()) + self.context_only)  # context_only is within columns when given
+        missing = [c for c in asked if c not in available]
         if missing:
             raise ValueError(f"column(s) {missing} not in the dataset; available: {list(available)}")
+        if self.columns is None:
+            return available
         wanted = set(self.columns) | set(KEY_COLUMNS)
         return tuple(c for c in available if c in wanted)

@@ -38,16 +38,6 @@ def _numbers(text: str, kind, flag: str) -> list:
     return values
 
 
-def _settings(pairs: list[str]) -> dict[str, str]:
-    out = {}
-    for pair in pairs:
-        key, sep, value = pair.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            fail(f"--set {pair!r}: give KEY=VALUE, e.g. --set margin_per_speed=0.1")
-        out[key.strip()] = value.strip()
-    return out
-
-
 @friendly
 def closed_loop(
     run: Annotated[Optional[Path], typer.Argument(help="Stage I run folder (with its probe) or a policy run "
@@ -104,18 +94,20 @@ def closed_loop(
     import torch
 
     from orbitdata.config import GenerationConfig
+    from orbitdata.cli.options import key_values
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
+    from orbitmodel.plan.config import planner_config
 
     options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
                                      replan_every=replan_every, memory_frames=memory_frames, history=history,
                                      support=support, depth_head=depth_head.value if depth_head else None,
                                      compile=compile_rollout).items() if x is not None}
-    options.update(_settings(set_ or []))
+    options.update(key_values(set_ or [], "--set", "margin_per_speed=0.1"))
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
         variant=Variant(pilot.value), run=run, obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
         speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
-        planner=_planner(planner.value, options),
+        planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, video_dir=video,
         video_format=f".{video_format.value}")
@@ -126,15 +118,6 @@ def closed_loop(
     print_table(report, episodes)
     if json_out is not None:
         json_out.write_text(json.dumps(report, indent=2) + "\n")
-
-
-def _planner(preset: str, options: dict):
-    from orbitmodel.plan.config import planner_config
-
-    try:
-        return planner_config(preset, **options)
-    except (TypeError, ValueError) as err:
-        fail(f"planner settings: {err}")
 
 
 def _fly_with_progress(loop, json_out: Path | None):

@@ -148,7 +148,8 @@ def test_context_only_columns_hold_the_context_frames_alone(tiny_dataset_master,
             assert torch.equal(item[S.IMAGE], ref[S.IMAGE][..., :2, :, :, :])
             assert torch.equal(item[S.ACTION], ref[S.ACTION]) and torch.equal(item[IS_PAD], ref[IS_PAD])
     for bad, match in [(dict(context_only=[S.FRAME_INDEX]), "every frame"),
-                       (dict(columns=[S.ACTION], context_only=[S.IMAGE]), "not in columns")]:
+                       (dict(columns=[S.ACTION], context_only=[S.IMAGE]), "not in columns"),
+                       (dict(context_only=["observation.nothing"]), "not in the dataset")]:
         with pytest.raises(ValueError, match=match):
             load_windows(tiny_dataset_master, cache_dir=cache, **bad)
 
