@@ -70,6 +70,7 @@ def episode_filter(levels: list[str] | None, outcomes: list[str] | None) -> dict
 
 # ---- model steps of several frames (ModelConfig.frame_step) ------------------------------------
 FLAG_KEYS = (S.COLLISION, IS_PAD)  # per-frame flags: a model step has one if any of its frames has
+FRAME_STATES = "frame_states"  # not a dataset column: a model-step window's state at every frame (T s, 16)
 
 
 def group_actions(actions, frame_step: int):
@@ -104,22 +105,30 @@ def skip_frames(window: dict, frame_step: int, time_dim: int = 0) -> dict:
 
 class ModelStepWindows:
     """A ``WindowDataset`` of T s frames seen as windows of T model steps (:func:`skip_frames`);
-    the loader's API (len, items, batches, ``sampler``) and its attributes pass through."""
+    the loader's API (len, items, batches, ``sampler``) and its attributes pass through. With
+    ``frame_states`` each window also keeps its state at every frame (``FRAME_STATES``, T s x 16):
+    the targets of a probe that predicts every frame."""
 
-    def __init__(self, frames, frame_step: int):
-        self.frames, self.frame_step = frames, frame_step
+    def __init__(self, frames, frame_step: int, frame_states: bool = False):
+        self.frames, self.frame_step, self.frame_states = frames, frame_step, frame_states
 
     def __len__(self) -> int:
         return len(self.frames)
 
+    def _steps(self, window: dict, time_dim: int) -> dict:
+        out = skip_frames(window, self.frame_step, time_dim)
+        if self.frame_states:
+            out[FRAME_STATES] = window[S.STATE]
+        return out
+
     def __getitem__(self, i: int) -> dict:
-        return skip_frames(self.frames[i], self.frame_step)
+        return self._steps(self.frames[i], 0)
 
     def __getitems__(self, indices):
         from orbitdata.load.collate import WindowBatch
 
         batch = self.frames.__getitems__(indices)
-        return WindowBatch(skip_frames(batch.stacked, self.frame_step, 1)) if len(batch) else batch
+        return WindowBatch(self._steps(batch.stacked, 1)) if len(batch) else batch
 
     def sampler(self, *args, **kwargs):
         return self.frames.sampler(*args, **kwargs)
@@ -130,15 +139,17 @@ class ModelStepWindows:
         return getattr(self.frames, name)
 
 
-def load_model_windows(source, frame_step: int = 1, context: int = 1, horizon: int = 0, stride: int = 1, **kwargs):
+def load_model_windows(source, frame_step: int = 1, context: int = 1, horizon: int = 0, stride: int = 1,
+                       frame_states: bool = False, **kwargs):
     """``orbitdata.load_windows`` counted in model steps: windows of ``context + horizon`` steps of
-    ``frame_step`` frames each (``stride`` stays in frames). At ``frame_step`` 1 it is the loader's
-    own dataset, unchanged."""
+    ``frame_step`` frames each (``stride`` stays in frames); ``frame_states`` keeps every frame's
+    state too (:class:`ModelStepWindows`). At ``frame_step`` 1 it is the loader's own dataset,
+    unchanged."""
     from orbitdata.load import load_windows
 
     frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride,
                           **kwargs)
-    return frames if frame_step == 1 else ModelStepWindows(frames, frame_step)
+    return frames if frame_step == 1 else ModelStepWindows(frames, frame_step, frame_states)
 
 
 # ---- the validation split: held-out training episodes, where every choice is made ----------------

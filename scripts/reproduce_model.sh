@@ -40,9 +40,10 @@ use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folde
   mkdir -p "$GDIR"
 }
 use_grid 0 "$OUT/grid"
-EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=()
+EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=() VAL_WINDOWS=(--windows 90)
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
+  VAL_WINDOWS=(--windows 1 --horizon 5)
   DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2)
 fi
 
@@ -119,9 +120,15 @@ refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RU
 
 [ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
 # The flown run: preset cpu-step5 steps 5 frames per prediction, so 10 predictor calls imagine a
-# 50-frame plan. Rollout horizon in model steps.
+# 50-frame plan (rollout horizon in model steps); it holds 5 % of the training episodes out, the
+# validation split its recipe was chosen on. Scored there, and on the test split at the planner's
+# history of 2 latents.
 step train-step5 train_wm "$WMS" cpu-step5
 probe_and_eval "$WMS" 10
+step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA" --horizon 10 --split val \
+  --out "$WMS/eval-val" "${ROLLOUT[@]}"
+"$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
+"$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
 refit "$WMS"
 train_dp() {
   local resume=()

@@ -30,8 +30,10 @@ def presets() -> None:
         typer.echo(f"  {name:9s} {WorldModel(m).num_parameters() / 1e6:6.2f}M params  {m.image_size} px, "
                    f"patch {m.patch_size}, ViT {m.depth}x{m.width}, latent {m.latent_dim}, "
                    f"predictor {m.pred_depth}x{m.latent_dim}, {m.frame_step} frame(s) a step; window "
-                   f"{p.train.window}, batch {p.train.batch_size}; probe {probe.inputs}, {probe.integrator}, "
-                   f"{probe.train.epochs} epochs\n            {p.description}")
+                   f"{p.train.window}, batch {p.train.batch_size}, SIGReg {m.lambda_sigreg}"
+                   + (f", {p.train.val_fraction:.0%} of the train episodes held out" if p.train.val_fraction else "")
+                   + f"; probe {probe.inputs}, {probe.integrator}" + (", per frame" if probe.per_frame else "")
+                   + f", {probe.train.epochs} epochs\n            {p.description}")
     typer.echo("planner (orbitmodel eval closed-loop --planner NAME):")
     for name, factory in PLANNER_PRESETS.items():
         c = factory()

@@ -78,6 +78,8 @@ def closed_loop(
                                                                     "chunk [default: its config's]")] = None,
     ensemble: Annotated[Optional[float], typer.Option(min=0.0, help="a policy run: temporal ensembling of "
                                                                     "overlapping chunks with this decay")] = None,
+    draws: Annotated[Optional[int], typer.Option(min=1, help="a policy run: fly the mean of this many chunks "
+                                                             "sampled together [default: 1, one draw]")] = None,
     compile_rollout: Annotated[Optional[bool], typer.Option(
         "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
                                        "[default: the preset's, off]")] = None,
@@ -109,7 +111,8 @@ def closed_loop(
         speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
         planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
-        max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, video_dir=video,
+        max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, draws=draws,
+        video_dir=video,
         video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     if loop.name != req.variant.value and (options or planner.value != "paper"):

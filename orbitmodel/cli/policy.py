@@ -79,6 +79,9 @@ def eval_policy(
     max_windows: Annotated[int, typer.Option(min=0, help="measure only the first N windows (0 = all)")] = 0,
     batch_size: Annotated[int, typer.Option(min=1, help="windows sampled together")] = 64,
     seed: Annotated[int, typer.Option(min=0, help="sampling noise")] = 0,
+    samples: Annotated[int, typer.Option(
+        min=1, help="draws per window: above 1, the error splits into the samples' variance and the MSE of their "
+                    "mean")] = 1,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -89,12 +92,15 @@ def eval_policy(
 
     levels = tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS
     result = evaluate_policy(run, dataset, split=split.value, levels=levels, stride=stride, max_windows=max_windows,
-                             batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)))
+                             batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)),
+                             samples=samples)
     if as_json:
         typer.echo(json.dumps(result.to_dict()))
         return
     typer.echo(f"action MSE on {result.windows} {split.value} windows ({result.frames} frames, {'/'.join(levels)}): "
-               f"policy {result.policy:.5f}, mean action {result.mean_action:.5f} (ratio {result.ratio:.3f})")
+               f"policy {result.policy:.5f}, mean action {result.mean_action:.5f} (ratio {result.ratio:.3f})"
+               + (f"; over {samples} draws: variance {result.variance:.5f}, mean of the draws {result.sample_mean:.5f}"
+                  if samples > 1 else ""))
     for title, rows, label in (("executed index", result.per_index, lambda r: f"t+{r['index']}"),
                                ("distance to the goal at t", result.per_band,
                                 lambda r: f"{r['from_m']:g}-{r['to_m']:g} m" if r["to_m"] else f">= {r['from_m']:g} m")):
@@ -102,4 +108,6 @@ def eval_policy(
         for r in rows:
             ratio = "-" if r["ratio"] is None else f"{r['ratio']:.3f}"
             typer.echo(f"    {label(r):>9}: {r['frames']:6d} frames, ratio {ratio}"
-                       + (f" (policy {r['policy']:.5f}, mean action {r['mean_action']:.5f})" if r["frames"] else ""))
+                       + (f" (policy {r['policy']:.5f}, mean action {r['mean_action']:.5f}"
+                          + (f", variance {r['variance']:.5f}, mean of the draws {r['sample_mean']:.5f}"
+                             if samples > 1 else "") + ")" if r["frames"] else ""))

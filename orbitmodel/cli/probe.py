@@ -37,8 +37,15 @@ def probe(
     integrator: Annotated[Optional[Integrator], typer.Option(
         help="coasting: zero increments hold the world-frame velocity; upstream: p += dp, v += dv "
              "[default: the probe recipe of the run's preset]")] = None,
+    per_frame: Annotated[Optional[bool], typer.Option(
+        help="for a run stepping s > 1 frames: predict every frame's increments from each latent (10 s outputs) "
+             "instead of one per latent with the frames between interpolated [default: the probe recipe of the "
+             "run's preset]")] = None,
     loss_weights: Annotated[Optional[str], typer.Option(
         help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)")] = None,
+    increment_weight: Annotated[Optional[float], typer.Option(
+        min=0.0, help="weight of the MSE of the predicted per-step increments against the true ones, added to the "
+                      "state loss [default: the probe recipe's]")] = None,
     cache_windows: Annotated[Optional[int], typer.Option(
         min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)")] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
@@ -67,7 +74,8 @@ def probe(
             fail(f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
                  "(e.g. 1,1,1,1,100)")
     recipe = run_recipe(run).with_changes(
-        inputs=inputs.value if inputs else None, integrator=integrator.value if integrator else None, epochs=epochs,
+        inputs=inputs.value if inputs else None, integrator=integrator.value if integrator else None,
+        per_frame=per_frame, epochs=epochs, increment_weight=increment_weight,
         max_steps=max_steps, batch_size=batch_size, lr=lr, weights=weights, cache_windows=cache_windows,
         num_workers=workers, seed=seed)
     req = ProbeRequest(run=run, dataset=dataset, recipe=recipe, kind=kind, device=device.value, resume=resume,

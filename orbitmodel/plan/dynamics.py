@@ -12,21 +12,25 @@ states after each action (frames t+1..t+H), in the dataset's convention (``orbit
 from __future__ import annotations
 
 from collections import deque
-from typing import Callable
+from typing import Protocol
 
 import numpy as np
 import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, interpolate_frames, matrix_to_rot6d, rot6d_to_matrix, so3_exp
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.timing import Timings
 
-# probe(z_future (B, n, D), state0 (B, 16), z_last (B, D)) -> states (B, n, 16), frames t+1..t+n:
-# the PhysicsProbe's API; z_last, the latent of frame t, is what a probe reading latent changes
-# starts from (one reading the latents alone ignores it).
-Probe = Callable[[torch.Tensor, torch.Tensor, torch.Tensor], torch.Tensor]
+class Probe(Protocol):
+    """The PhysicsProbe's API: latents (B, n, D) of a world model stepping s frames, the state
+    (B, 16) and latent (B, D) of frame t, the planned actions (B, n, 8 s) of the n steps -> states
+    (B, n s, 16) of frames t+1..t+n s. z_last is what a probe reading latent changes starts from,
+    the actions what one reading thrusts reads (others ignore them)."""
+
+    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None,
+                  frame_step: int, actions: torch.Tensor | None = None) -> torch.Tensor: ...
 
 
 class RigidBodyDynamics:
@@ -114,9 +118,10 @@ class LearnedDynamics:
 
     A world model with ``frame_step`` s > 1 steps s frames at a time: its context latents are
     frames t, t-s, t-2s, ..., each step's action the s thrusts taken through it, and a plan of
-    H frames (a multiple of s) is H / s predictor calls. The probe gives the state every s
-    frames; the frames in between are interpolated linearly (position, velocity, attitude
-    columns, rates, fuel), so the cost sees one state per frame whatever the model's step.
+    H frames (a multiple of s) is H / s predictor calls. A per-frame probe gives every frame's
+    state; one giving the state every s frames has the frames between interpolated linearly
+    (position, velocity, attitude columns, rates, fuel), so the cost sees one state per frame
+    whatever the model's step (``PhysicsProbe.per_frame``).
     """
 
     needs_images = True
@@ -184,5 +189,4 @@ class LearnedDynamics:
             z_future = self.model.rollout(z_ctx, planned, self.history)  # (K, H / s, D)
         with self.timings("probe"):
             start = state0.float().expand(K, -1)
-            states = self.probe(z_future, start, z_ctx[:, -1])  # (K, H / s, 16)
-            return states if s == 1 else interpolate_frames(start, states, s)
+            return self.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -(H // s):])  # (K, H, 16)

@@ -23,6 +23,7 @@ from torch.utils.data import Dataset, DistributedSampler
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
 from orbitdata.load.collate import WindowBatch
+from orbitmodel.data import FRAME_STATES
 from orbitmodel.train.progress import Progress
 
 LATENT = "z_future"  # not a dataset column: the imagined latents of the horizon frames (N, n, D)
@@ -86,6 +87,8 @@ def imagine(world_model, windows, indices: list[int], context: int, device: torc
             out[LAST].append(z[:, -1].float().cpu())  # (b, D)
             out[S.STATE].append(states)
             out[S.ACTION].append(actions)
+            if FRAME_STATES in batch:  # a per-frame probe's targets
+                out.setdefault(FRAME_STATES, []).append(batch[FRAME_STATES])
             done = min(i + IMAGINE_BATCH, len(indices))
             progress.update(done, {"windows_per_s": done / (time.perf_counter() - started)})
     finally:

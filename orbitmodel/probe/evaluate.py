@@ -22,7 +22,7 @@ import torch
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
 from orbitmodel.data import group_actions, read_dataset_meta, split_selection
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, interpolate_frames, rot6d_to_matrix
+from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, rot6d_to_matrix
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.probe.train import load_stage1
@@ -81,7 +81,8 @@ def select_windows(dataset: str, context: int, horizon: int, count: int, seed: i
                     chosen.append(int(c))
                     break
     if len(chosen) < count:
-        raise RunError(f"only {len(chosen)} {split} episodes of {dataset} hold a collision-free window of "
+        which = f"{split} episodes" if episodes is None else f"held-out validation episodes ({split} split)"
+        raise RunError(f"only {len(chosen)} {which} of {dataset} hold a collision-free window of "
                        f"{context} + {horizon} frames; ask for --windows {len(chosen)} or fewer, or shorter horizons")
     return chosen, (collided[0] if collided else None)
 
@@ -92,15 +93,15 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
     """Every row's states (K, n, 16) for windows (K, context + n, ...) of frames, and the truth.
 
     A world model with ``frame_step`` s > 1 encodes every s-th context frame (``context`` = its
-    (m - 1) s + 1 frames), imagines n / s steps, and its probe's states are interpolated to every
-    frame as the planner does (:func:`~orbitmodel.kinematics.interpolate_frames`)."""
+    (m - 1) s + 1 frames) and imagines n / s steps; its probe gives every frame's state as the
+    planner reads it (:meth:`PhysicsProbe.per_frame`: predicted per frame, or interpolated)."""
     m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
     z_future = world_model.rollout(z, group_actions(actions[:, :m - 1 + n], s), history)  # (K, n / s, D)
-    pred = probe(z_future, states[:, m - 1], z[:, -1])  # (K, n / s, 16)
     out = {"truth": states[:, m:m + n].float(),
-           "probe": pred if s == 1 else interpolate_frames(states[:, m - 1].float(), pred, s),
+           "probe": probe.per_frame(z_future, states[:, m - 1], z[:, -1], s,
+                                    group_actions(actions[:, m - 1:m - 1 + n], s)),  # (K, n, 16)
            "constant_velocity": constant_velocity(states[:, m - 1], n, S.DT)}
     if state_mlp is not None:
         out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])
@@ -136,7 +137,8 @@ def markdown(result: dict) -> str:
              + (f", the world model seeing {result['history']} latents per imagined step" if "history" in result else "")
              + ", MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
              + (f"; the world model steps {result['frame_step']} frames at a time and its probe's states are "
-                "interpolated to every frame, as the planner reads them." if result.get("frame_step", 1) > 1 else "."),
+                + ("predicted for every frame" if result.get("per_frame") else "interpolated to every frame")
+                + ", as the planner reads them." if result.get("frame_step", 1) > 1 else "."),
              f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
              f"probe inputs: {result['probe_inputs']}; "
              f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.", "",
@@ -203,7 +205,7 @@ def evaluate_probe(req: EvalRequest) -> dict:
               "history": history,
               "horizons": list(req.horizons),
               "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
-              "probe_inputs": probe.config.inputs,
+              "probe_inputs": probe.config.inputs, "per_frame": probe.config.substeps > 1,
               "integrators": {"probe": probe.config.integrator,
                               **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
               "episodes": [int(windows.index.episode[c]) for c in chosen],

@@ -1,11 +1,13 @@
 """The physics probe: reads physical states out of a frozen world model's imagined latents.
 
     inc_k  = scale * MLP([z_k, z_k - z_{k-1}])    (B, n, 10) increments, per step (z_0: last context latent)
-    x_k    = integrate(x_0, inc_1..k)              (B, n, 16) states, frames t+1..t+n
+    x_k    = integrate(x_0, inc_1..k)              (B, n, 16) states, steps t+1..t+n
 
 (``config.inputs``: "latent+change" as above, or upstream's "latent", MLP(z_k) alone;
 ``config.integrator``: upstream's p += dp, v += dv, or "coasting", where zero increments hold
-the world-frame velocity; see ``probe.integrator``.)
+the world-frame velocity; see ``probe.integrator``; ``config.substeps`` u > 1: the MLP gives u
+increments per latent, (B, n u, 10), integrated over dt each, so a world model stepping s = u
+frames gets a state for every frame, the per-frame head.)
 
 x_0 is the true state at the last context frame. An increment is a change between frames, and a
 latent alone says where the craft is, not what just changed (``docs/model.md`` measures what
@@ -26,6 +28,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from orbitmodel.kinematics import interpolate_frames
 from orbitmodel.model.world_model import mlp
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import INCREMENT_DIM, integrate
@@ -35,12 +38,16 @@ PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a S
 
 
 class Increments(nn.Module):
-    """MLP features (..., d_in) -> increments (..., 10), in physical units."""
+    """MLP features (..., d_in) -> increments (..., 10), in physical units; a probe reading thrusts
+    adds a second MLP's increments from the step's (standardised) thrusts. Each frame's rate change
+    is linear in its thrusts; concatenated to the latent features they are learnt slowly, so they
+    get a branch of their own (docs/model.md)."""
 
     def __init__(self, config: ProbeConfig):
         super().__init__()
         self.config = config
         self.net = mlp(config.dims)
+        self.thrust_net = mlp(config.thrust_dims) if config.reads_thrust else None
         self.register_buffer("scale", torch.ones(INCREMENT_DIM))
         self.initialize_weights()
 
@@ -48,16 +55,22 @@ class Increments(nn.Module):
         """Default init for the hidden layers; zero on the output layer, so an untrained probe
         predicts zero increments (upstream integrator: p, v, w and fuel held, the attitude turning
         at w; coasting integrator: constant velocity) and training starts from a smooth loss."""
-        last = self.net[-1]
-        nn.init.zeros_(last.weight)
-        nn.init.zeros_(last.bias)
+        for net in (self.net, self.thrust_net):
+            if net is not None:
+                nn.init.zeros_(net[-1].weight)
+                nn.init.zeros_(net[-1].bias)
 
     def set_scale(self, scale: torch.Tensor) -> None:
         """Per-increment units (10,): the RMS of the true increments of the training windows."""
         self.scale.copy_(scale.clamp(min=1e-8))
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x) * self.scale
+    def forward(self, x: torch.Tensor, thrust: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, n, d_in) [and thrusts (B, n, action_dim)] -> (B, n substeps, 10): each step's
+        increments in time order."""
+        out = self.net(x)
+        if self.thrust_net is not None:
+            out = out + self.thrust_net(thrust)
+        return out.reshape(*out.shape[:-2], out.shape[-2] * self.config.substeps, -1) * self.scale
 
 
 class PhysicsProbe(nn.Module):
@@ -69,12 +82,30 @@ class PhysicsProbe(nn.Module):
             raise ValueError(f"PhysicsProbe reads latents; got a {config.kind!r} probe config")
         self.config = config
         self.increments = Increments(config)
+        if config.reads_thrust:  # thrusts in [0, 1] are ~0.1: standardised so the MLP sees them at the latents' scale
+            self.register_buffer("thrust_mean", torch.zeros(config.action_dim))
+            self.register_buffer("thrust_std", torch.ones(config.action_dim))
 
-    def forward(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None = None) -> torch.Tensor:
+    def set_thrust_stats(self, mean, std) -> None:
+        """Per-thruster mean and std (8,) of the training data (``meta/stats.json``), tiled over the
+        step's frames: a probe reading thrusts standardises them with these."""
+        reps = self.config.action_dim // len(mean)
+        self.thrust_mean.copy_(torch.as_tensor(mean, dtype=torch.float32).repeat(reps))
+        self.thrust_std.copy_(torch.as_tensor(std, dtype=torch.float32).clamp(min=1e-6).repeat(reps))
+
+    def forward(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None = None,
+                actions: torch.Tensor | None = None) -> torch.Tensor:
         """z_future (B, n, D) imagined latents of frames t+1..t+n, state0 (B, 16) the state at
-        frame t -> states (B, n, 16) at frames t+1..t+n (float32). A probe that reads latent
-        changes (``config.inputs == "latent+change"``) also needs z_last (B, D), the latent of
-        frame t (the last context latent)."""
+        frame t -> states (B, n substeps, 16) after each integration step (float32). A probe
+        that reads latent changes (``config.inputs`` "latent+change...") also needs z_last (B, D),
+        the latent of frame t (the last context latent); one that reads thrusts needs actions
+        (B, n, action_dim), the action that led to each imagined latent."""
+        inc = self.step_increments(z_future, z_last, actions)
+        return integrate(state0, inc, self.config.dt, self.config.coasting)
+
+    def step_increments(self, z_future: torch.Tensor, z_last: torch.Tensor | None = None,
+                        actions: torch.Tensor | None = None) -> torch.Tensor:
+        """The increments (B, n substeps, 10), in physical units, that :meth:`forward` integrates."""
         D = self.config.latent_dim
         if z_future.shape[-1] != D or z_future.ndim != 3:
             raise ValueError(f"z_future has shape {tuple(z_future.shape)}; expected (B, n, {D})")
@@ -86,7 +117,28 @@ class PhysicsProbe(nn.Module):
                                  f"context latent (got {got})")
             previous = torch.cat([z_last[:, None].to(z_future), z_future[:, :-1]], dim=1)  # (B, n, D)
             x = torch.cat([z_future, z_future - previous], dim=-1)  # (B, n, 2D)
-        return integrate(state0, self.increments(x), self.config.dt, self.config.coasting)
+        if self.config.reads_thrust:
+            want = (*z_future.shape[:2], self.config.action_dim)
+            if actions is None or tuple(actions.shape) != want:
+                got = None if actions is None else tuple(actions.shape)
+                raise ValueError(f"this probe reads each step's thrusts: pass actions {want}, the action that led to "
+                                 f"each imagined latent (got {got})")
+            return self.increments(x, (actions.to(x) - self.thrust_mean) / self.thrust_std)
+        return self.increments(x)
+
+    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None,
+                  frame_step: int, actions: torch.Tensor | None = None) -> torch.Tensor:
+        """Every frame's state (B, n frame_step, 16) from the latents of a world model stepping
+        ``frame_step`` frames: the probe's own states when it predicts each frame (substeps ==
+        frame_step), else its states at the latents interpolated linearly between them
+        (:func:`~orbitmodel.kinematics.interpolate_frames`). How the planner and ``eval probe`` read it."""
+        states = self(z_future, state0, z_last, actions)
+        u = self.config.substeps
+        if u == frame_step:
+            return states
+        if u != 1:
+            raise ValueError(f"this probe predicts {u} frames per latent; the world model steps {frame_step}")
+        return interpolate_frames(state0.float(), states, frame_step)
 
     @classmethod
     def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu",

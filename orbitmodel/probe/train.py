@@ -8,6 +8,12 @@ Per window of ``context + horizon`` frames (8 + 12 upstream)::
     x_hat    = probe(z_future, states[:, m-1], z[:, -1])         (B, n, 16)
     loss     = sum_q w_q MSE(x_hat[q], states[:, m:][q])         q = p, v, rot6d, w, fuel
 
+A world model stepping s frames counts m and n in its steps; a per-frame probe (``per_frame``:
+s increments per latent) is scored on the state of every one of the n s frames. With
+``increment_weight`` w > 0 the loss adds w MSE((inc_hat - inc) / scale), the per-step increments
+against the true ones (``increments_of``), which scores how a step's change divides among its
+frames directly rather than through every later state.
+
 The world model stays in eval mode (BatchNorm running statistics, no dropout) with
 ``requires_grad`` off, so its weights and buffers end the run bit-for-bit as they started.
 The probe is written to ``RUN/probe/`` (``RUN/probe-state/`` for the reference), a run folder
@@ -27,14 +33,14 @@ from torch import nn
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
 from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig
-from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
+from orbitmodel.data import FRAME_STATES, DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
 from orbitmodel.kinematics import FUEL, P, ROT, V, W
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
 from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
                                     save_cache, subset)
 from orbitmodel.probe.config import ProbeConfig
-from orbitmodel.probe.integrator import increments_of
+from orbitmodel.probe.integrator import increments_of, integrate
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.runs import (PROBE, RunDir, RunError, check_image_size, local_run_folder, read_run_config, resolve_run,
                              run_config)
@@ -59,7 +65,8 @@ class LatentObjective(nn.Module):
         super().__init__()
         self.world_model = world_model.requires_grad_(False).eval()
         self.probe = probe
-        self.context, self.weights = train.context, train.weights
+        self.context, self.weights, self.increment_weight = train.context, train.weights, train.increment_weight
+        self.frames = probe.config.substeps  # states per latent step: 1, or every frame of it
 
     def train(self, mode: bool = True) -> "LatentObjective":
         """Only the probe follows train/eval; the world model stays in eval (BatchNorm, dropout)."""
@@ -67,18 +74,30 @@ class LatentObjective(nn.Module):
         self.world_model.eval()
         return self
 
-    def forward(self, states, actions, images=None, z_future=None, z_last=None):
+    def forward(self, states, actions, images=None, z_future=None, z_last=None, frame_states=None):
         """states (B, m+n, 16); actions (B, m+n, 8); either images (B, m, 3, H, W) uint8 of the
         context, or the latents the world model imagined for this window (B, n, D) with the
-        last context latent (B, D)."""
-        m = self.context
+        last context latent (B, D); a per-frame probe of a world model stepping s frames also
+        needs frame_states (B, (m+n) s, 16), the window's state at every frame."""
+        m, s = self.context, self.frames
         if z_future is None:
             with torch.no_grad():
                 z = self.world_model.encode(images, states[:, :m])  # (B, m, D)
                 z_future = self.world_model.rollout(z, actions[:, :-1])  # (B, n, D)
                 z_last = z[:, -1]  # (B, D)
-        pred = self.probe(z_future.float(), states[:, m - 1], None if z_last is None else z_last.float())  # (B, n, 16)
-        return state_loss(pred, states[:, m:], self.weights)
+        taken = actions[:, m - 1:-1].float()  # (B, n, 8 s): the action that led to each imagined latent
+        c = self.probe.config
+        inc = self.probe.step_increments(z_future.float(), None if z_last is None else z_last.float(), taken)
+        pred = integrate(states[:, m - 1], inc, c.dt, c.coasting)  # (B, n s, 16)
+        target = states[:, m:] if s == 1 else frame_states[:, (m - 1) * s + 1:(m - 1) * s + 1 + pred.shape[1]]
+        loss, parts = state_loss(pred, target, self.weights)
+        if self.increment_weight:
+            true_inc = increments_of(torch.cat([states[:, m - 1:m], target], 1).float(), c.dt, c.coasting)
+            scale = self.probe.increments.scale
+            parts["increments"] = F.mse_loss(inc / scale, true_inc / scale)
+            loss = loss + self.increment_weight * parts["increments"]
+            parts["increments"] = parts["increments"].detach()
+        return loss, parts
 
 
 class StateObjective(nn.Module):
@@ -101,6 +120,8 @@ class ProbeJob:
 
     def inputs(self, batch: dict, step: int, device: torch.device) -> dict:
         out = {"states": batch[S.STATE].to(device), "actions": batch[S.ACTION].to(device)}
+        if FRAME_STATES in batch:
+            out["frame_states"] = batch[FRAME_STATES].to(device)
         if LATENT in batch:
             out["z_future"] = batch[LATENT].to(device)
             out["z_last"] = batch[LAST].to(device)
@@ -140,12 +161,15 @@ def run_recipe(run: str | Path) -> ProbeRecipe:
 def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1,
                     episodes=None) -> torch.Tensor:
     """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
-    (a seeded draw), the probe's output units; a step is ``frame_step`` frames."""
+    (a seeded draw), the probe's output units; a step is ``frame_step`` frames, or one frame
+    for a per-frame probe (``config.substeps == frame_step``)."""
+    per_frame = config.substeps > 1
     windows = load_model_windows(dataset, frame_step, split="train", context=train.context, horizon=train.horizon,
-                                 stride=train.window_stride, columns=[S.STATE], episodes=episodes)
+                                 stride=train.window_stride, columns=[S.STATE], episodes=episodes,
+                                 frame_states=per_frame)
     g = torch.Generator().manual_seed(train.seed)
     chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
-    states = collate_windows(windows.__getitems__(chosen))[S.STATE]  # (N, T, 16)
+    states = collate_windows(windows.__getitems__(chosen))[FRAME_STATES if per_frame else S.STATE]  # (N, T, 16)
     inc = increments_of(states, config.dt, config.coasting)  # (N, T-1, 10)
     return inc.flatten(0, 1).pow(2).mean(0).sqrt()  # (10,)
 
@@ -159,7 +183,8 @@ def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, met
     t = req.recipe.train
     key = cache_key(world_model=wm_print, config=asdict(world_model.config), package=version("orbitdata"),
                     dataset=meta.to_dict(), windows=chosen, context=t.context, horizon=t.horizon,
-                    stride=t.window_stride, **({"held_out": list(held_out)} if held_out else {}))
+                    stride=t.window_stride, **({"held_out": list(held_out)} if held_out else {}),
+                    **({"frame_states": True} if getattr(windows, "frame_states", False) else {}))
     cached = load_cache(folder, key)
     if cached is None:
         cached = imagine(world_model.to(device), windows, chosen, t.context, device)
@@ -169,11 +194,14 @@ def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, met
 
 def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: int) -> ProbeConfig:
     """The probe network of ``kind`` that ``recipe`` prescribes for a world model with latents of
-    ``latent_dim`` stepping ``frame_step`` frames (the state-only reference reads state and action)."""
+    ``latent_dim`` stepping ``frame_step`` frames (the state-only reference reads state and action);
+    a per-frame recipe predicts each of the ``frame_step`` frames of a latent step."""
     latent = kind == "latent"
+    substeps = frame_step if latent and recipe.per_frame else 1
     return ProbeConfig(kind=kind, latent_dim=latent_dim if latent else STATE_ACTION_DIM, hidden=recipe.hidden,
-                       layers=recipe.layers, dt=S.DT * frame_step, inputs=recipe.inputs if latent else "latent",
-                       integrator=recipe.integrator)
+                       layers=recipe.layers, dt=S.DT * frame_step / substeps,
+                       inputs=recipe.inputs if latent else "latent", integrator=recipe.integrator, substeps=substeps,
+                       action_dim=S.ACTION_DIM * frame_step if latent else 0)
 
 
 def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
@@ -205,7 +233,8 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite)
     episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
     windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
-                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]), episodes=episodes)
+                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]), episodes=episodes,
+                                 frame_states=config.substeps > 1)
     data = windows
     if t.cache_windows:
         chosen = subset(len(windows), t.cache_windows, t.seed)
@@ -224,6 +253,8 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         module = StateObjective(model, t)
     if not req.resume:
         model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step, episodes))
+        if latent and config.reads_thrust:
+            model.set_thrust_stats(meta.action_mean, meta.action_std)
     job = ProbeJob(module, model, req.kind, t.context)
     return fit(job, data, LoopSettings.of(t), run, device, resume=req.resume,
                label="probe" if latent else "state-only", on_log=on_log)

@@ -182,12 +182,16 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
-    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1} and report["threads"] >= 1
+    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1} and report["threads"] >= 1
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", *grid, "--json", str(out)])
+    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["draws"] == 2, res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--draws", "2", *grid])
+    assert res.exit_code == 2 and "--draws" in res.output and "Traceback" not in res.output
 
 
 class ChunkPolicy(torch.nn.Module):
     """Stands in for a trained policy: sample k (0-based) is the chunk k * 100 + frame offset, so an
-    executed action says which sample and which offset it came from."""
+    executed action says which sample and which offset it came from; row i of a batch adds 10 i."""
 
     def __init__(self):
         super().__init__()
@@ -197,7 +201,8 @@ class ChunkPolicy(torch.nn.Module):
         c = self.config
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
-        return chunk[None, :, None].expand(1, c.horizon, c.action_dim)
+        rows = 10 * torch.arange(len(states), dtype=torch.float32)  # (B,)
+        return (chunk[None, :, None] + rows[:, None, None]).expand(len(states), c.horizon, c.action_dim)
 
 
 def _fly_steps(pilot, steps: int) -> list[float]:
@@ -214,6 +219,11 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5}
+    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1}
+    averaged = DiffusionPilot(ChunkPolicy(), action_steps=2, draws=3)  # rows 0, 10, 20 of one call: their mean
+    assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
+    assert averaged.metadata()["draws"] == 3
+    with pytest.raises(ValueError, match="draws=0"):
+        DiffusionPilot(ChunkPolicy(), draws=0)
     with pytest.raises(ValueError, match="action_steps=16"):
         DiffusionPilot(ChunkPolicy(), action_steps=16)

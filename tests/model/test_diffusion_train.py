@@ -140,6 +140,15 @@ def test_evaluate(trained, tiny_dataset_master):
         assert total / result.frames == pytest.approx(result.policy, rel=1e-9)
     assert [r["index"] for r in result.per_index] == list(range(8))
     assert [(r["from_m"], r["to_m"]) for r in result.per_band] == [(0, 1), (1, 2), (2, 4), (4, 8), (8, None)]
+    # several draws: the first is the one scored alone; over the draws, a draw's error is the error of
+    # their mean plus (N-1)/N of their variance, in every band
+    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3)
+    assert three.policy == result.policy and three.per_band[0]["policy"] == result.per_band[0]["policy"]
+    for r in three.per_band + three.per_index:
+        if r["frames"]:
+            assert r["draws"] == pytest.approx(r["sample_mean"] + 2 / 3 * r["variance"], rel=1e-5)
+            assert r["variance"] > 0
+    assert three.draws == pytest.approx(three.sample_mean + 2 / 3 * three.variance, rel=1e-5)
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
                               "--device", "cpu", "--max-windows", "3"])
     assert cli.exit_code == 0, cli.output

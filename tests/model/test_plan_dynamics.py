@@ -110,9 +110,19 @@ class SpyModel(WorldModel):
         return super().rollout(z_context, actions, history)
 
 
-def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor) -> torch.Tensor:
-    """(B, n, D), (B, 16), (B, D) -> (B, n, 16): the initial state held, shifted by the latent mean."""
-    return state0[:, None].expand(-1, z_future.shape[1], -1) + z_future.mean(-1, keepdim=True)
+class StandInProbe:
+    """The probe's API (``per_frame``): the initial state held, shifted by the latent mean, at each
+    latent, and interpolated between them."""
+
+    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor, frame_step: int,
+                  actions: torch.Tensor | None = None):
+        from orbitmodel.kinematics import interpolate_frames
+
+        states = state0[:, None].expand(-1, z_future.shape[1], -1) + z_future.mean(-1, keepdim=True)  # (B, n, 16)
+        return states if frame_step == 1 else interpolate_frames(state0, states, frame_step)
+
+
+stand_in_probe = StandInProbe()
 
 
 def test_learned_dynamics_keeps_the_context_and_the_actions_between_frames():

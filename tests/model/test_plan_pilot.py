@@ -32,8 +32,16 @@ SMALL = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=5))
 AT_REST = np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32)
 
 
-def stand_in_probe(z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor) -> torch.Tensor:
-    return state0[:, None].expand(-1, z_future.shape[1], -1) + 0.01 * z_future[..., :1]
+class StandInProbe:
+    """The probe's API for a per-frame world model: the state held, nudged by the latents."""
+
+    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor, frame_step: int,
+                  actions: torch.Tensor | None = None):
+        assert frame_step == 1
+        return state0[:, None].expand(-1, z_future.shape[1], -1) + 0.01 * z_future[..., :1]
+
+
+stand_in_probe = StandInProbe()
 
 
 def learned_planner(config: PlannerConfig = SMALL, model: WorldModel | None = None) -> PlannerPilot:

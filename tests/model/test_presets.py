@@ -18,9 +18,14 @@ def test_each_preset_carries_its_probe_recipe():
 
 
 def test_the_flown_preset_is_the_cpu_preset_stepping_five_frames():
+    """cpu-step5 is cpu with 5 frames a step and what its validation episodes chose: SIGReg 0.4, 5 %
+    of the train episodes held out, a per-frame probe that reads each step's thrusts, scored on each
+    frame's increments too."""
     cpu, flown = get_preset("cpu"), get_preset("cpu-step5")
-    assert flown.model == dataclasses.replace(cpu.model, frame_step=5)
-    assert (flown.train, flown.probe) == (cpu.train, cpu.probe)
+    assert flown.model == dataclasses.replace(cpu.model, frame_step=5, lambda_sigreg=0.4)
+    assert flown.train == dataclasses.replace(cpu.train, val_fraction=0.05)
+    assert flown.probe == dataclasses.replace(cpu.probe, inputs="latent+change+thrust", per_frame=True,
+                                              train=dataclasses.replace(cpu.probe.train, increment_weight=100.0))
 
 
 def test_a_custom_preset_keeps_its_recipe_through_the_run_config():

@@ -223,3 +223,71 @@ def test_a_probe_reading_latent_changes_needs_the_last_context_latent():
     upstream = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16))  # reads z_k alone: z_last changes nothing
     torch.nn.init.normal_(upstream.increments.net[-1].weight, generator=torch.Generator().manual_seed(1))
     assert torch.equal(upstream(z, state), upstream(z, state, z_last))
+
+
+def test_a_per_frame_probe_gives_each_frame_of_a_latent_step_its_own_increments():
+    """substeps = s: the MLP's 10 s outputs of latent k are the increments of frames s(k-1)+1..sk,
+    in time order, each integrated over dt; per_frame returns them as they are, while a probe with
+    one increment per latent has the frames between its latents interpolated."""
+    from orbitmodel.kinematics import interpolate_frames
+
+    s, dt = 3, 0.04
+    probe = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16, dt=dt, substeps=s, integrator="coasting"))
+    assert probe.increments.net[-1].out_features == 10 * s
+    state = make_state(2, v=(0.4, 0, 0), w=(0, 0, 0.2))
+    z = torch.randn(2, 4, 8, generator=torch.Generator().manual_seed(0))
+    assert torch.allclose(probe(z, state), constant_velocity(state, 4 * s, dt))  # untrained: coasting, frame by frame
+    torch.nn.init.normal_(probe.increments.net[-1].weight, generator=torch.Generator().manual_seed(2))
+    inc = probe.increments(z)  # (2, 12, 10)
+    assert inc.shape == (2, 4 * s, 10)
+    raw = probe.increments.net(z).reshape(2, 4, s, 10) * probe.increments.scale
+    assert torch.equal(inc[:, s:2 * s], raw[:, 1])  # latent 2 owns frames 4..6
+    out = probe.per_frame(z, state, None, s)
+    assert torch.equal(out, integrate(state, inc, dt, coasting=True)) and out.shape == (2, 12, 16)
+    with pytest.raises(ValueError, match="predicts 3 frames per latent"):
+        probe.per_frame(z, state, None, 5)
+    knots = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16, dt=dt * s))
+    torch.nn.init.normal_(knots.increments.net[-1].weight, generator=torch.Generator().manual_seed(3))
+    assert torch.equal(knots.per_frame(z, state, None, s), interpolate_frames(state, knots(z, state), s))
+    with pytest.raises(ValueError, match="substeps"):
+        ProbeConfig(kind="state", latent_dim=STATE_ACTION_DIM, substeps=2)
+
+
+def test_a_probe_reading_thrusts_takes_each_steps_action():
+    """inputs "latent+change+thrust": the MLP reads [z_k, z_k - z_{k-1}] and a branch of its own a_k,
+    the action that led to latent k; it is refused without them, and different thrusts give
+    different increments."""
+    probe = PhysicsProbe(ProbeConfig(latent_dim=8, hidden=16, inputs="latent+change+thrust", action_dim=16))
+    assert probe.increments.net[0].in_features == 2 * 8 and probe.increments.thrust_net[0].in_features == 16
+    torch.nn.init.normal_(probe.increments.net[-1].weight, generator=torch.Generator().manual_seed(0))
+    torch.nn.init.normal_(probe.increments.thrust_net[-1].weight, generator=torch.Generator().manual_seed(2))
+    g = torch.Generator().manual_seed(1)
+    z, z_last, state = torch.randn(2, 3, 8, generator=g), torch.randn(2, 8, generator=g), make_state(2)
+    thrusts = torch.rand(2, 3, 16, generator=g)
+    with pytest.raises(ValueError, match="thrusts"):
+        probe(z, state, z_last)
+    with pytest.raises(ValueError, match="thrusts"):
+        probe(z, state, z_last, thrusts[..., :8])
+    out = probe(z, state, z_last, thrusts)
+    assert out.shape == (2, 3, 16)
+    # step k reads a_k, not later ones (the attitude product is orthonormalised once: ~1e-7 apart)
+    assert torch.allclose(out[:, :2], probe(z[:, :2], state, z_last, thrusts[:, :2]), atol=1e-6)
+    assert not torch.allclose(out, probe(z, state, z_last, thrusts.flip(-1)), atol=1e-6)
+    with pytest.raises(ValueError, match="action_dim"):
+        ProbeConfig(latent_dim=8, inputs="latent+change+thrust")
+
+
+def test_a_probe_reading_thrusts_standardises_them_with_the_data_stats():
+    """Thrusts enter the MLP as (a - mean) / std per thruster, tiled over the step's frames, so the
+    stats set at training start move the output exactly as shifting the thrusts would."""
+    probe = PhysicsProbe(ProbeConfig(latent_dim=4, hidden=8, inputs="latent+change+thrust", action_dim=16))
+    torch.nn.init.normal_(probe.increments.thrust_net[-1].weight, generator=torch.Generator().manual_seed(0))
+    g = torch.Generator().manual_seed(1)
+    z, z_last, state = torch.randn(1, 2, 4, generator=g), torch.randn(1, 4, generator=g), make_state(1)
+    thrusts = torch.rand(1, 2, 16, generator=g)
+    mean, std = torch.full((8,), 0.1), torch.full((8,), 0.05)
+    raw = probe(z, state, z_last, (thrusts - 0.1) / 0.05)
+    probe.set_thrust_stats(mean, std)
+    assert torch.equal(probe.thrust_mean, torch.full((16,), 0.1)) and "thrust_std" in probe.state_dict()
+    assert torch.allclose(probe(z, state, z_last, thrusts), raw, atol=1e-6)
+    assert "thrust_mean" not in PhysicsProbe(ProbeConfig(latent_dim=4, hidden=8)).state_dict()  # others load as before

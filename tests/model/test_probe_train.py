@@ -73,6 +73,67 @@ def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
     assert trained.increments.scale.ne(1).all()  # output units from the data
 
 
+def test_a_per_frame_probe_is_scored_on_every_frame_after_the_context(tiny_dataset_master):
+    """At frame step s, the per-frame probe's loss compares its n s states with the window's states
+    of frames (m-1) s + 1 .. (m-1+n) s; an untrained (coasting) probe's loss is recomputed here."""
+    from orbitmodel.data import FRAME_STATES, load_model_windows
+    from orbitmodel.model.world_model import WorldModel
+    from orbitmodel.probe.baselines import constant_velocity
+    from orbitmodel.probe.train import probe_config, state_loss
+
+    s, preset = 2, get_preset("tiny").with_model(frame_step=2)
+    t = preset.probe.train  # context 4, horizon 4 model steps
+    windows = load_model_windows(str(tiny_dataset_master), s, split="train", context=t.context, horizon=t.horizon,
+                                 columns=[S.IMAGE, S.STATE, S.ACTION], frame_states=True)
+    batch = windows.__getitems__([0, 5, 9]).stacked
+    assert batch[FRAME_STATES].shape[1] == (t.context + t.horizon) * s
+    assert torch.equal(batch[FRAME_STATES][:, ::s], batch[S.STATE])  # a model step's state is its first frame's
+    config = probe_config(preset.probe.with_changes(per_frame=True), "latent", preset.model.latent_dim, s)
+    assert (config.substeps, config.dt) == (s, S.DT)
+    objective = LatentObjective(WorldModel(preset.model), PhysicsProbe(config), t)
+    with torch.no_grad():
+        got = objective(batch[S.STATE], batch[S.ACTION], images=batch[S.IMAGE][:, :t.context],
+                        frame_states=batch[FRAME_STATES])[0]
+    start = (t.context - 1) * s
+    truth = batch[FRAME_STATES][:, start + 1:start + 1 + t.horizon * s]
+    expected = state_loss(constant_velocity(batch[S.STATE][:, t.context - 1], t.horizon * s, S.DT), truth, t.weights)[0]
+    assert torch.allclose(got, expected)
+
+
+def test_the_increment_loss_scores_each_frames_change_in_output_units(tiny_dataset_master):
+    """increment_weight w adds w x MSE((predicted - true increments) / scale), the true increments
+    taken between the window's consecutive frame states from the last context frame on."""
+    import dataclasses
+
+    from orbitmodel.data import FRAME_STATES, load_model_windows
+    from orbitmodel.model.world_model import WorldModel
+    from orbitmodel.probe.integrator import increments_of
+    from orbitmodel.probe.train import probe_config
+
+    s, preset = 2, get_preset("tiny").with_model(frame_step=2)
+    t = preset.probe.train
+    windows = load_model_windows(str(tiny_dataset_master), s, split="train", context=t.context, horizon=t.horizon,
+                                 columns=[S.IMAGE, S.STATE, S.ACTION], frame_states=True)
+    batch = windows.__getitems__([0, 5]).stacked
+    recipe = preset.probe.with_changes(per_frame=True, inputs="latent+change+thrust")
+    probe = PhysicsProbe(probe_config(recipe, "latent", preset.model.latent_dim, s))
+    torch.nn.init.normal_(probe.increments.thrust_net[-1].weight, generator=torch.Generator().manual_seed(0))
+    probe.increments.set_scale(torch.linspace(0.5, 2.0, 10))
+    world_model = WorldModel(preset.model)
+    args = dict(images=batch[S.IMAGE][:, :t.context], frame_states=batch[FRAME_STATES])
+    with torch.no_grad():
+        plain, _ = LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION], **args)
+        both, parts = LatentObjective(world_model, probe, dataclasses.replace(t, increment_weight=3.0))(
+            batch[S.STATE], batch[S.ACTION], **args)
+        z = world_model.encode(batch[S.IMAGE][:, :t.context], batch[S.STATE][:, :t.context])
+        z_future = world_model.rollout(z, batch[S.ACTION][:, :-1])
+        inc = probe.step_increments(z_future, z[:, -1], batch[S.ACTION][:, t.context - 1:-1])
+    start = (t.context - 1) * s
+    true = increments_of(batch[FRAME_STATES][:, start:start + 1 + t.horizon * s], S.DT, coasting=True)
+    expected = ((inc - true) / probe.increments.scale).pow(2).mean()
+    assert torch.allclose(parts["increments"], expected) and torch.allclose(both, plain + 3 * expected)
+
+
 class Interrupt(Exception):
     pass
 
@@ -165,10 +226,13 @@ def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, ti
     assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["epochs"] == 2
 
 
-def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset_master, tmp_path):
+@pytest.mark.parametrize("frame_step", [1, 2])
+def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset_master, tmp_path, frame_step):
     """eval probe, checked from outside: the windows it names (episode, first frame) are read
     straight from the Parquet shards, encoded, rolled out at the planner's history and probed here,
-    and the errors recomputed in numpy (the attitude as |log(R_true^T R_pred)|); the same Table I."""
+    and the errors recomputed in numpy at every frame (the attitude as |log(R_true^T R_pred)|); the
+    same Table I. At frame step 2 (the flown configuration's kind) the world model sees every other
+    frame and a per-frame probe reading each step's thrusts predicts both frames of each step."""
     import cv2
     import numpy as np
     import pyarrow.parquet as pq
@@ -178,14 +242,17 @@ def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
     run = tmp_path / "wm"  # trained long enough that its predictor, and so the history, matters
+    s = frame_step
     train_world_model(Stage1Request(dataset=str(tiny_dataset_master), device="cpu", out=run,
-                                    preset=get_preset("tiny").with_train(max_steps=30, lr=1e-2)))
-    train_probe(request(run, tiny_dataset_master, epochs=20, lr=1e-2))  # a probe whose output the latents move
+                                    preset=get_preset("tiny").with_model(frame_step=s).with_train(max_steps=30, lr=1e-2)))
+    # a probe whose output the latents move
+    flown_kind = {"per_frame": True, "inputs": "latent+change+thrust"} if s > 1 else {}
+    train_probe(request(run, tiny_dataset_master, epochs=20, lr=1e-2, **flown_kind))
     res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "2",
                               "--horizon", "4", "--history", "2", "--no-figures"])
     assert res.exit_code == 0, res.output
     table = json.loads((run / "eval" / TABLE_JSON).read_text())
-    assert table["history"] == 2 and "seeing 2 latents" in res.output
+    assert table["history"] == 2 and "seeing 2 latents" in res.output and table["per_frame"] == (s > 1)
     model, probe = WorldModel.from_pretrained(run), PhysicsProbe.from_pretrained(run)
     steps = pq.read_table(sorted((tiny_dataset_master / "data").glob("test-*.parquet"))).to_pylist()
     m, n = table["context"], max(table["horizons"])
@@ -199,9 +266,13 @@ def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset
         states = np.array([r[S.STATE] for r in rows], np.float32)  # (m + n, 16)
         actions = np.array([r[S.ACTION] for r in rows], np.float32)
         with torch.no_grad():
-            z = model.encode(torch.from_numpy(images).permute(0, 3, 1, 2)[None], torch.from_numpy(states[None, :m]))
-            z_future = model.rollout(z, torch.from_numpy(actions[None, :m - 1 + n]), history=2)
-            pred = probe(z_future, torch.from_numpy(states[None, m - 1]), z[:, -1])[0].double().numpy()  # (n, 16)
+            z = model.encode(torch.from_numpy(images[::s]).permute(0, 3, 1, 2)[None],
+                             torch.from_numpy(states[None, :m:s]))  # every s-th frame, the last at m - 1
+            grouped = torch.from_numpy(actions[:m - 1 + n]).reshape(1, (m - 1 + n) // s, 8 * s)  # s thrusts a step
+            z_future = model.rollout(z, grouped, history=2)
+            future = grouped[:, (m - 1) // s:] if s > 1 else None  # the thrusts of each imagined step
+            pred = probe(z_future, torch.from_numpy(states[None, m - 1]), z[:, -1], future)[0].double().numpy()  # (n, 16)
+        assert pred.shape == (n, 16)  # the probe itself gives every frame
         true = states[m:].astype(np.float64)
         rel = np.swapaxes(rot6d_to_matrix(true[:, 6:12]), -1, -2) @ rot6d_to_matrix(pred[:, 6:12])
         errors["position"].append(np.abs(pred[:, 0:3] - true[:, 0:3]).mean(-1))

@@ -8,6 +8,14 @@ baseline predicts, for every frame, the mean action of the training episodes of 
 Both are also given per executed index (t .. t+7) and per band of the distance to the goal at
 frame t. A policy that learnt something sits well below the baseline everywhere; flying it
 (``orbitmodel eval closed-loop``) is the real test.
+
+With ``samples`` N > 1 the policy samples each window N times (the first draw is the one scored
+above, what a flight executes) and the error splits in two: a sample's MSE is the squared error
+of the policy's mean action plus the variance of its samples (``variance``, unbiased over the N
+draws), and the mean of the N samples (``sample_mean``) carries the first part and 1/N of the
+second (over the draws, a draw's MSE = the mean's MSE + (N-1)/N of the variance, ``draws``). Where the variance is most of the error, the policy spreads its samples over actions
+the expert did not take at that moment (several ways round an obstacle, or noise), rather than
+missing the expert's action on average.
 """
 
 from __future__ import annotations
@@ -35,23 +43,33 @@ GOAL_BANDS_M = (1.0, 2.0, 4.0, 8.0)  # metres: upper edges of the bands of dista
 
 
 class _Errors:
-    """Squared errors of the policy and of the mean action, summed per group (an index, a band)."""
+    """Squared errors summed per group (an index, a band): of the policy's first sample
+    (``policy``), of the mean action (``mean_action``), and with several samples of the samples'
+    variance and of their mean."""
 
-    def __init__(self, groups: int):
-        self.policy, self.mean, self.frames = np.zeros(groups), np.zeros(groups), np.zeros(groups, np.int64)
+    def __init__(self, groups: int, names: tuple[str, ...]):
+        self.sums = {name: np.zeros(groups) for name in names}
+        self.frames = np.zeros(groups, np.int64)
 
-    def add(self, group: np.ndarray, policy: np.ndarray, mean: np.ndarray) -> None:
-        np.add.at(self.policy, group, policy)
-        np.add.at(self.mean, group, mean)
+    def add(self, group: np.ndarray, **values: np.ndarray) -> None:
+        for name, value in values.items():
+            np.add.at(self.sums[name], group, value)
         np.add.at(self.frames, group, 1)
+
+    def total(self, name: str) -> float:
+        return float(self.sums[name].sum() / self.frames.sum())
 
     def rows(self, labels: list[dict]) -> list[dict]:
         out = []
         for i, label in enumerate(labels):
             n = int(self.frames[i])
-            policy, mean = (self.policy[i] / n, self.mean[i] / n) if n else (None, None)
-            out.append({**label, "frames": n, "policy": policy, "mean_action": mean,
-                        "ratio": policy / mean if n and mean > 0 else None})
+            row = {**label, "frames": n, **{k: (float(v[i] / n) if n else None) for k, v in self.sums.items()}}
+            mean = row["mean_action"]
+            row["ratio"] = row["policy"] / mean if n and mean > 0 else None
+            for name in ("draws", "variance", "sample_mean"):
+                if name in row:
+                    row[f"{name}_ratio"] = row[name] / mean if n and mean > 0 else None
+            out.append(row)
         return out
 
 
@@ -67,6 +85,10 @@ class ActionMSE:
     mean_action: float  # baseline: always predict the training mean action
     per_index: tuple = ()  # per executed index k (frame t + k): {"index", "frames", "policy", "mean_action", "ratio"}
     per_band: tuple = ()  # per band of goal distance at frame t: {"from_m", "to_m", "frames", ...}
+    samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance" and "sample_mean"
+    draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
+    variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
+    sample_mean: float | None = None  # MSE of the mean of the N draws
 
     @property
     def ratio(self) -> float:
@@ -94,12 +116,13 @@ def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out
 @torch.no_grad()
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
-                    device: str = "cpu", use_ema: bool = True) -> ActionMSE:
+                    device: str = "cpu", use_ema: bool = True, samples: int = 1) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
-    start; the first ``max_windows`` when > 0), against predicting the mean training action."""
-    if stride < 1 or batch_size < 1 or max_windows < 0:
-        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}: "
-                         "give stride and batch size >= 1 and max_windows >= 0")
+    start; the first ``max_windows`` when > 0), against predicting the mean training action;
+    ``samples`` > 1 draws each window that many times and splits the error (module docstring)."""
+    if stride < 1 or batch_size < 1 or max_windows < 0 or samples < 1:
+        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}, samples={samples}: "
+                         "give stride, batch size and samples >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
     check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
@@ -114,29 +137,40 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     goals = episode_goals(dataset, source_split)
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
-    generator = torch.Generator().manual_seed(seed)
+    # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
+    generators = [torch.Generator().manual_seed(seed if k == 0 else int(np.random.SeedSequence([seed, k]).generate_state(1)[0]))
+                  for k in range(samples)]
     executed = slice(c.action_start, c.action_start + c.n_action_steps)
-    by_index, by_band = _Errors(c.n_action_steps), _Errors(len(GOAL_BANDS_M) + 1)
+    names = ("policy", "mean_action") + (("draws", "variance", "sample_mean") if samples > 1 else ())
+    by_index, by_band = _Errors(c.n_action_steps, names), _Errors(len(GOAL_BANDS_M) + 1, names)
     To = c.n_obs_steps
     batches = [list(range(first, min(first + batch_size, n))) for first in range(0, n, batch_size)]
     for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
         goal = goals[batch[S.EPISODE_INDEX][:, 0]]
-        sampled = policy.sample_actions(batch[S.IMAGE][:, :To], batch[S.STATE][:, :To], goal, generator,
-                                        use_ema).cpu()  # (B, H, 8)
+        draws = torch.stack([policy.sample_actions(batch[S.IMAGE][:, :To], batch[S.STATE][:, :To], goal, g,
+                                                   use_ema).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
         truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
         real = (~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])).numpy()  # (B, 8 steps)
-        policy_sq = ((sampled[:, executed] - truth) ** 2).mean(-1).numpy()  # (B, 8 steps)
-        mean_sq = ((baseline - truth) ** 2).mean(-1).numpy()
+        errors = {"policy": ((draws[0] - truth) ** 2).mean(-1), "mean_action": ((baseline - truth) ** 2).mean(-1)}
+        if samples > 1:
+            errors["draws"] = ((draws - truth) ** 2).mean(-1).mean(0)
+            errors["variance"] = draws.var(0, unbiased=True).mean(-1)
+            errors["sample_mean"] = ((draws.mean(0) - truth) ** 2).mean(-1)
+        errors = {k: v.numpy()[real] for k, v in errors.items()}  # (B, 8 steps) -> the real frames
         distance = (goal - batch[S.STATE][:, c.action_start, P]).norm(dim=-1).numpy()  # (B,) metres at frame t
         band = np.searchsorted(GOAL_BANDS_M, distance, side="right")  # (B,)
         index = np.broadcast_to(np.arange(c.n_action_steps), real.shape)
-        by_index.add(index[real], policy_sq[real], mean_sq[real])
-        by_band.add(np.broadcast_to(band[:, None], real.shape)[real], policy_sq[real], mean_sq[real])
+        by_index.add(index[real], **errors)
+        by_band.add(np.broadcast_to(band[:, None], real.shape)[real], **errors)
     frames = int(by_index.frames.sum())
     if frames == 0:
         raise ValueError(f"no real frames to compare in split {split!r} of {dataset}; use a smaller --stride")
     edges = (0.0, *GOAL_BANDS_M, None)
+    several = samples > 1
     return ActionMSE(split=split, levels=tuple(levels), windows=n, frames=frames,
-                     policy=float(by_index.policy.sum() / frames), mean_action=float(by_index.mean.sum() / frames),
+                     policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
                      per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
-                     per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])))
+                     per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
+                     samples=samples, draws=by_index.total("draws") if several else None,
+                     variance=by_index.total("variance") if several else None,
+                     sample_mean=by_index.total("sample_mean") if several else None)

@@ -6,7 +6,9 @@ Action chunking as in the reference: every ``action_steps`` control steps (the c
 queues those for frames t .. t + action_steps - 1. At the first step of an episode the one
 observation stands in for both (the reference's padding). With ``ensemble`` = m (temporal
 ensembling, as ACT does), every chunk sampled so far that covers the current frame votes, the
-oldest with weight 1 and each newer one exp(-m) times the one before.
+oldest with weight 1 and each newer one exp(-m) times the one before. With ``draws`` = N > 1 a
+chunk is the mean of N samples drawn together: the policy's mean action rather than one draw
+(``eval policy --samples`` measures what that removes from the error).
 
     pilot = load_policy_pilot("runs/policy")
     pilot.reset(task)                   # task.goal: metres, world frame relative to the start
@@ -40,7 +42,7 @@ class DiffusionPilot(Pilot):
     needs_images = True
 
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
-                 ensemble: float | None = None):
+                 ensemble: float | None = None, draws: int = 1):
         c = policy.config
         self.policy = policy.eval()
         self.use_ema = use_ema
@@ -51,6 +53,9 @@ class DiffusionPilot(Pilot):
         if ensemble is not None and not ensemble >= 0:
             raise ValueError(f"ensemble={ensemble}: give a decay >= 0 (0: every covering chunk votes alike)")
         self.ensemble = None if ensemble is None else float(ensemble)
+        if not int(draws) >= 1:
+            raise ValueError(f"draws={draws}: average 1 or more sampled chunks")
+        self.draws = int(draws)
         self._goal: torch.Tensor | None = None
         self._history: deque = deque(maxlen=c.n_obs_steps)
         self._queue: deque = deque()
@@ -95,30 +100,36 @@ class DiffusionPilot(Pilot):
 
     def _sample(self) -> np.ndarray:
         """A chunk from the last observations: (n, 8) thrusts for the current frame on."""
-        images = torch.stack([f[0] for f in self._history])[None]  # (1, To, 3, S, S)
-        states = torch.stack([f[1] for f in self._history])[None]  # (1, To, 16)
-        actions = self.policy.sample_actions(images, states, self._goal, self._generator, self.use_ema)[0]
+        n = self.draws
+        images = torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
+        states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
+        actions = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
+                                             self.use_ema).mean(0)  # (H, 8)
         return actions[self.policy.config.action_start:].cpu().numpy().astype(np.float32)
 
     def metadata(self) -> dict:
-        return {"action_steps": self.action_steps, "ensemble": self.ensemble}
+        return {"action_steps": self.action_steps, "ensemble": self.ensemble, "draws": self.draws}
 
 
 def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True, action_steps: int | None = None,
-                      ensemble: float | None = None) -> DiffusionPilot:
+                      ensemble: float | None = None, draws: int = 1) -> DiffusionPilot:
     """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub repo id."""
     return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema, action_steps=action_steps,
-                          ensemble=ensemble)
+                          ensemble=ensemble, draws=draws)
 
 
 def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", action_steps=None,
-                         ensemble=None) -> DiffusionPilot:
+                         ensemble=None, draws=1) -> DiffusionPilot:
     """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
-    (``--pilot-option action_steps=4``, ``--pilot-option ensemble=0.1``: see :class:`DiffusionPilot`)."""
+    (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``: see :class:`DiffusionPilot`)."""
     if run is None:
         raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
+    try:
+        draws = int(draws)
+    except ValueError:
+        raise ValueError(f"--pilot-option draws={draws}: give a whole number of chunks to average") from None
     pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
-                              ensemble=None if ensemble is None else float(ensemble))
+                              ensemble=None if ensemble is None else float(ensemble), draws=draws)
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
