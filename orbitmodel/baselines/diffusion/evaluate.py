@@ -13,7 +13,8 @@ With ``samples`` N > 1 the policy samples each window N times (the first draw is
 above, what a flight executes) and the error splits in two: a sample's MSE is the squared error
 of the policy's mean action plus the variance of its samples (``variance``, unbiased over the N
 draws), and the mean of the N samples (``sample_mean``) carries the first part and 1/N of the
-second (over the draws, a draw's MSE = the mean's MSE + (N-1)/N of the variance, ``draws``). Where the variance is most of the error, the policy spreads its samples over actions
+second; over the N draws, a draw's MSE (``draws``) is the mean's MSE plus (N-1)/N of the
+variance. Where the variance is most of the error, the policy spreads its samples over actions
 the expert did not take at that moment (several ways round an obstacle, or noise), rather than
 missing the expert's action on average.
 """
@@ -138,8 +139,8 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
-    generators = [torch.Generator().manual_seed(seed if k == 0 else int(np.random.SeedSequence([seed, k]).generate_state(1)[0]))
-                  for k in range(samples)]
+    seeds = [seed] + [int(np.random.SeedSequence([seed, k]).generate_state(1)[0]) for k in range(1, samples)]
+    generators = [torch.Generator().manual_seed(k) for k in seeds]
     executed = slice(c.action_start, c.action_start + c.n_action_steps)
     names = ("policy", "mean_action") + (("draws", "variance", "sample_mean") if samples > 1 else ())
     by_index, by_band = _Errors(c.n_action_steps, names), _Errors(len(GOAL_BANDS_M) + 1, names)
