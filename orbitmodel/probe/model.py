@@ -91,7 +91,9 @@ class PhysicsProbe(nn.Module):
         step's frames: a probe reading thrusts standardises them with these."""
         reps = self.config.action_dim // len(mean)
         self.thrust_mean.copy_(torch.as_tensor(mean, dtype=torch.float32).repeat(reps))
-        self.thrust_std.copy_(torch.as_tensor(std, dtype=torch.float32).clamp(min=1e-6).repeat(reps))
+        # a thruster the data never fires has std 0: its thrusts then pass through unscaled
+        std = torch.as_tensor(std, dtype=torch.float32)
+        self.thrust_std.copy_(torch.where(std > 1e-6, std, torch.ones_like(std)).repeat(reps))
 
     def forward(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None = None,
                 actions: torch.Tensor | None = None) -> torch.Tensor:

@@ -192,6 +192,14 @@ def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, met
     return cached
 
 
+def upgrade_probe_config(old: dict) -> dict:
+    """A probe run's config.json from before per-frame heads, thrust inputs and the increment loss,
+    as this version writes it (the defaults it trained with), so such a run resumes."""
+    probe = {"substeps": 1, "action_dim": 0, **old.get("probe", {})}
+    train = {"increment_weight": 0.0, **old.get("train", {})}
+    return {**old, "probe": probe, "train": train}
+
+
 def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: int) -> ProbeConfig:
     """The probe network of ``kind`` that ``recipe`` prescribes for a world model with latents of
     ``latent_dim`` stepping ``frame_step`` frames (the state-only reference reads state and action);
@@ -201,7 +209,7 @@ def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: in
     return ProbeConfig(kind=kind, latent_dim=latent_dim if latent else STATE_ACTION_DIM, hidden=recipe.hidden,
                        layers=recipe.layers, dt=S.DT * frame_step / substeps,
                        inputs=recipe.inputs if latent else "latent", integrator=recipe.integrator, substeps=substeps,
-                       action_dim=S.ACTION_DIM * frame_step if latent else 0)
+                       action_dim=S.ACTION_DIM * frame_step if latent and recipe.inputs.endswith("+thrust") else 0)
 
 
 def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
@@ -220,6 +228,9 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         raise RunError(f"{req.run} steps {frame_step} frames per prediction; the state-only reference reads "
                        "one frame's state and action, so train it on a per-frame run (`orbitmodel train` "
                        "without --frame-step)")
+    if not latent and t.increment_weight:
+        raise RunError(f"--increment-weight {t.increment_weight:g}: the state-only reference is scored on its states "
+                       "only; pass --increment-weight 0 with --state-only")
     config = probe_config(req.recipe, req.kind, stage1.preset.model.latent_dim, frame_step)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
@@ -230,7 +241,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     parts = {"probe": config.to_dict(), "train": t.to_dict(), "dataset": meta.to_dict(), "stage1_run": str(req.run)}
     if latent:
         parts["world_model"] = wm_print  # a probe reads one world model's latents only
-    run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite)
+    run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
     windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
                                  stride=t.window_stride, columns=list(COLUMNS[req.kind]), episodes=episodes,

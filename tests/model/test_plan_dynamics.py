@@ -118,6 +118,7 @@ class StandInProbe:
                   actions: torch.Tensor | None = None):
         from orbitmodel.kinematics import interpolate_frames
 
+        self.actions = actions  # what the planner hands a probe that reads thrusts
         states = state0[:, None].expand(-1, z_future.shape[1], -1) + z_future.mean(-1, keepdim=True)  # (B, n, 16)
         return states if frame_step == 1 else interpolate_frames(state0, states, frame_step)
 
@@ -195,6 +196,7 @@ def test_learned_dynamics_with_a_frame_step_sees_every_step_th_frame_and_grouped
     assert torch.allclose(actions[0, 0], torch.tensor(np.concatenate(taken[2:5])))  # thrusts of frames 2, 3, 4
     assert torch.allclose(actions[0, 1], torch.tensor(np.concatenate(taken[5:8])))
     assert torch.equal(actions[:, 2:], plan.reshape(4, 2, 24))
+    assert torch.equal(stand_in_probe.actions, plan.reshape(4, 2, 24))  # the probe reads the planned steps' thrusts
     with pytest.raises(ValueError, match="multiple of 3"):
         dyn.rollout(torch.zeros(16), torch.rand(4, 5, 8))
     # at the start of an episode the context holds the frames one step apart that exist: frame 3, not 1..3

@@ -134,6 +134,19 @@ def test_the_increment_loss_scores_each_frames_change_in_output_units(tiny_datas
     assert torch.allclose(parts["increments"], expected) and torch.allclose(both, plain + 3 * expected)
 
 
+def test_a_probe_run_from_before_per_frame_heads_resumes(run, tiny_dataset_master):
+    """A probe config.json without substeps, action_dim and increment_weight (written before they
+    existed) resumes: it reads as the defaults it trained with."""
+    train_probe(request(run, tiny_dataset_master, epochs=1))
+    path = run / "probe" / "config.json"
+    config = json.loads(path.read_text())
+    assert config["probe"]["action_dim"] == 0  # a probe that reads no thrusts records none
+    del config["probe"]["substeps"], config["probe"]["action_dim"], config["train"]["increment_weight"]
+    path.write_text(json.dumps(config))
+    req = request(run, tiny_dataset_master, epochs=1)
+    train_probe(ProbeRequest(run=req.run, dataset=req.dataset, recipe=req.recipe, device="cpu", resume=True))
+
+
 class Interrupt(Exception):
     pass
 
@@ -199,6 +212,8 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     config["preset"]["model"]["image_size"] = 32
     (other_size / "config.json").write_text(json.dumps(config))
     one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "holds 64 px")
+    one_line_error(runner.invoke(app, ["probe", str(run), data, "--state-only", "--increment-weight", "1"]),
+                   "--increment-weight")
     for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1"):
         one_line_error(runner.invoke(app, ["probe", str(run), data, "--loss-weights", bad]), "--loss-weights")
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
