@@ -165,6 +165,11 @@ INTEGRATORS = ("upstream", "coasting")
 INPUTS = ("latent", "latent+change", "latent+change+thrust")
 
 
+def reads_thrust(inputs: str) -> bool:
+    """Whether a probe with these ``inputs`` reads each step's thrusts (and so needs their width)."""
+    return inputs.endswith("+thrust")
+
+
 @dataclass(frozen=True)
 class ProbeTrainConfig:
     """How Stage II trains; the loop's fields (see ``train.loop.LoopSettings``) plus the windows

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from orbitdata import schema as S
-from orbitmodel.config import INPUTS, INTEGRATORS, KINDS
+from orbitmodel.config import INPUTS, INTEGRATORS, KINDS, reads_thrust
 
 
 @dataclass(frozen=True)
@@ -71,7 +71,7 @@ class ProbeConfig:
 
     @property
     def reads_thrust(self) -> bool:
-        return self.inputs.endswith("+thrust")
+        return reads_thrust(self.inputs)
 
     @property
     def dims(self) -> tuple[int, ...]:

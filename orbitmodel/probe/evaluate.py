@@ -98,10 +98,10 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
     m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
-    z_future = world_model.rollout(z, group_actions(actions[:, :m - 1 + n], s), history)  # (K, n / s, D)
+    steps = group_actions(actions[:, :m - 1 + n], s)  # (K, context steps - 1 + n / s, 8 s): taken, then imagined
+    z_future = world_model.rollout(z, steps, history)  # (K, n / s, D)
     out = {"truth": states[:, m:m + n].float(),
-           "probe": probe.per_frame(z_future, states[:, m - 1], z[:, -1], s,
-                                    group_actions(actions[:, m - 1:m - 1 + n], s)),  # (K, n, 16)
+           "probe": probe.per_frame(z_future, states[:, m - 1], z[:, -1], s, steps[:, -(n // s):]),  # (K, n, 16)
            "constant_velocity": constant_velocity(states[:, m - 1], n, S.DT)}
     if state_mlp is not None:
         out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])

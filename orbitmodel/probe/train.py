@@ -32,7 +32,7 @@ from torch import nn
 
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
-from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig
+from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig, reads_thrust
 from orbitmodel.data import FRAME_STATES, DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
 from orbitmodel.kinematics import FUEL, P, ROT, V, W
 from orbitmodel.model.world_model import WorldModel
@@ -209,7 +209,7 @@ def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: in
     return ProbeConfig(kind=kind, latent_dim=latent_dim if latent else STATE_ACTION_DIM, hidden=recipe.hidden,
                        layers=recipe.layers, dt=S.DT * frame_step / substeps,
                        inputs=recipe.inputs if latent else "latent", integrator=recipe.integrator, substeps=substeps,
-                       action_dim=S.ACTION_DIM * frame_step if latent and recipe.inputs.endswith("+thrust") else 0)
+                       action_dim=S.ACTION_DIM * frame_step if latent and reads_thrust(recipe.inputs) else 0)
 
 
 def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
