@@ -56,6 +56,19 @@ MAKES = {WORLD_MODEL: "orbitmodel train DATASET --out RUN", PROBE: "orbitmodel p
 REPO_ID = re.compile(r"^(?P<repo>[A-Za-z0-9][\w.-]*/[\w.-]+)(?:@(?P<revision>[\w./-]+))?$")  # owner/name[@rev]
 
 
+def extends(old: dict, new: dict) -> bool:
+    """Whether ``new`` is ``old`` with a larger ``preset.train.max_steps`` and nothing else changed
+    (a run trained further, ``--resume --extend``)."""
+    def steps(config: dict) -> int:
+        return int(config.get("preset", {}).get("train", {}).get("max_steps") or 0)
+
+    def without_steps(config: dict) -> dict:
+        preset = config.get("preset", {})
+        return {**config, "preset": {**preset, "train": {**preset.get("train", {}), "max_steps": None}}}
+
+    return 0 < steps(old) < steps(new) and without_steps(old) == without_steps(new)
+
+
 class RunError(ValueError):
     """A run folder that cannot be used as asked (the CLI turns it into one line, exit 2)."""
 
@@ -146,10 +159,15 @@ class RunDir:
         except json.JSONDecodeError as err:
             raise RunError(f"{path} is not valid JSON ({err}); train the run again") from None
 
-    def start(self, config: dict, resume: bool, overwrite: bool, upgrade=None) -> None:
+    def start(self, config: dict, resume: bool, overwrite: bool, upgrade=None, extend: bool = False) -> None:
         """Claim the folder for a run with ``config``: new, resumed, or overwritten. ``upgrade``:
         old config -> the same config as this version writes it (a resume then compares like with
-        like, and the file is rewritten in the current form)."""
+        like, and the file is rewritten in the current form). ``extend`` (with ``resume``): the
+        config may differ from the run's in a larger ``preset.train.max_steps`` only; the run goes
+        on to the new total (its schedule from the checkpoint on is the new total's, and
+        training.json records each segment's ``schedule_steps``)."""
+        if extend and not resume:
+            raise RunError("--extend continues a run: pass --resume with it")
         existing = self.path / CONFIG
         config = json.loads(json.dumps(config))  # as it reads back (tuples become lists)
         if existing.exists() and overwrite:
@@ -163,8 +181,11 @@ class RunDir:
             old = self.read_config()
             if upgrade is not None:
                 old = json.loads(json.dumps(upgrade(old)))
-            if old != config:
+            if old != config and not (extend and extends(old, config)):
                 changed = sorted(k for k in set(old) | set(config) if old.get(k) != config.get(k))
+                if extend:
+                    raise RunError(f"--extend: {self.path} may differ from this run in a larger --max-steps only "
+                                   f"(differs in: {', '.join(changed)}); give the run's other settings")
                 raise RunError(f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
                                "pass --overwrite to replace it, or choose another --out")
             if not resume:
@@ -174,6 +195,9 @@ class RunDir:
             raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
         elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):
             raise RunError(f"{self.path} is not empty and not an orbitmodel run; choose another --out")
+        if extend and existing.exists() and (self.path / WEIGHTS).exists() and self.read_config() != config:
+            (self.path / WEIGHTS).unlink()  # the old end's weights (its last checkpoint keeps them): the run is
+            # unfinished again until it reaches the new end
         self.path.mkdir(parents=True, exist_ok=True)
         write_json_atomic(existing, config)
 

@@ -3,7 +3,8 @@
 #   bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]
 # The headline chain: generate a 64 px dataset -> train the world model (preset cpu-step5, the run
 # the planner flies) -> eval rollout -> train the probe (Stage II) -> eval probe -> refit the depth
-# head -> train and evaluate the Diffusion Policy -> fly the planner (planner preset cpu), its MPPI
+# head -> train and evaluate the Diffusion Policy (and its variant without the camera, flown on the
+# test seeds only) -> fly the planner (planner preset cpu), its MPPI
 # oracles (and the depth oracle on the Stage I head), the Diffusion Policy, the expert and the risky
 # pilot on the grid (same seeds, none used by the dataset) -> Figure 6 -> the planner, oracles and
 # references again on a second validation seed (OUT/grid/seed2) -> every pilot on the test seeds
@@ -35,6 +36,9 @@ WMS="$OUT/wm-cpu-step5"
 WM="$OUT/wm-cpu"
 WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
+DPS="$OUT/dp-state"  # the policy without the camera (preset cpu-state), a second baseline row
+DP_STEPS=32000  # the policy trains the cpu preset's 16,000 steps, then on to this many (--resume --extend),
+# as long as its curve improved on the held-out episodes and validation seed 1 (docs/results.md)
 use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folder of their JSON
   GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed "$1") GDIR=$2
   mkdir -p "$GDIR"
@@ -44,7 +48,7 @@ EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=() VAL_
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
   VAL_WINDOWS=(--windows 1 --horizon 5)
-  DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2)
+  DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2) DP_STEPS=6
 fi
 
 TIMES="$OUT/timings.tsv"
@@ -98,6 +102,9 @@ DP_FLY=(--image-codec)  # how the policy flies: 8 actions per chunk (its config)
 fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
   fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}" "${DP_FLY[@]}"
 }
+fly_policy_state() {  # the policy without the camera -> grid/diffusion-state.json
+  fly "$GDIR/diffusion-state.json" "$BIN/orbitmodel" eval closed-loop "$DPS" "${GRID[@]}" "${FLIGHT[@]}"
+}
 train_wm() {  # train_wm RUN PRESET [OPTIONS...]: Stage I, resuming a cut run
   local run=$1 preset=$2 resume=()
   shift 2
@@ -130,15 +137,23 @@ step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA"
 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
 refit "$WMS"
-train_dp() {
-  local resume=()
-  [ -f "$DP/model.safetensors" ] && return 0
-  [ -d "$DP/checkpoints" ] && resume=(--resume)
-  "$BIN/orbitmodel" train-policy "$DATA" --preset cpu --val-fraction 0.05 --out "$DP" "${resume[@]}" "${STEPS[@]}"
+max_steps_of() { "$BIN/python" -c "import json, sys; print(json.load(open(sys.argv[1]))['preset']['train']['max_steps'])" "$1/config.json"; }
+train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with TO) on to TO steps; resumes a cut run
+  local run=$1 preset=$2 to=${3:-} resume=()
+  [ -d "$run/checkpoints" ] && resume=(--resume)
+  if [ ! -f "$run/config.json" ] || [ "$(max_steps_of "$run")" != "$to" ]; then
+    [ -f "$run/model.safetensors" ] || "$BIN/orbitmodel" train-policy "$DATA" --preset "$preset" --val-fraction 0.05 \
+      --out "$run" "${resume[@]}" "${STEPS[@]}"
+  fi
+  [ -n "$to" ] || return 0
+  [ -f "$run/model.safetensors" ] && [ "$(max_steps_of "$run")" = "$to" ] && return 0
+  "$BIN/orbitmodel" train-policy "$DATA" --preset "$preset" --val-fraction 0.05 --out "$run" --resume --extend --max-steps "$to"
 }
 if [ "$POLICY" = 1 ]; then
-  step train-diffusion train_dp
+  step train-diffusion train_policy "$DP" cpu "$DP_STEPS"
   step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+  step train-diffusion-state train_policy "$DPS" cpu-state
+  step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000
 fi
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 # learned_pair FLY / depth_pair FLY: FLY is fly_model (the planner's run) or fly_cpu (ALL=1's cpu run)
@@ -154,6 +169,7 @@ data_pilots() {  # the policy (unless POLICY=0), the expert and the risky pilot
   spawn fly_data expert; join; fly_data risky
 }
 with_policy() { if [ "$POLICY" = 1 ]; then echo "$@" diffusion; else echo "$@"; fi; }  # pilot names
+with_policies() { if [ "$POLICY" = 1 ]; then echo "$@" diffusion diffusion-state; else echo "$@"; fi; }
 step grid-learned learned_pair fly_model
 step grid-depth depth_pair fly_model
 step grid-rigid rigid_pair
@@ -180,13 +196,14 @@ for seed in 3 4 5; do
   step "grid-seed$seed-depth" depth_pair fly_model
   step "grid-seed$seed-rigid" rigid_pair
   step "grid-seed$seed-data" data_pilots
+  if [ "$POLICY" = 1 ]; then step "grid-seed$seed-state" fly_policy_state; fi
 done
 mkdir -p "$OUT/grid/test"
 FIG6=()
-for pilot in $(with_policy expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth \
-                           oracle-true-dyn-depth-stage1-head oracle-learned-dyn planner); do
+for pilot in $(with_policies expert risky oracle-true oracle-true-dyn-sensor oracle-true-dyn-depth \
+                             oracle-true-dyn-depth-stage1-head oracle-learned-dyn planner); do
   "$BIN/orbitmodel" eval pool "$OUT"/grid/seed{3,4,5}/"$pilot.json" --json "$OUT/grid/test/$pilot.json"
-  [ "$pilot" = oracle-true-dyn-depth-stage1-head ] || FIG6+=("$OUT/grid/test/$pilot.json")
+  case "$pilot" in oracle-true-dyn-depth-stage1-head|diffusion-state) ;; *) FIG6+=("$OUT/grid/test/$pilot.json") ;; esac
 done
 step figure6-test "$BIN/orbitmodel" eval figure6 "${FIG6[@]}" --out "$OUT/grid/test/figure6.png"
 use_grid 0 "$OUT/grid"

@@ -26,7 +26,9 @@ def register(app: typer.Typer, eval_app: typer.Typer) -> None:
 def train_policy(
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset folder")],
     out: Annotated[Path, typer.Option("--out", help="run folder to write (checkpoints, metrics, config)")],
-    preset: Annotated[PolicyPresetName, typer.Option(help="policy size and recipe: cpu or tiny")] = "cpu",
+    preset: Annotated[PolicyPresetName, typer.Option(
+        help="policy size and recipe: cpu; cpu-state (no camera: states and goal); cpu-state-obstacles (a "
+             "privileged diagnostic told the true obstacles, scored open loop only); tiny (tests)")] = "cpu",
     epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
     pad_before: Annotated[Optional[int], typer.Option(
@@ -47,6 +49,9 @@ def train_policy(
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     resume: Annotated[bool, typer.Option(help="continue the run in --out from its latest checkpoint")] = False,
     overwrite: Annotated[bool, typer.Option(help="replace a run already in --out")] = False,
+    extend: Annotated[bool, typer.Option(
+        help="with --resume and a larger --max-steps: train a run on past its end (the learning rate follows the "
+             "longer schedule from the checkpoint on)")] = False,
 ) -> None:
     """Train a Diffusion Policy (Chi et al. 2023) on the dataset's expert episodes.
 
@@ -63,7 +68,7 @@ def train_policy(
     req = PolicyRequest(dataset=dataset, preset=p, out=out,
                         levels=tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS,
                         outcomes=tuple(o.value for o in outcome or ()), device=device.value, resume=resume,
-                        overwrite=overwrite)
+                        overwrite=overwrite, extend=extend)
     echo_trained("the policy", train(req), out)
 
 

@@ -294,21 +294,22 @@ def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.de
             if step % s.save_every == 0 or step == total:
                 _save(run, job, optimizer, step, world, main)
                 if main:  # the segment so far: a run killed after this checkpoint still records its time
-                    run.add_training_segment(_segment(start, step, tally, world, device))
+                    run.add_training_segment(_segment(start, step, total, tally, world, device))
             tally.busy += time.perf_counter() - got
         if main:
             run.save_final(job.saved.state_dict(), step)
-            run.add_training_segment(_segment(start, step, tally, world, device))
+            run.add_training_segment(_segment(start, step, total, tally, world, device))
     finally:
         progress.close()
         metrics.close()
     return tally.result(step)
 
 
-def _segment(start: int, step: int, tally: _Tally, world: int, device: torch.device) -> dict:
-    """training.json's record of this process's part of the run: steps, wall time, hardware."""
+def _segment(start: int, step: int, total: int, tally: _Tally, world: int, device: torch.device) -> dict:
+    """training.json's record of this process's part of the run: steps, the schedule's length
+    (a run extended with ``--resume --extend`` changes it), wall time, hardware."""
     result = tally.result(step)
-    return {"from_step": start, "to_step": step, "seconds": round(result.seconds, 1),
+    return {"from_step": start, "to_step": step, "schedule_steps": total, "seconds": round(result.seconds, 1),
             "windows_per_s": round(result.windows_per_s, 2), "world_size": world, "device": str(device),
             "hardware": hardware(device), "torch": torch.__version__}
 

@@ -109,6 +109,42 @@ def test_flies_with_chunks_and_never_sees_the_obstacles(policy, env, monkeypatch
     assert calls[0] == (1, 2, 3, 64, 64)
 
 
+def test_a_policy_without_images_flies_without_a_camera():
+    """The state + goal variant (``PolicyConfig.images`` False): the env need not render, the pilot
+    reads the state only, and its actions do not depend on any image."""
+    from dataclasses import replace
+
+    from orbitdata.sim import CubeSatEnv
+    from orbitdata.sim.config import SimConfig
+
+    torch.manual_seed(0)
+    blind = DiffusionPolicy(replace(PRESET.model, images=False)).eval()
+    assert blind.net.obs_encoder.image is None
+    pilot = DiffusionPilot(blind)
+    assert pilot.needs_images is False
+    env = CubeSatEnv(SimConfig(render=False))
+    try:
+        obs, _ = env.reset(seed=3, options={"n_obstacles": 1, "speed": 1.0})
+        assert "image" not in obs
+        pilot.reset(Task(tuple(env.scenario.goal), 0.5, (0.0, 0.0, 0.0), 3))
+        read = set()
+        for _ in range(9):
+            o = SpyObs(obs)
+            action = pilot.act(o)
+            read |= {k for k in o.read if k in o}
+            obs, *_ = env.step(action.astype(np.float64))
+    finally:
+        env.close()
+    assert read == {"state"}
+    states, goal = torch.zeros(2, 2, 16), torch.tensor([[2.0, 0.0, 0.0]] * 2)
+    states[..., 6] = states[..., 9] = 1.0  # identity rotation
+    images = torch.randint(0, 256, (2, 2, 3, 64, 64), dtype=torch.uint8)
+    draw = [blind.sample_actions(x, states, goal, torch.Generator().manual_seed(0)) for x in (None, images)]
+    torch.testing.assert_close(draw[0], draw[1], rtol=0, atol=0)
+    with pytest.raises(ValueError, match="pass its images"):
+        DiffusionPolicy(PRESET.model).sample_actions(None, states, goal)
+
+
 def test_an_episode_is_reproducible_from_its_seed(policy):
     rng = np.random.default_rng(0)
     obs = {"image": rng.integers(0, 256, (64, 64, 3), dtype=np.uint8), "state": np.zeros(16, np.float32)}

@@ -93,6 +93,101 @@ def test_resume_is_exact(trained, tiny_dataset_master, tmp_path):
         assert torch.equal(straight[k], resumed[k]), k
 
 
+def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny_dataset_master, tmp_path):
+    """--resume --extend to more steps: the run goes on from its last checkpoint, the learning rate
+    follows the longer schedule from there, and training.json records each segment's schedule."""
+    import shutil
+
+    from orbitmodel.train.loop import LoopSettings, lr_at
+
+    out = tmp_path / "run"
+    shutil.copytree(trained[0], out)
+    longer = PRESET.with_train(max_steps=STEPS + 2)
+    logs = []
+    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu",
+                                   resume=True, extend=True), on_log=logs.append)
+    assert [r["step"] for r in logs] == [STEPS + 1, STEPS + 2]
+    settings = LoopSettings.of(longer.train)
+    assert [r["lr"] for r in logs] == pytest.approx([lr_at(s, STEPS + 2, settings) for s in (STEPS, STEPS + 1)])
+    config = json.loads((out / "config.json").read_text())
+    assert config["preset"]["train"]["max_steps"] == STEPS + 2
+    segments = json.loads((out / "training.json").read_text())["segments"]
+    assert [(s["from_step"], s["to_step"], s["schedule_steps"]) for s in segments] == [
+        (0, STEPS, STEPS), (STEPS, STEPS + 2, STEPS + 2)]
+    extended, ended = load_file(out / "model.safetensors"), load_file(trained[0] / "model.safetensors")
+    assert any(not torch.equal(extended[k], ended[k]) for k in ended)  # trained on past the old end
+    steps = [json.loads(l)["step"] for l in (out / "metrics.jsonl").read_text().splitlines()]
+    assert steps == list(range(1, STEPS + 3))
+
+
+def test_extend_refuses_what_is_not_a_longer_run(trained, tiny_dataset_master, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(trained[0], out)
+    before = (out / "model.safetensors").read_bytes()
+    cases = {  # args -> what the one line must say
+        ("--max-steps", str(STEPS + 2), "--extend"): "--extend continues a run",  # no --resume
+        ("--max-steps", str(STEPS + 2), "--resume", "--extend", "--lr", "0.01"): "larger --max-steps only",
+        ("--max-steps", str(STEPS - 1), "--resume", "--extend"): "larger --max-steps only",
+        ("--max-steps", str(STEPS + 2), "--resume"): "another config",  # a longer run needs --extend
+    }
+    for args, says in cases.items():
+        result = runner.invoke(app, ["train-policy", str(tiny_dataset_master), "--out", str(out), "--preset", "tiny",
+                                     "--device", "cpu", *args])
+        assert result.exit_code == 2, (args, result.output)
+        assert says in result.output and "Traceback" not in result.output, (args, result.output)
+    assert (out / "model.safetensors").read_bytes() == before  # nothing written is lost
+
+
+def test_the_state_only_variant_trains_and_evaluates_without_images(tiny_dataset_master, tmp_path):
+    blind = replace(PRESET, model=replace(PRESET.model, images=False))
+    windows = T.policy_windows(tiny_dataset_master, "train", blind, {"level": ["expert"]})
+    assert S.IMAGE not in windows[0]  # no image decoded
+    out = tmp_path / "run"
+    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=blind, out=out, device="cpu"))
+    assert json.loads((out / "config.json").read_text())["preset"]["model"]["images"] is False
+    policy = DiffusionPolicy.from_pretrained(out)
+    assert policy.net.obs_encoder.image is None
+    result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert result.frames > 0 and np.isfinite(result.policy)
+    assert get_policy_preset("cpu-state").model == replace(get_policy_preset("cpu").model, images=False)
+
+
+def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(tiny_dataset_master, tmp_path):
+    """preset cpu-state-obstacles' kind: told each episode's true obstacles (centre, bounding radius),
+    trained and scored open loop like any policy; no pilot flies it."""
+    from orbitdata.scenario.spec import Obstacle
+    from orbitmodel.baselines.diffusion.pilot import DiffusionPilot
+
+    told = replace(PRESET, model=replace(PRESET.model, images=False, obstacles=5))
+    lookup = T.episode_obstacles(tiny_dataset_master, "train", 5)
+    table = T.load_episode_table(tiny_dataset_master, "train", {})
+    for idx, row in zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.OBSTACLES).to_pylist()):
+        want = [[*o["center"], Obstacle(o["shape"], tuple(o["center"]), tuple(o["size"])).bounding_radius]
+                for o in row[:5]]
+        np.testing.assert_allclose(lookup[idx, :len(want)].numpy(), np.asarray(want, np.float32).reshape(-1, 4),
+                                   rtol=1e-6)
+        assert not lookup[idx, len(want):].any()  # empty slots
+    out = tmp_path / "run"
+    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=told, out=out, device="cpu"))
+    policy = DiffusionPolicy.from_pretrained(out)
+    result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert result.frames > 0 and np.isfinite(result.policy)
+    states = torch.zeros(1, 2, 16)
+    states[..., 6] = states[..., 9] = 1.0
+    goal, obstacles = torch.tensor([[3.0, 0.0, 0.0]]), torch.zeros(1, 5, 4)
+    obstacles[0, 0] = torch.tensor([1.5, 0.2, 0.0, 0.4])
+    moved = obstacles.clone()
+    moved[0, 0, 1] = -0.2  # the same obstacle on the other side
+    cond = [policy.condition(policy.ema, None, states, goal, o) for o in (obstacles, moved)]
+    assert not torch.equal(cond[0], cond[1])
+    with pytest.raises(ValueError, match="privileged"):
+        policy.condition(policy.ema, None, states, goal)
+    with pytest.raises(ValueError, match="cannot fly"):
+        DiffusionPilot(policy)
+
+
 def test_goal_join_reads_only_goals(tiny_dataset_master, monkeypatch):
     table = T.load_episode_table(tiny_dataset_master, "train", {})
     monkeypatch.setattr(T, "load_episode_table", lambda *a: table.drop_columns([S.OBSTACLES]))

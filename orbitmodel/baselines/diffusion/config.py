@@ -46,6 +46,12 @@ class PolicyConfig:
         clip_sample: clip the predicted clean sample to [-1, 1] at each step [clip_sample].
         prediction_type: what the U-Net predicts [prediction_type]: "epsilon" (the noise, the
             reference's default) or "sample" (the clean action sequence, its other option).
+        images: condition on the camera (False: on the states and the goal only, a variant that
+            cannot see obstacles; no image is decoded, rendered or encoded for it).
+        obstacles: privileged, a diagnostic: also condition on the episode's true obstacles, up to
+            this many (each one's centre relative to the craft in the body frame and its bounding
+            radius; 0: none). It measures how much of the action error the camera leaves; such a
+            policy cannot fly (no pilot is told the obstacles).
     """
 
     image_size: int = 64
@@ -65,8 +71,12 @@ class PolicyConfig:
     prediction_type: str = "epsilon"
     state_dim: int = STATE_DIM
     action_dim: int = ACTION_DIM
+    images: bool = True
+    obstacles: int = 0
 
     def __post_init__(self):
+        if self.obstacles < 0:
+            raise ValueError(f"obstacles={self.obstacles}: give the number of true obstacles to read, 0 for none")
         levels = 2 ** (len(self.down_dims) - 1)
         if self.horizon % levels:
             raise ValueError(f"horizon={self.horizon} must be divisible by {levels}: the U-Net halves it "
@@ -204,6 +214,22 @@ def _cpu() -> PolicyPreset:
                         PolicyConfig(prediction_type="sample"), train)
 
 
+def _cpu_state() -> PolicyPreset:
+    # The cpu policy and recipe without the camera: a second baseline row, and a cheap proxy of
+    # how much of the policy's skill needs no vision.
+    cpu = _cpu()
+    return PolicyPreset("cpu-state", "the cpu Diffusion Policy on states and goal only (no camera)",
+                        replace(cpu.model, images=False), cpu.train)
+
+
+def _cpu_state_obstacles() -> PolicyPreset:
+    # The diagnostic beside cpu-state: the same policy told the episode's true obstacles (up to 5,
+    # the dataset's most), so its error is what perfect perception would leave. It does not fly.
+    blind = _cpu_state()
+    return PolicyPreset("cpu-state-obstacles", "diagnostic: cpu-state told the true obstacles (privileged; does not fly)",
+                        replace(blind.model, obstacles=5), blind.train)
+
+
 def _tiny() -> PolicyPreset:
     model = PolicyConfig(cnn_channels=(8, 8, 8, 8), image_features=8, n_groups=4, down_dims=(8, 16),
                          step_embed=8, kernel_size=3, inference_steps=4)
@@ -212,7 +238,8 @@ def _tiny() -> PolicyPreset:
     return PolicyPreset("tiny", "a tiny policy for tests", model, train)
 
 
-POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {"cpu": _cpu, "tiny": _tiny}
+POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {"cpu": _cpu, "cpu-state": _cpu_state,
+                                                           "cpu-state-obstacles": _cpu_state_obstacles, "tiny": _tiny}
 
 
 def get_policy_preset(name: str) -> PolicyPreset:

@@ -35,7 +35,7 @@ from orbitdata.load.select import select_episodes
 from orbitdata.load.tables import load_episode_table, load_steps
 from orbitmodel.baselines.diffusion.config import read_policy_run
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
-from orbitmodel.baselines.diffusion.train import COLUMNS, DEFAULT_LEVELS, episode_goals
+from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, episode_goals, episode_obstacles, policy_columns
 from orbitmodel.data import ValidationSplit, episode_filter, read_dataset_meta, split_selection, training_episodes
 from orbitmodel.kinematics import P
 from orbitmodel.runs import check_image_size, resolve_run
@@ -126,7 +126,8 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                          "give stride, batch size and samples >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
-    check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
+    if c.images:
+        check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     held_out = read_policy_run(resolve_run(run)).validation
     source_split, episodes = ("train", None) if split == "train" else split_selection(split, held_out)
     chosen = episode_filter(list(levels), list(outcomes))
@@ -134,8 +135,9 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())
         chosen = [e for e in episodes if e in keep]
     windows = load_windows(dataset, split=source_split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
-                           stride=stride, pad=True, columns=list(COLUMNS), episodes=chosen)
+                           stride=stride, pad=True, columns=policy_columns(c), episodes=chosen)
     goals = episode_goals(dataset, source_split)
+    obstacles = episode_obstacles(dataset, source_split, c.obstacles) if c.obstacles else None  # privileged
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
@@ -148,8 +150,10 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     batches = [list(range(first, min(first + batch_size, n))) for first in range(0, n, batch_size)]
     for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
         goal = goals[batch[S.EPISODE_INDEX][:, 0]]
-        draws = torch.stack([policy.sample_actions(batch[S.IMAGE][:, :To], batch[S.STATE][:, :To], goal, g,
-                                                   use_ema).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
+        images = batch[S.IMAGE][:, :To] if c.images else None
+        told = obstacles[batch[S.EPISODE_INDEX][:, 0]] if obstacles is not None else None
+        draws = torch.stack([policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema,
+                                                   told).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
         truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
         real = (~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])).numpy()  # (B, 8 steps)
         errors = {"policy": ((draws[0] - truth) ** 2).mean(-1), "mean_action": ((baseline - truth) ** 2).mean(-1)}

@@ -44,7 +44,11 @@ class DiffusionPilot(Pilot):
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
                  ensemble: float | None = None, draws: int = 1):
         c = policy.config
+        if c.obstacles:
+            raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
+                             "cpu-state-obstacles): no pilot is told them, so it cannot fly; score it with eval policy")
         self.policy = policy.eval()
+        self.needs_images = c.images  # a policy without images flies without rendering
         self.use_ema = use_ema
         self.action_steps = int(c.n_action_steps if action_steps is None else action_steps)
         most = c.horizon - c.n_obs_steps + 1  # actions a sample holds from the current frame on
@@ -77,11 +81,11 @@ class DiffusionPilot(Pilot):
         if self._goal is None:
             raise RuntimeError("call reset(task) before act(obs)")
         c = self.policy.config
-        image, state = obs["image"], obs["state"]
-        if image.shape != (c.image_size, c.image_size, 3):
+        image, state = obs.get("image"), obs["state"]
+        if c.images and (image is None or image.shape != (c.image_size, c.image_size, 3)):
             raise ValueError(f"pilot {self.name!r} was trained on {c.image_size} px RGB images but the camera gives "
-                             f"{image.shape}; fly it with a {c.image_size} px camera")
-        frame = (torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1),  # (3, S, S) uint8
+                             f"{None if image is None else image.shape}; fly it with a {c.image_size} px camera")
+        frame = (torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1) if c.images else None,  # (3, S, S)
                  torch.as_tensor(state, dtype=torch.float32))  # (16,)
         while len(self._history) < c.n_obs_steps - 1:  # first step: repeat the first observation
             self._history.append(frame)
@@ -101,7 +105,8 @@ class DiffusionPilot(Pilot):
     def _sample(self) -> np.ndarray:
         """A chunk from the last observations: (n, 8) thrusts for the current frame on."""
         n = self.draws
-        images = torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
+        images = (torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
+                  if self.policy.config.images else None)
         states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
         actions = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
                                              self.use_ema).mean(0)  # (H, 8)
@@ -131,7 +136,7 @@ def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str
     pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
                               ensemble=None if ensemble is None else float(ensemble), draws=draws)
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
-    if size is not None and size != pilot.policy.config.image_size:
+    if pilot.needs_images and size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
                          f"{size} px; pass --image-size {pilot.policy.config.image_size}")
     return pilot

@@ -114,17 +114,34 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
     def unnormalise_actions(self, x: torch.Tensor) -> torch.Tensor:  # (..., 8) [-1, 1] -> thrust in [0, 1]
         return ((x + 1) / 2 * (self.action_high - self.action_low) + self.action_low).clamp(0.0, 1.0)
 
-    def condition(self, net: Denoiser, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-        """images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3) metres world frame -> (B, C)."""
-        x = images.float() / 127.5 - 1.0  # [-1, 1]
+    def condition(self, net: Denoiser, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
+                  obstacles: torch.Tensor | None = None) -> torch.Tensor:
+        """images (B, To, 3, S, S) uint8 (ignored, may be None, for a policy without images), states
+        (B, To, 16), goal (B, 3) metres world frame, and for a privileged policy obstacles (B, K, 4):
+        the true obstacles' centres (metres, world frame) and bounding radii (0: an empty slot) -> (B, C)."""
+        if self.config.images and images is None:
+            raise ValueError("this policy sees the camera: pass its images")
+        x = images.float() / 127.5 - 1.0 if self.config.images else None  # [-1, 1]
         s = self.normalise_states(states)
-        g = goal_in_body(states, goal[:, None, :].expand(-1, states.shape[1], -1)) / self.goal_scale  # (B, To, 3)
-        return net.obs_encoder(x, s, g)
+        To = states.shape[1]
+        g = goal_in_body(states, goal[:, None, :].expand(-1, To, -1)) / self.goal_scale  # (B, To, 3)
+        o = None
+        if self.config.obstacles:
+            if obstacles is None or obstacles.shape[1:] != (self.config.obstacles, 4):
+                raise ValueError(f"this policy is privileged: pass the episode's true obstacles as (B, "
+                                 f"{self.config.obstacles}, 4) centres and radii")
+            K = obstacles.shape[1]
+            here = (obstacles[:, None, :, 3:] > 0).to(states.dtype).expand(-1, To, -1, -1)  # (B, To, K, 1)
+            centre = goal_in_body(states[:, :, None].expand(-1, -1, K, -1),
+                                  obstacles[:, None, :, :3].expand(-1, To, -1, -1))  # (B, To, K, 3)
+            radius = obstacles[:, None, :, 3:].expand(-1, To, -1, -1)
+            o = torch.cat([centre * here / self.goal_scale, radius / self.goal_scale, here], -1)  # (B, To, K, 5)
+        return net.obs_encoder(x, s, g, o)
 
     # ---- training ---------------------------------------------------------------------------
     def loss(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor, actions: torch.Tensor,
-             generator: torch.Generator | None = None, real: torch.Tensor | None = None
-             ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+             generator: torch.Generator | None = None, real: torch.Tensor | None = None,
+             obstacles: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """DDPM loss on the noise (or the clean sample). images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
         actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU). ``real``
         (B, H) bool: the frames whose action was really taken; the others (the terminal frame's
@@ -134,7 +151,7 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         k = torch.randint(0, self.config.train_timesteps, (B,), generator=generator).to(a0.device)
         eps = torch.randn(a0.shape, generator=generator).to(a0.device)
         noisy = self.noise_scheduler.add_noise(a0, eps, k)
-        pred = self.net.unet(noisy, k, self.condition(self.net, images, states, goal))
+        pred = self.net.unet(noisy, k, self.condition(self.net, images, states, goal, obstacles))
         target = eps if self.config.prediction_type == "epsilon" else a0
         if real is None:
             return F.mse_loss(pred.float(), target), {}
@@ -142,9 +159,9 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         error = ((pred.float() - target) ** 2 * weight).sum() / (weight.sum() * pred.shape[-1]).clamp(min=1.0)
         return error, {"real_frames": weight.mean().detach()}
 
-    def forward(self, images, states, goal, actions, generator=None, real=None):
+    def forward(self, images, states, goal, actions, generator=None, real=None, obstacles=None):
         """The training loss (so DDP sees a forward): see :meth:`loss`."""
-        return self.loss(images, states, goal, actions, generator, real)
+        return self.loss(images, states, goal, actions, generator, real, obstacles)
 
     @torch.no_grad()
     def ema_update(self, step: int, power: float, max_decay: float) -> None:
@@ -158,13 +175,16 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
     # ---- acting -----------------------------------------------------------------------------
     @torch.no_grad()
     def sample_actions(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
-                       generator: torch.Generator | None = None, use_ema: bool = True) -> torch.Tensor:
+                       generator: torch.Generator | None = None, use_ema: bool = True,
+                       obstacles: torch.Tensor | None = None) -> torch.Tensor:
         """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
         observations of frames t-To+1 .. t (see :meth:`condition`). Execute
         ``[:, config.action_start : config.action_start + config.n_action_steps]``."""
         net = self.ema if use_ema else self.net
         device = self.state_mean.device
-        cond = self.condition(net, images.to(device), states.to(device).float(), goal.to(device).float())
+        images = images.to(device) if images is not None else None
+        obstacles = obstacles.to(device).float() if obstacles is not None else None
+        cond = self.condition(net, images, states.to(device).float(), goal.to(device).float(), obstacles)
         c = self.config
         x = torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
         x = denoise(self.sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)

@@ -41,6 +41,12 @@ STREAM_NOISE, STREAM_SHIFT = 0, 1
 
 
 # ---- data ------------------------------------------------------------------------------------
+def policy_columns(model) -> list[str]:
+    """The columns a policy with ``model`` (a PolicyConfig) reads: COLUMNS, less the image for one
+    that does not see the camera."""
+    return [c for c in COLUMNS if model.images or c != S.IMAGE]
+
+
 def episode_goals(source: str | Path, split: str) -> torch.Tensor:
     """(max episode_index + 1, 3) goals, metres, world frame relative to the start; NaN rows for
     episodes not in the split. Reads only the goal and index columns of the episodes table."""
@@ -49,6 +55,22 @@ def episode_goals(source: str | Path, split: str) -> torch.Tensor:
     goals = np.asarray(table.column(S.GOAL).to_pylist(), dtype=np.float32).reshape(-1, 3)
     lookup = torch.full((int(ids.max()) + 1, 3), float("nan"))
     lookup[torch.from_numpy(ids)] = torch.from_numpy(goals)
+    return lookup
+
+
+def episode_obstacles(source: str | Path, split: str, slots: int) -> torch.Tensor:
+    """(max episode_index + 1, slots, 4): each episode's first ``slots`` true obstacles as centre
+    (metres, world frame relative to the start) and bounding radius; empty slots are zeros. Only a
+    privileged diagnostic policy (``PolicyConfig.obstacles``) reads them."""
+    from orbitdata.scenario.spec import Obstacle
+
+    table = load_episode_table(source, split, {}).select([S.EPISODE_INDEX, S.OBSTACLES])
+    ids = table.column(S.EPISODE_INDEX).to_numpy().astype(np.int64)
+    lookup = torch.zeros((int(ids.max()) + 1, slots, 4))
+    for idx, row in zip(ids, table.column(S.OBSTACLES).to_pylist()):
+        for k, ob in enumerate(row[:slots]):
+            o = Obstacle(ob["shape"], tuple(ob["center"]), tuple(ob["size"]), tuple(ob["quat"]))
+            lookup[idx, k] = torch.tensor([*o.center, o.bounding_radius])
     return lookup
 
 
@@ -80,18 +102,25 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
 class PolicyJob:
     """What the shared loop needs: the module, how a batch becomes its inputs, the EMA update."""
 
-    def __init__(self, policy: DiffusionPolicy, preset: PolicyPreset, goals: torch.Tensor, rank: int = 0):
+    def __init__(self, policy: DiffusionPolicy, preset: PolicyPreset, goals: torch.Tensor, rank: int = 0,
+                 obstacles: torch.Tensor | None = None):
         self.module = self.saved = policy
         self.preset = preset
         self.goals = goals
+        self.obstacles = obstacles  # (episodes, K, 4): a privileged policy's (episode_obstacles)
         self.rank = rank
 
     def inputs(self, batch: dict, step: int, device: torch.device) -> dict:
         t, To = self.preset.train, self.preset.model.n_obs_steps
-        images = random_shift(batch[S.IMAGE][:, :To], t.shift, step_generator(t.seed, step, STREAM_SHIFT, self.rank))
+        images = None
+        if self.preset.model.images:
+            images = random_shift(batch[S.IMAGE][:, :To], t.shift,
+                                  step_generator(t.seed, step, STREAM_SHIFT, self.rank)).to(device)
         goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
-        inputs = {"images": images.to(device), "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
+        inputs = {"images": images, "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
                   "actions": batch[S.ACTION].to(device), "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
+        if self.preset.model.obstacles:
+            inputs["obstacles"] = self.obstacles[batch[S.EPISODE_INDEX][:, 0]].to(device)
         if t.mask_padding:  # the terminal frame's and the padding's zero thrust are no action anyone took; they
             # add no loss (else the policy learns to cut thrust near the goal)
             inputs["real"] = (~(batch[IS_PAD] | batch[S.IS_LAST])).to(device)
@@ -110,8 +139,8 @@ def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episode
     (:class:`PadBefore`)."""
     m = preset.model
     windows = load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
-                           stride=stride or preset.train.window_stride, pad=True, columns=list(COLUMNS),
-                           episodes=episodes, context_only=[S.IMAGE])
+                           stride=stride or preset.train.window_stride, pad=True, columns=policy_columns(m),
+                           episodes=episodes, context_only=[S.IMAGE] if m.images else [])
     return PadBefore(windows, pad_before) if pad_before else windows
 
 
@@ -175,6 +204,7 @@ class PolicyRequest:
     device: str = "auto"
     resume: bool = False
     overwrite: bool = False
+    extend: bool = False  # with resume: train the run on to a larger max_steps
 
 
 def upgrade_config(old: dict) -> dict:
@@ -195,7 +225,8 @@ def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes,
 
 def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
     """A fresh policy (initialised from the preset's seed) with the dataset's normalisation."""
-    check_image_size(meta, preset.model.image_size, f"policy preset {preset.name!r}")
+    if preset.model.images:
+        check_image_size(meta, preset.model.image_size, f"policy preset {preset.name!r}")
     torch.manual_seed(preset.train.seed)  # initialisation
     policy = DiffusionPolicy(preset.model)
     low, high = action_range(meta.source)
@@ -214,10 +245,12 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
     if rank == 0:
         run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
-                  overwrite=req.overwrite, upgrade=upgrade_config)
+                  overwrite=req.overwrite, upgrade=upgrade_config, extend=req.extend)
     windows = policy_windows(req.dataset, "train", req.preset,
                              training_episodes(req.dataset, req.levels, req.outcomes, held_out),
                              pad_before=t.pad_before)
     goals = episode_goals(req.dataset, "train")
-    return fit(PolicyJob(policy, req.preset, goals, rank), windows, LoopSettings.of(req.preset.train), run, device,
+    slots = req.preset.model.obstacles
+    obstacles = episode_obstacles(req.dataset, "train", slots) if slots else None
+    return fit(PolicyJob(policy, req.preset, goals, rank, obstacles), windows, LoopSettings.of(req.preset.train), run, device,
                resume=req.resume, label="train-policy", on_log=on_log)
