@@ -49,6 +49,8 @@ def main(argv=None) -> int:
     parser.add_argument("snapshots", type=Path, help="folder of step-N snapshot runs")
     parser.add_argument("--out", type=Path, required=True, help="PNG to write")
     parser.add_argument("--json", type=Path, help="write the points here too")
+    parser.add_argument("--mark", type=int, action="append", default=[],
+                        help="a dotted line at this step, e.g. where the run was trained on (--resume --extend)")
     args = parser.parse_args(argv)
     points = read_points(args.snapshots)
     if not points:
@@ -77,6 +79,9 @@ def main(argv=None) -> int:
         b.set(xlabel="training step", ylabel="success %, 95 % CI", ylim=(0, 100),
               title=f"closed loop: {'/'.join(sorted({str(n) for n, _ in fly[0]['settings']}))} obstacle(s), "
                     f"{fly[0]['episodes']} episodes, seed {fly[0]['flight_seed']}")
+    for axis in (a, b):
+        for step in args.mark:
+            axis.axvline(step, color="grey", ls=":", lw=1)
     fig.tight_layout()
     args.out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.out, dpi=120)

@@ -80,6 +80,9 @@ def closed_loop(
                                                                     "overlapping chunks with this decay")] = None,
     draws: Annotated[Optional[int], typer.Option(min=1, help="a policy run: fly the mean of this many chunks "
                                                              "sampled together [default: 1, one draw]")] = None,
+    noise_scale: Annotated[Optional[float], typer.Option(
+        min=0.0, help="a policy run: scale of the noise each draw starts from (0: one deterministic chunk per "
+                      "observation) [default: 1, as trained]")] = None,
     compile_rollout: Annotated[Optional[bool], typer.Option(
         "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
                                        "[default: the preset's, off]")] = None,
@@ -112,7 +115,7 @@ def closed_loop(
         planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, draws=draws,
-        video_dir=video,
+        noise_scale=noise_scale, video_dir=video,
         video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     if loop.name != req.variant.value and (options or planner.value != "paper"):

@@ -87,6 +87,11 @@ def eval_policy(
     samples: Annotated[int, typer.Option(
         min=1, help="draws per window: above 1, the error splits into the samples' variance and the MSE of their "
                     "mean")] = 1,
+    without_obstacles: Annotated[bool, typer.Option(
+        help="tell a privileged policy (cpu-state-obstacles) no obstacle: how much it relies on them")] = False,
+    noise_scale: Annotated[float, typer.Option(
+        min=0.0, help="scale of the noise each draw starts from, as eval closed-loop's (0: one deterministic chunk "
+                      "per window)")] = 1.0,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -98,7 +103,7 @@ def eval_policy(
     levels = tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS
     result = evaluate_policy(run, dataset, split=split.value, levels=levels, stride=stride, max_windows=max_windows,
                              batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)),
-                             samples=samples)
+                             samples=samples, without_obstacles=without_obstacles, noise_scale=noise_scale)
     if as_json:
         typer.echo(json.dumps(result.to_dict()))
         return

@@ -159,6 +159,26 @@ def test_an_episode_is_reproducible_from_its_seed(policy):
     assert not np.array_equal(first_actions(1), first_actions(2))
 
 
+def test_noise_scale_gathers_the_draws(policy):
+    """sample_actions' noise_scale scales the noise DDIM starts from: at 0 every draw is the same
+    chunk whatever the generator, and a smaller scale spreads the draws less."""
+    states = torch.zeros(64, 2, 16)
+    states[..., 6] = states[..., 9] = 1.0
+    images = torch.randint(0, 256, (1, 2, 3, 64, 64), dtype=torch.uint8, generator=torch.Generator().manual_seed(0))
+    images, goal = images.expand(64, -1, -1, -1, -1), torch.tensor([[2.0, 1.0, 0.0]]).expand(64, -1)
+
+    def draws(scale, seed):
+        return policy.sample_actions(images, states, goal, torch.Generator().manual_seed(seed), noise_scale=scale)
+
+    zero = draws(0.0, 1)
+    torch.testing.assert_close(zero, draws(0.0, 2), rtol=0, atol=0)
+    torch.testing.assert_close(zero, zero[:1].expand_as(zero), rtol=0, atol=0)  # 64 draws, one chunk
+    spread = {s: draws(s, 1).var(0).mean().item() for s in (0.3, 1.0)}
+    assert 0 < spread[0.3] < spread[1.0]
+    with pytest.raises(ValueError, match="noise_scale=-0.5"):
+        draws(-0.5, 1)
+
+
 def test_errors(policy):
     pilot = DiffusionPilot(policy)
     obs = {"image": np.zeros((32, 32, 3), np.uint8), "state": np.zeros(16, np.float32)}
@@ -192,6 +212,10 @@ def test_loads_from_a_run_folder(policy, tmp_path):
     config = GenerationConfig()  # renders 224 px by default
     with pytest.raises(ValueError, match="--image-size 64"):
         make_diffusion_pilot(config, run=str(run.path))
+    # --pilot-option values arrive as text
+    assert make_diffusion_pilot(None, run=str(run.path), noise_scale="0.5", draws="2").metadata()["noise_scale"] == 0.5
+    with pytest.raises(ValueError, match="noise_scale=cold"):
+        make_diffusion_pilot(None, run=str(run.path), noise_scale="cold")
 
 
 def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
@@ -218,11 +242,16 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
-    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1} and report["threads"] >= 1
+    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1, "noise_scale": 1.0}
+    assert report["threads"] >= 1
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", *grid, "--json", str(out)])
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["draws"] == 2, res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--draws", "2", *grid])
     assert res.exit_code == 2 and "--draws" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--noise-scale", "0", *grid, "--json", str(out)])
+    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--noise-scale", "0", *grid])
+    assert res.exit_code == 2 and "--noise-scale" in res.output and "Traceback" not in res.output
 
 
 class ChunkPolicy(torch.nn.Module):
@@ -231,10 +260,11 @@ class ChunkPolicy(torch.nn.Module):
 
     def __init__(self):
         super().__init__()
-        self.config, self.samples = PRESET.model, 0
+        self.config, self.samples, self.noise_scales = PRESET.model, 0, []
 
-    def sample_actions(self, images, states, goal, generator=None, use_ema=True):
+    def sample_actions(self, images, states, goal, generator=None, use_ema=True, noise_scale=1.0):
         c = self.config
+        self.noise_scales.append(noise_scale)
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
         rows = 10 * torch.arange(len(states), dtype=torch.float32)  # (B,)
@@ -255,11 +285,16 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1}
+    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0}
     averaged = DiffusionPilot(ChunkPolicy(), action_steps=2, draws=3)  # rows 0, 10, 20 of one call: their mean
     assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
     assert averaged.metadata()["draws"] == 3
     with pytest.raises(ValueError, match="draws=0"):
         DiffusionPilot(ChunkPolicy(), draws=0)
+    cooled = DiffusionPilot(ChunkPolicy(), action_steps=2, noise_scale=0.25)  # every chunk sampled at that scale
+    _fly_steps(cooled, 5)
+    assert cooled.policy.noise_scales == [0.25] * 3 and cooled.metadata()["noise_scale"] == 0.25
+    with pytest.raises(ValueError, match="noise_scale=-1"):
+        DiffusionPilot(ChunkPolicy(), noise_scale=-1)
     with pytest.raises(ValueError, match="action_steps=16"):
         DiffusionPilot(ChunkPolicy(), action_steps=16)

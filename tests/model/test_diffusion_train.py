@@ -154,12 +154,13 @@ def test_the_state_only_variant_trains_and_evaluates_without_images(tiny_dataset
     assert get_policy_preset("cpu-state").model == replace(get_policy_preset("cpu").model, images=False)
 
 
-def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(tiny_dataset_master, tmp_path):
+def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(trained, tiny_dataset_master, tmp_path):
     """preset cpu-state-obstacles' kind: told each episode's true obstacles (centre, bounding radius),
     trained and scored open loop like any policy; no pilot flies it."""
     from orbitdata.scenario.spec import Obstacle
     from orbitmodel.baselines.diffusion.pilot import DiffusionPilot
 
+    trained_run = trained[0]
     told = replace(PRESET, model=replace(PRESET.model, images=False, obstacles=5))
     lookup = T.episode_obstacles(tiny_dataset_master, "train", 5)
     table = T.load_episode_table(tiny_dataset_master, "train", {})
@@ -174,6 +175,10 @@ def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(tiny_
     policy = DiffusionPolicy.from_pretrained(out)
     result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
     assert result.frames > 0 and np.isfinite(result.policy)
+    blind = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, without_obstacles=True)
+    assert blind.frames == result.frames and blind.policy != result.policy  # the same windows, told nothing
+    res = runner.invoke(app, ["eval", "policy", str(trained_run), str(tiny_dataset_master), "--without-obstacles"])
+    assert res.exit_code == 2 and "told no obstacles" in res.output and "Traceback" not in res.output
     states = torch.zeros(1, 2, 16)
     states[..., 6] = states[..., 9] = 1.0
     goal, obstacles = torch.tensor([[3.0, 0.0, 0.0]]), torch.zeros(1, 5, 4)
@@ -244,10 +249,16 @@ def test_evaluate(trained, tiny_dataset_master):
             assert r["draws"] == pytest.approx(r["sample_mean"] + 2 / 3 * r["variance"], rel=1e-5)
             assert r["variance"] > 0
     assert three.draws == pytest.approx(three.sample_mean + 2 / 3 * three.variance, rel=1e-5)
+    # draws started from zero noise are one deterministic chunk: no variance, whatever the seed
+    still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3, noise_scale=0.0)
+    assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
+    assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
+                                           noise_scale=0.0).policy
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
-                              "--device", "cpu", "--max-windows", "3"])
+                              "--device", "cpu", "--max-windows", "3", "--noise-scale", "0.5"])
     assert cli.exit_code == 0, cli.output
-    assert json.loads(cli.stdout.strip().splitlines()[-1])["windows"] == 3
+    reported = json.loads(cli.stdout.strip().splitlines()[-1])
+    assert reported["windows"] == 3 and reported["noise_scale"] == 0.5
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--device", "cpu"])
     assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
 

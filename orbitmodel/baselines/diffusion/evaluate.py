@@ -87,6 +87,7 @@ class ActionMSE:
     per_index: tuple = ()  # per executed index k (frame t + k): {"index", "frames", "policy", "mean_action", "ratio"}
     per_band: tuple = ()  # per band of goal distance at frame t: {"from_m", "to_m", "frames", ...}
     samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance" and "sample_mean"
+    noise_scale: float = 1.0  # of the noise each draw starts from (1: as trained)
     draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
     variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
     sample_mean: float | None = None  # MSE of the mean of the N draws
@@ -117,10 +118,14 @@ def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out
 @torch.no_grad()
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
-                    device: str = "cpu", use_ema: bool = True, samples: int = 1) -> ActionMSE:
+                    device: str = "cpu", use_ema: bool = True, samples: int = 1,
+                    without_obstacles: bool = False, noise_scale: float = 1.0) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
     start; the first ``max_windows`` when > 0), against predicting the mean training action;
-    ``samples`` > 1 draws each window that many times and splits the error (module docstring)."""
+    ``samples`` > 1 draws each window that many times and splits the error (module docstring).
+    ``without_obstacles``: a privileged policy is told no obstacle (every slot empty), a knock-out
+    of how much it relies on them. ``noise_scale``: the scale of the noise each draw starts from, as
+    the pilot's (:meth:`DiffusionPolicy.sample_actions`)."""
     if stride < 1 or batch_size < 1 or max_windows < 0 or samples < 1:
         raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}, samples={samples}: "
                          "give stride, batch size and samples >= 1 and max_windows >= 0")
@@ -138,6 +143,11 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                            stride=stride, pad=True, columns=policy_columns(c), episodes=chosen)
     goals = episode_goals(dataset, source_split)
     obstacles = episode_obstacles(dataset, source_split, c.obstacles) if c.obstacles else None  # privileged
+    if without_obstacles:
+        if obstacles is None:
+            raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
+                             "privileged policy's (preset cpu-state-obstacles)")
+        obstacles = torch.zeros_like(obstacles)
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
@@ -152,8 +162,8 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         goal = goals[batch[S.EPISODE_INDEX][:, 0]]
         images = batch[S.IMAGE][:, :To] if c.images else None
         told = obstacles[batch[S.EPISODE_INDEX][:, 0]] if obstacles is not None else None
-        draws = torch.stack([policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema,
-                                                   told).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
+        draws = torch.stack([policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema, told,
+                                                   noise_scale).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
         truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
         real = (~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])).numpy()  # (B, 8 steps)
         errors = {"policy": ((draws[0] - truth) ** 2).mean(-1), "mean_action": ((baseline - truth) ** 2).mean(-1)}
@@ -176,6 +186,6 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                      policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
                      per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
                      per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
-                     samples=samples, draws=by_index.total("draws") if several else None,
+                     samples=samples, noise_scale=noise_scale, draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
                      sample_mean=by_index.total("sample_mean") if several else None)

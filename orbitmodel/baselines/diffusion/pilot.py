@@ -8,7 +8,9 @@ observation stands in for both (the reference's padding). With ``ensemble`` = m 
 ensembling, as ACT does), every chunk sampled so far that covers the current frame votes, the
 oldest with weight 1 and each newer one exp(-m) times the one before. With ``draws`` = N > 1 a
 chunk is the mean of N samples drawn together: the policy's mean action rather than one draw
-(``eval policy --samples`` measures what that removes from the error).
+(``eval policy --samples`` measures what that removes from the error). ``noise_scale`` below 1
+starts each draw from scaled-down noise (:meth:`DiffusionPolicy.sample_actions`): 0 flies the one
+chunk that the zero noise gives.
 
     pilot = load_policy_pilot("runs/policy")
     pilot.reset(task)                   # task.goal: metres, world frame relative to the start
@@ -42,7 +44,7 @@ class DiffusionPilot(Pilot):
     needs_images = True
 
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
-                 ensemble: float | None = None, draws: int = 1):
+                 ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0):
         c = policy.config
         if c.obstacles:
             raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
@@ -60,6 +62,9 @@ class DiffusionPilot(Pilot):
         if not int(draws) >= 1:
             raise ValueError(f"draws={draws}: average 1 or more sampled chunks")
         self.draws = int(draws)
+        if not float(noise_scale) >= 0:
+            raise ValueError(f"noise_scale={noise_scale}: give a scale >= 0 (1: sample as trained)")
+        self.noise_scale = float(noise_scale)
         self._goal: torch.Tensor | None = None
         self._history: deque = deque(maxlen=c.n_obs_steps)
         self._queue: deque = deque()
@@ -109,32 +114,39 @@ class DiffusionPilot(Pilot):
                   if self.policy.config.images else None)
         states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
         actions = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
-                                             self.use_ema).mean(0)  # (H, 8)
+                                             self.use_ema, noise_scale=self.noise_scale).mean(0)  # (H, 8)
         return actions[self.policy.config.action_start:].cpu().numpy().astype(np.float32)
 
     def metadata(self) -> dict:
-        return {"action_steps": self.action_steps, "ensemble": self.ensemble, "draws": self.draws}
+        return {"action_steps": self.action_steps, "ensemble": self.ensemble, "draws": self.draws,
+                "noise_scale": self.noise_scale}
 
 
 def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True, action_steps: int | None = None,
-                      ensemble: float | None = None, draws: int = 1) -> DiffusionPilot:
+                      ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0) -> DiffusionPilot:
     """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub repo id."""
     return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema, action_steps=action_steps,
-                          ensemble=ensemble, draws=draws)
+                          ensemble=ensemble, draws=draws, noise_scale=noise_scale)
 
 
 def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", action_steps=None,
-                         ensemble=None, draws=1) -> DiffusionPilot:
+                         ensemble=None, draws=1, noise_scale=1.0) -> DiffusionPilot:
     """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
-    (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``: see :class:`DiffusionPilot`)."""
+    (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``, ``noise_scale=0.5``: see
+    :class:`DiffusionPilot`)."""
     if run is None:
         raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
     try:
         draws = int(draws)
     except ValueError:
         raise ValueError(f"--pilot-option draws={draws}: give a whole number of chunks to average") from None
+    try:
+        noise_scale = float(noise_scale)
+    except ValueError:
+        raise ValueError(f"--pilot-option noise_scale={noise_scale}: give a number >= 0 (1: as trained)") from None
     pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
-                              ensemble=None if ensemble is None else float(ensemble), draws=draws)
+                              ensemble=None if ensemble is None else float(ensemble), draws=draws,
+                              noise_scale=noise_scale)
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if pilot.needs_images and size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "

@@ -176,17 +176,24 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
     @torch.no_grad()
     def sample_actions(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
                        generator: torch.Generator | None = None, use_ema: bool = True,
-                       obstacles: torch.Tensor | None = None) -> torch.Tensor:
+                       obstacles: torch.Tensor | None = None, noise_scale: float = 1.0) -> torch.Tensor:
         """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
         observations of frames t-To+1 .. t (see :meth:`condition`). Execute
-        ``[:, config.action_start : config.action_start + config.n_action_steps]``."""
+        ``[:, config.action_start : config.action_start + config.n_action_steps]``.
+
+        ``noise_scale`` scales the initial noise that DDIM's deterministic reverse process starts
+        from: 1 samples as trained; below 1 the samples gather towards the chunk that the zero
+        noise gives (0: that one chunk for every draw). The generator advances alike whatever
+        the scale."""
+        if not noise_scale >= 0:
+            raise ValueError(f"noise_scale={noise_scale}: give a scale >= 0 (1: as trained)")
         net = self.ema if use_ema else self.net
         device = self.state_mean.device
         images = images.to(device) if images is not None else None
         obstacles = obstacles.to(device).float() if obstacles is not None else None
         cond = self.condition(net, images, states.to(device).float(), goal.to(device).float(), obstacles)
         c = self.config
-        x = torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
+        x = noise_scale * torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
         x = denoise(self.sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)
         return self.unnormalise_actions(x)
 

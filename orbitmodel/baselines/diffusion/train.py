@@ -4,8 +4,10 @@ A training window is ``horizon`` (16) frames starting at t-1: its first ``n_obs_
 frames are the observations, and all 16 actions are the target. The horizon may run past the
 episode end (``pad=True``); padded frames repeat the terminal frame, whose action is zero
 thrust, so the loss skips both (they are no action the expert took). The goal is joined from
-the episodes table by ``episode_index``. Only the image (of the observed frames), the state,
-the action and the goal are read: never the obstacles.
+the episodes table by ``episode_index``. Only the image (of the observed frames; none for a
+policy without the camera), the state, the action and the goal are read: never the obstacles,
+except by the privileged diagnostic (``PolicyConfig.obstacles``, preset ``cpu-state-obstacles``),
+which cannot fly.
 
 EMA: the weights' moving average lives in the policy module (``policy.ema``), so checkpoints
 and exact resume carry it; the shared loop calls :meth:`PolicyJob.after_step` after each
