@@ -191,6 +191,10 @@ class RunDir:
             if not resume:
                 raise RunError(f"{self.path} already holds this run; pass --resume to continue it, "
                                "or --overwrite to start again")
+            if extend and old == config and (self.path / WEIGHTS).exists():
+                steps = config.get("preset", {}).get("train", {}).get("max_steps")
+                raise RunError(f"--extend: {self.path} is already trained to its --max-steps {steps}; "
+                               "give a larger --max-steps to train it on")
         elif resume:
             raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
         elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):

@@ -38,7 +38,8 @@ WMF="$OUT/wm-cpu-perframe"
 DP="$OUT/dp-cpu"
 DPS="$OUT/dp-state"  # the policy without the camera (preset cpu-state), a second baseline row
 # The policy trains the cpu preset's 16,000 steps, the run the test seeds report. DP_STEPS=N trains
-# it on to N steps (--resume --extend): on to 28,000, its held-out MSE kept falling slowly and its
+# a copy of it on to N steps (--resume --extend) in OUT/dp-cpu-N, which the policy's grids then fly:
+# trained on under N = 32,000 (and stopped at 28,000), its held-out MSE kept falling slowly and its
 # validation flights did not improve (docs/results.md#the-diffusion-policy).
 DP_STEPS=${DP_STEPS:-}
 use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folder of their JSON
@@ -52,6 +53,8 @@ if [ "${QUICK:-0}" = 1 ]; then
   VAL_WINDOWS=(--windows 1 --horizon 5)
   DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2) DP_STEPS=6
 fi
+DP0=$DP  # the preset-length policy run
+[ -z "$DP_STEPS" ] || DP="$OUT/dp-cpu-$DP_STEPS"  # a longer one has a folder of its own, named in its grids' commands
 
 TIMES="$OUT/timings.tsv"
 step() {  # step NAME COMMAND...: run it and log its wall time
@@ -140,8 +143,12 @@ step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA"
 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
 refit "$WMS"
 max_steps_of() { "$BIN/python" -c "import json, sys; print(json.load(open(sys.argv[1]))['preset']['train']['max_steps'])" "$1/config.json"; }
-train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with TO) on to TO steps; resumes a cut run
+train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with TO) on to TO steps; resumes a cut run.
+  # With TO, RUN starts as a copy of the finished preset-length run $DP0 when there is one.
   local run=$1 preset=$2 to=${3:-} resume=()
+  if [ -n "$to" ] && [ ! -e "$run" ] && [ -f "$DP0/model.safetensors" ]; then
+    rm -rf "$run.copy" && cp -r "$DP0" "$run.copy" && mv "$run.copy" "$run"
+  fi
   [ -d "$run/checkpoints" ] && resume=(--resume)
   if [ ! -f "$run/config.json" ] || [ "$(max_steps_of "$run")" != "$to" ]; then
     [ -f "$run/model.safetensors" ] || "$BIN/orbitmodel" train-policy "$DATA" --preset "$preset" --val-fraction 0.05 \

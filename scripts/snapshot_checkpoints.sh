@@ -5,7 +5,8 @@
 # OUT/step-N is then a run like RUN (its config.json and the checkpoint's weights, EMA included),
 # which `orbitmodel eval policy` and `eval closed-loop` read; scripts/policy_curve.py plots them.
 # Stops when RUN has its final weights at its max_steps (a run trained on with --resume --extend
-# keeps its old final weights for a moment after it starts: those do not stop it).
+# keeps its old final weights for a moment after it starts: those do not stop it). A run that ends
+# at its --epochs before its --max-steps is never seen to end: stop the script by hand.
 set -euo pipefail
 RUN=${1:?usage: bash scripts/snapshot_checkpoints.sh RUN EVERY OUT}
 EVERY=${2:?give the step interval}

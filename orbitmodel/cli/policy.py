@@ -55,8 +55,8 @@ def train_policy(
 ) -> None:
     """Train a Diffusion Policy (Chi et al. 2023) on the dataset's expert episodes.
 
-    It sees the last 2 camera images and states and the goal in the body frame, predicts 16
-    actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
+    It sees the last 2 camera images (none for --preset cpu-state) and states and the goal in the
+    body frame, predicts 16 actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
     """
     from orbitmodel.baselines.diffusion.config import get_policy_preset
     from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, PolicyRequest, train_policy as train

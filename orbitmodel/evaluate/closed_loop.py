@@ -120,6 +120,8 @@ def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfi
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
         pilot = load_policy_pilot(run, action_steps=req.action_steps, ensemble=req.ensemble, draws=req.draws or 1,
                                   noise_scale=1.0 if req.noise_scale is None else req.noise_scale)
+        if req.image_codec and not pilot.needs_images:
+            raise RunError(f"--image-codec: the policy of {req.run} flies without the camera; drop --image-codec")
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
     if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale)):
         raise RunError(f"--action-steps, --ensemble, --draws and --noise-scale are for a policy run; "

@@ -62,6 +62,10 @@ class SpyObs(dict):
         self.read.add(key)
         return super().get(key, default)
 
+    def get(self, key, default=None):
+        self.read.add(key)
+        return super().get(key, default)
+
 
 @pytest.fixture(scope="module")
 def policy() -> DiffusionPolicy:
@@ -129,9 +133,9 @@ def test_a_policy_without_images_flies_without_a_camera():
         pilot.reset(Task(tuple(env.scenario.goal), 0.5, (0.0, 0.0, 0.0), 3))
         read = set()
         for _ in range(9):
-            o = SpyObs(obs)
+            o = SpyObs({**obs, "image": np.zeros((64, 64, 3), np.uint8)})  # a camera it must not look at
             action = pilot.act(o)
-            read |= {k for k in o.read if k in o}
+            read |= o.read
             obs, *_ = env.step(action.astype(np.float64))
     finally:
         env.close()
@@ -191,13 +195,13 @@ def test_errors(policy):
         make_diffusion_pilot(None)
 
 
-def save_policy_run(policy, path) -> RunDir:
-    """``policy`` as a policy run folder of a 64 px dataset (root seed 0, one episode)."""
+def save_policy_run(policy, path, preset=PRESET) -> RunDir:
+    """``policy`` (of ``preset``) as a policy run folder of a 64 px dataset (root seed 0, one episode)."""
     meta = DatasetMeta(source="x", image_size=64, state_mean=(0.0,) * 16, state_std=(1.0,) * 16,
                        action_mean=(0.1,) * 8, action_std=(0.1,) * 8, depth_max=50.1, fovy_deg=100.0, root_seed=0,
                        episodes={"train": 1})
     run = RunDir(path)
-    run.start(policy_run_config(PRESET, meta, ["expert"], []), resume=False, overwrite=False)
+    run.start(policy_run_config(preset, meta, ["expert"], []), resume=False, overwrite=False)
     run.save_final(policy.state_dict(), step=0)
     return run
 
@@ -252,6 +256,16 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--noise-scale", "0", *grid])
     assert res.exit_code == 2 and "--noise-scale" in res.output and "Traceback" not in res.output
+    # a policy without the camera flies without rendering, so the camera's codec is refused for it
+    from dataclasses import replace
+
+    blind = replace(PRESET, model=replace(PRESET.model, images=False))
+    torch.manual_seed(0)
+    blind_run = save_policy_run(DiffusionPolicy(blind.model), tmp_path / "blind", blind)
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(blind_run.path), "--image-codec", *grid])
+    assert res.exit_code == 2 and "without the camera" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(blind_run.path), *grid])
+    assert res.exit_code == 0, res.output
 
 
 class ChunkPolicy(torch.nn.Module):

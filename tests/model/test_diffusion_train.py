@@ -131,6 +131,8 @@ def test_extend_refuses_what_is_not_a_longer_run(trained, tiny_dataset_master, t
         ("--max-steps", str(STEPS + 2), "--resume", "--extend", "--lr", "0.01"): "larger --max-steps only",
         ("--max-steps", str(STEPS - 1), "--resume", "--extend"): "larger --max-steps only",
         ("--max-steps", str(STEPS + 2), "--resume"): "another config",  # a longer run needs --extend
+        ("--max-steps", str(STEPS), "--resume", "--extend"): "already trained to its --max-steps",
+        ("--max-steps", "10000000", "--resume", "--extend"): "epochs end at step",  # past the run's epochs
     }
     for args, says in cases.items():
         result = runner.invoke(app, ["train-policy", str(tiny_dataset_master), "--out", str(out), "--preset", "tiny",
@@ -177,6 +179,7 @@ def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(train
     assert result.frames > 0 and np.isfinite(result.policy)
     blind = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, without_obstacles=True)
     assert blind.frames == result.frames and blind.policy != result.policy  # the same windows, told nothing
+    assert blind.without_obstacles and not result.without_obstacles  # the report says which it is
     res = runner.invoke(app, ["eval", "policy", str(trained_run), str(tiny_dataset_master), "--without-obstacles"])
     assert res.exit_code == 2 and "told no obstacles" in res.output and "Traceback" not in res.output
     states = torch.zeros(1, 2, 16)
@@ -254,6 +257,9 @@ def test_evaluate(trained, tiny_dataset_master):
     assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
     assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
                                            noise_scale=0.0).policy
+    for bad in ("inf", "-1"):
+        cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--noise-scale", bad])
+        assert cli.exit_code == 2 and "Traceback" not in cli.output, cli.output
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
                               "--device", "cpu", "--max-windows", "3", "--noise-scale", "0.5"])
     assert cli.exit_code == 0, cli.output

@@ -88,6 +88,7 @@ class ActionMSE:
     per_band: tuple = ()  # per band of goal distance at frame t: {"from_m", "to_m", "frames", ...}
     samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance" and "sample_mean"
     noise_scale: float = 1.0  # of the noise each draw starts from (1: as trained)
+    without_obstacles: bool = False  # a privileged policy told no obstacle (the knock-out)
     draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
     variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
     sample_mean: float | None = None  # MSE of the mean of the N draws
@@ -131,6 +132,9 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                          "give stride, batch size and samples >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
+    if without_obstacles and not c.obstacles:
+        raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
+                         "privileged policy's (preset cpu-state-obstacles)")
     if c.images:
         check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     held_out = read_policy_run(resolve_run(run)).validation
@@ -144,9 +148,6 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     goals = episode_goals(dataset, source_split)
     obstacles = episode_obstacles(dataset, source_split, c.obstacles) if c.obstacles else None  # privileged
     if without_obstacles:
-        if obstacles is None:
-            raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
-                             "privileged policy's (preset cpu-state-obstacles)")
         obstacles = torch.zeros_like(obstacles)
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
     n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
@@ -186,6 +187,6 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                      policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
                      per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
                      per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
-                     samples=samples, noise_scale=noise_scale, draws=by_index.total("draws") if several else None,
+                     samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles, draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
                      sample_mean=by_index.total("sample_mean") if several else None)

@@ -62,8 +62,8 @@ class DiffusionPilot(Pilot):
         if not int(draws) >= 1:
             raise ValueError(f"draws={draws}: average 1 or more sampled chunks")
         self.draws = int(draws)
-        if not float(noise_scale) >= 0:
-            raise ValueError(f"noise_scale={noise_scale}: give a scale >= 0 (1: sample as trained)")
+        if not 0 <= float(noise_scale) < float("inf"):
+            raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: sample as trained)")
         self.noise_scale = float(noise_scale)
         self._goal: torch.Tensor | None = None
         self._history: deque = deque(maxlen=c.n_obs_steps)
@@ -86,7 +86,7 @@ class DiffusionPilot(Pilot):
         if self._goal is None:
             raise RuntimeError("call reset(task) before act(obs)")
         c = self.policy.config
-        image, state = obs.get("image"), obs["state"]
+        image, state = obs.get("image") if c.images else None, obs["state"]
         if c.images and (image is None or image.shape != (c.image_size, c.image_size, 3)):
             raise ValueError(f"pilot {self.name!r} was trained on {c.image_size} px RGB images but the camera gives "
                              f"{None if image is None else image.shape}; fly it with a {c.image_size} px camera")

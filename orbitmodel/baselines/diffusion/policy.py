@@ -185,8 +185,8 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         from: 1 samples as trained; below 1 the samples gather towards the chunk that the zero
         noise gives (0: that one chunk for every draw). The generator advances alike whatever
         the scale."""
-        if not noise_scale >= 0:
-            raise ValueError(f"noise_scale={noise_scale}: give a scale >= 0 (1: as trained)")
+        if not 0 <= noise_scale < float("inf"):
+            raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: as trained)")
         net = self.ema if use_ema else self.net
         device = self.state_mean.device
         images = images.to(device) if images is not None else None

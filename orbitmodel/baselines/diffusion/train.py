@@ -33,7 +33,7 @@ from orbitmodel.baselines.diffusion.config import FAMILY, POLICY_PRESETS, Policy
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, ValidationSplit, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.kinematics import P
-from orbitmodel.runs import POLICY, RunDir, check_image_size, run_config, upgrade_preset_config
+from orbitmodel.runs import POLICY, RunDir, RunError, check_image_size, run_config, upgrade_preset_config
 from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad, always loaded; the goal comes
@@ -245,12 +245,19 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     rank = int(os.environ.get("RANK", 0))
     t = req.preset.train
     held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
-    if rank == 0:
-        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
-                  overwrite=req.overwrite, upgrade=upgrade_config, extend=req.extend)
     windows = policy_windows(req.dataset, "train", req.preset,
                              training_episodes(req.dataset, req.levels, req.outcomes, held_out),
                              pad_before=t.pad_before)
+    if req.extend and t.max_steps:  # the loop stops at the run's epochs too: an extension must fit in them
+        world = int(os.environ.get("WORLD_SIZE", 1))
+        per_epoch = len(windows.sampler(seed=t.seed, drop_last=True, rank=0, world_size=world)) // t.batch_size
+        if per_epoch * t.epochs < t.max_steps:
+            raise RunError(f"--extend --max-steps {t.max_steps}: the run's {t.epochs} epochs end at step "
+                           f"{per_epoch * t.epochs}, and an extension changes only --max-steps; extend it to at most "
+                           f"{per_epoch * t.epochs}")
+    if rank == 0:
+        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
+                  overwrite=req.overwrite, upgrade=upgrade_config, extend=req.extend)
     goals = episode_goals(req.dataset, "train")
     slots = req.preset.model.obstacles
     obstacles = episode_obstacles(req.dataset, "train", slots) if slots else None
