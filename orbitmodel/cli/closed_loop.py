@@ -268,6 +268,10 @@ def flips(
     result = outcome_flips(json.loads(first.read_text()), json.loads(second.read_text()))
     typer.echo(f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
                f"{result['successes'][1]})")
+    if "identical" in result:
+        c, f = result["clearance_change_m"], result["frames_change"]
+        typer.echo(f"{result['identical']} of {result['episodes']} flown identically; closest approach changed by "
+                   f"{c['median']:.3f} m median ({c['max']:.3f} max), frames by {f['median']:g} median ({f['max']} max)")
     for f in result["flipped"]:
         typer.echo(f"  {f['obstacles']} obstacles, {f['speed']:g} m/s, episode {f['episode']}: {f['first']} -> "
                    f"{f['second']}")

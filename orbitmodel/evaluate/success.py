@@ -5,6 +5,7 @@ its 95 % Wilson score interval (Wilson 1927), which stays inside [0, 1] and is h
 from __future__ import annotations
 
 import math
+import statistics
 from pathlib import Path
 
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
@@ -119,7 +120,10 @@ def pool_seeds(reports: list[dict]) -> dict:
 def outcome_flips(a: dict, b: dict) -> dict:
     """Episodes of two flights of one grid (the same pilot and seeds, e.g. on 1 and 2 torch threads,
     or on two machines) whose outcome differs: the robustness of a figure to a tiny perturbation.
-    Episodes are matched by seed; both reports need their ``episodes``."""
+    Episodes are matched by seed; both reports need their ``episodes``. Beside the flips, how much
+    the flights themselves moved: the episodes flown identically (the same frame count and
+    closest approach) and the median and largest change of the closest approach (metres) and of the
+    frame count, where the reports record them."""
     def by_seed(report: dict, name: str) -> dict[int, dict]:
         episodes = report.get("episodes")
         if not episodes:
@@ -134,4 +138,11 @@ def outcome_flips(a: dict, b: dict) -> dict:
               "first": ea[s]["outcome"], "second": eb[s]["outcome"]}
              for s in common if ea[s]["outcome"] != eb[s]["outcome"]]
     success = (sum(ea[s]["outcome"] == "success" for s in common), sum(eb[s]["outcome"] == "success" for s in common))
-    return {"episodes": len(common), "flips": len(flips), "successes": list(success), "flipped": flips}
+    moved: dict = {}
+    if all("frames" in e[s] and "min_clearance_m" in e[s] for e in (ea, eb) for s in common):
+        clearance = [abs(ea[s]["min_clearance_m"] - eb[s]["min_clearance_m"]) for s in common]
+        frames = [abs(ea[s]["frames"] - eb[s]["frames"]) for s in common]
+        moved = {"identical": sum(c == 0 and f == 0 for c, f in zip(clearance, frames)),
+                 "clearance_change_m": {"median": float(statistics.median(clearance)), "max": float(max(clearance))},
+                 "frames_change": {"median": float(statistics.median(frames)), "max": int(max(frames))}}
+    return {"episodes": len(common), "flips": len(flips), "successes": list(success), "flipped": flips, **moved}

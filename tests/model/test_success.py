@@ -46,13 +46,21 @@ def test_the_table_gives_counts_the_interval_and_the_failures(tmp_path):
 def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     from orbitmodel.evaluate.success import outcome_flips
 
-    def report(outcomes):
-        return {"episodes": [{"obstacles": 1, "speed": 1.0, "episode": k, "seed": 100 + k, "outcome": o}
-                             for k, o in enumerate(outcomes)]}
+    def report(outcomes, clearances=(0.5, 0.5, 0.0, 0.3), frames=(100, 90, 40, 300)):
+        return {"episodes": [{"obstacles": 1, "speed": 1.0, "episode": k, "seed": 100 + k, "outcome": o,
+                              "min_clearance_m": c, "frames": n}
+                             for k, (o, c, n) in enumerate(zip(outcomes, clearances, frames))]}
 
-    a, b = report(["success", "success", "collision", "timeout"]), report(["success", "collision", "collision", "success"])
+    a = report(["success", "success", "collision", "timeout"])
+    b = report(["success", "collision", "collision", "success"], (0.5, 0.0, 0.0, 0.7), (100, 60, 40, 200))
     result = outcome_flips(a, b)
     assert (result["episodes"], result["flips"], result["successes"]) == (4, 2, [2, 2])
+    # how far the flights moved: 2 flown identically; closest approach changes 0, 0.5, 0, 0.4 m; frames 0, 30, 0, 100
+    assert result["identical"] == 2
+    assert result["clearance_change_m"] == pytest.approx({"median": 0.2, "max": 0.5})
+    assert result["frames_change"] == {"median": 15.0, "max": 100}
+    assert "identical" not in outcome_flips(report(["success"] * 4), {"episodes": [
+        {k: v for k, v in e.items() if k != "frames"} for e in a["episodes"]]})  # not recorded: not reported
     assert [(f["episode"], f["first"], f["second"]) for f in result["flipped"]] == [(1, "success", "collision"),
                                                                                     (3, "timeout", "success")]
     with pytest.raises(ValueError, match="share no episode seed"):
@@ -61,6 +69,7 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     (tmp_path / "b.json").write_text(json.dumps(b))
     res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
     assert res.exit_code == 0 and "2 of 4 episodes flip" in res.output and "success -> collision" in res.output
+    assert "2 of 4 flown identically" in res.output
 
 
 def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
