@@ -187,6 +187,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                      policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
                      per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
                      per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
-                     samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles, draws=by_index.total("draws") if several else None,
+                     samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles,
+                     draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
                      sample_mean=by_index.total("sample_mean") if several else None)
