@@ -62,10 +62,6 @@ class SpyObs(dict):
         self.read.add(key)
         return super().get(key, default)
 
-    def get(self, key, default=None):
-        self.read.add(key)
-        return super().get(key, default)
-
 
 @pytest.fixture(scope="module")
 def policy() -> DiffusionPolicy:

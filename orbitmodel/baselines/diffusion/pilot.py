@@ -29,7 +29,7 @@ import torch
 
 from orbitdata.fly.pilot import Pilot
 from orbitdata.seeding import rng
-from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy, check_noise_scale
 
 
 class DiffusionPilot(Pilot):
@@ -62,9 +62,7 @@ class DiffusionPilot(Pilot):
         if not int(draws) >= 1:
             raise ValueError(f"draws={draws}: average 1 or more sampled chunks")
         self.draws = int(draws)
-        if not 0 <= float(noise_scale) < float("inf"):
-            raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: sample as trained)")
-        self.noise_scale = float(noise_scale)
+        self.noise_scale = check_noise_scale(noise_scale)  # refused here, before any flight
         self._goal: torch.Tensor | None = None
         self._history: deque = deque(maxlen=c.n_obs_steps)
         self._queue: deque = deque()

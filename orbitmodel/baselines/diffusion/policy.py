@@ -66,6 +66,13 @@ def denoise(scheduler, predict: Callable[[torch.Tensor, torch.Tensor], torch.Ten
     return sample
 
 
+def check_noise_scale(noise_scale: float) -> float:
+    """``noise_scale`` as a float, if it is a finite scale >= 0 (see :meth:`DiffusionPolicy.sample_actions`)."""
+    if not 0 <= float(noise_scale) < float("inf"):
+        raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: sample as trained)")
+    return float(noise_scale)
+
+
 def ema_decay(step: int, power: float, max_decay: float) -> float:
     """The reference's EMA warm-up: 0 at the first update, then 1 - step^-power, capped."""
     return 0.0 if step <= 1 else min(max_decay, 1.0 - step ** -power)
@@ -185,8 +192,7 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         from: 1 samples as trained; below 1 the samples gather towards the chunk that the zero
         noise gives (0: that one chunk for every draw). The generator advances alike whatever
         the scale."""
-        if not 0 <= noise_scale < float("inf"):
-            raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: as trained)")
+        noise_scale = check_noise_scale(noise_scale)
         net = self.ema if use_ema else self.net
         device = self.state_mean.device
         images = images.to(device) if images is not None else None
