@@ -25,9 +25,13 @@ def episode_seed(root_seed: int, index: int) -> int:
     return _fold([root_seed, index])
 
 
-def rng(seed: int, stream: str) -> np.random.Generator:
-    """The generator for one named stream of an episode seed."""
-    return np.random.default_rng([int(seed), STREAMS[stream]])
+def rng(seed: int, stream: str, draw: int = 0) -> np.random.Generator:
+    """The generator for one named stream of an episode seed. ``draw`` k > 0: the k-th other,
+    independent generator of that stream (another draw of the same episode's randomness, e.g.
+    another RRT* plan of the same task); 0 is the episode's own."""
+    if draw < 0:
+        raise ValueError(f"draw={draw}: give 0 (the episode's own stream) or a positive draw")
+    return np.random.default_rng([int(seed), STREAMS[stream]] + ([int(draw)] if draw else []))
 
 
 def grid_seed(root_seed: int, n_obstacles: int, speed: float, episode: int) -> int:

@@ -47,11 +47,12 @@ use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folde
   mkdir -p "$GDIR"
 }
 use_grid 0 "$OUT/grid"
-EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=() VAL_WINDOWS=(--windows 90)
+EPISODES=3000 STEPS=() PROBE=() PROBE_EVAL=() DEPTH=() FLIGHT=() ROLLOUT=() VAL_WINDOWS=(--windows 90) FLOOR=()
 if [ "${QUICK:-0}" = 1 ]; then
   EPISODES=40 STEPS=(--max-steps 3) PROBE=(--max-steps 3 --cache-windows 0) PROBE_EVAL=(--windows 2)
   VAL_WINDOWS=(--windows 1 --horizon 5)
   DEPTH=(--frames 500 --test-frames 100) FLIGHT=(--max-steps 20) ROLLOUT=(--windows 2) DP_STEPS=6
+  FLOOR=(--plans 4 --position-m 0.5 --speed-mps 0.5 --angle-deg 60)
 fi
 DP0=$DP  # the preset-length policy run
 [ -z "$DP_STEPS" ] || DP="$OUT/dp-cpu-$DP_STEPS"  # a longer one has a folder of its own, named in its grids' commands
@@ -161,6 +162,7 @@ train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with
 if [ "$POLICY" = 1 ]; then
   step train-diffusion train_policy "$DP" cpu "$DP_STEPS"
   step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
+  step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 "${FLOOR[@]}"
   step train-diffusion-state train_policy "$DPS" cpu-state
   step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000
 fi

@@ -93,6 +93,8 @@ def register(app: typer.Typer) -> None:
                 inspect.signature(factory).bind(cfg, **options)
             except TypeError as exc:
                 raise TypeError(f"--pilot-option: pilot {pilot!r} {exc}") from None
+        with usage_errors(ValueError):  # an option value the factory refuses, before anything flies
+            factory(cfg, **options)
         recorder = None
         if video is not None:
             from orbitdata.viz.flight import FlightVideos

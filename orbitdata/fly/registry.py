@@ -25,11 +25,20 @@ ENTRY_POINT_GROUP = "orbitdata.pilots"
 PilotFactory = Callable[..., "Pilot"]  # factory(config: GenerationConfig, **options) -> Pilot
 
 
-def _expert(config: GenerationConfig) -> Pilot:
+def _expert(config: GenerationConfig, plan_draw=0, noise_draw=0) -> Pilot:
+    """``plan_draw`` / ``noise_draw`` k > 0: another RRT* plan / thrust noise of the same task."""
     from orbitdata.fly.pilots.control import Controller
     from orbitdata.fly.pilots.expert import ExpertPilot
 
-    return ExpertPilot(config.pilots.expert, controller=Controller(config.sim.cubesat, config.pilots.gains))
+    draws = {}
+    for name, value in (("plan_draw", plan_draw), ("noise_draw", noise_draw)):
+        try:
+            draws[name] = int(value)
+        except (TypeError, ValueError):
+            draws[name] = -1
+        if draws[name] < 0 or str(value).strip() != str(draws[name]):
+            raise ValueError(f"--pilot-option {name}={value}: give a whole number >= 0 (0: the episode's own)")
+    return ExpertPilot(config.pilots.expert, controller=Controller(config.sim.cubesat, config.pilots.gains), **draws)
 
 
 def _risky(config: GenerationConfig) -> Pilot:

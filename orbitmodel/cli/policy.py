@@ -20,6 +20,7 @@ Split = Enum("Split", {"test": "test", "val": "val", "train": "train"}, type=str
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
     app.command("train-policy")(train_policy)
     eval_app.command("policy")(eval_policy)
+    eval_app.command("expert-floor")(eval_expert_floor)
 
 
 @friendly
@@ -121,3 +122,46 @@ def eval_policy(
                        + (f" (policy {r['policy']:.5f}, mean action {r['mean_action']:.5f}"
                           + (f", variance {r['variance']:.5f}, mean of the draws {r['sample_mean']:.5f}"
                              if samples > 1 else "") + ")" if r["frames"] else ""))
+
+
+@friendly
+def eval_expert_floor(
+    run: Annotated[Path, typer.Argument(help="policy run folder: its windows, validation episodes and mean action")],
+    dataset: Annotated[str, typer.Argument(help="the orbitdata dataset it trained on")],
+    split: Annotated[Split, typer.Option(help="test, val (the run's validation episodes) or train")] = "test",
+    stride: Annotated[int, typer.Option(min=1, help="frames between window starts")] = 4,
+    max_windows: Annotated[int, typer.Option(min=0, help="look at only the first N windows (0 = all)")] = 0,
+    plans: Annotated[int, typer.Option(min=1, help="other RRT* plans of each episode's task")] = 64,
+    position_m: Annotated[float, typer.Option(min=0.0, help="another plan's path passes this close to the state")] = 0.1,
+    speed_mps: Annotated[float, typer.Option(min=0.0, help="... with a reference velocity this close")] = 0.1,
+    angle_deg: Annotated[float, typer.Option(min=0.0, help="... and a camera attitude this close")] = 27.0,
+    policy: Annotated[bool, typer.Option(help="score the policy on the same windows")] = True,
+    seed: Annotated[int, typer.Option(min=0, help="the policy's sampling noise")] = 0,
+    device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
+    as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
+) -> None:
+    """How closely another plan of the expert, at the recorded states, matches the recorded
+    actions: the floor under `eval policy`'s error (other plans that could be at frame t act at
+    frames t .. t+7), beside the mean action and the policy on the same windows."""
+    from orbitmodel.baselines.diffusion.expert_floor import expert_floor
+    from orbitmodel.train.loop import resolve_device
+
+    r = expert_floor(run, dataset, split=split.value, stride=stride, max_windows=max_windows, plans=plans,
+                     position_m=position_m, speed_mps=speed_mps, angle_deg=angle_deg, with_policy=policy, seed=seed,
+                     device=str(resolve_device(device.value)))
+    if as_json:
+        typer.echo(json.dumps(r.to_dict()))
+        return
+    typer.echo(f"{r.scored_windows} of {r.windows} {split.value} windows have another of {r.plans} plans within "
+               f"{r.position_m:g} m, {r.speed_mps:g} m/s, {r.angle_deg:g} deg ({r.plans_per_window:.1f} per window; "
+               f"the own plan passes in {r.own_plan_could:.0%}); ratio to the mean action over {r.frames} frames: "
+               f"another expert {r.ratio:.3f}, own plan {r.own / r.mean_action:.3f}"
+               + (f", policy {r.policy['ratio']:.3f}" if r.policy else ""))
+    bands = r.policy["per_band"] if r.policy else [None] * len(r.per_band)
+    for row, mine in zip(r.per_band, bands):
+        label = f"{row['from_m']:g}-{row['to_m']:g} m" if row["to_m"] else f">= {row['from_m']:g} m"
+        if not row["frames"]:
+            typer.echo(f"  {label:>9}: no frames")
+            continue
+        typer.echo(f"  {label:>9}: {row['frames']:6d} frames, another expert {row['other_ratio']:.3f}, own plan "
+                   f"{row['own_ratio']:.3f}" + (f", policy {mine['ratio']:.3f}" if mine else ""))

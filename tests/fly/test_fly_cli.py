@@ -48,6 +48,7 @@ def test_fly_writes_videos(tmp_path):
         (["--obstacles", "-1"], ">= 0"),
         (["--speeds", "-2"], ">= 0"),
         (["--video-format", "avi"], "--video-format"),
+        (["--pilot", "expert", "--pilot-option", "plan_draw=two"], "plan_draw"),
     ],
 )
 def test_bad_flags_give_one_line_errors(args, message):

@@ -77,3 +77,55 @@ def test_exploratory_noise_is_strong_and_correlated(env):
 def test_unknown_level_is_rejected():
     with pytest.raises(ValueError, match="unknown pilot"):
         make_pilot("reckless")
+
+
+def _rock_between(goal=(8.0, 0.0, 0.0)) -> Scenario:
+    rock = Obstacle("sphere", center=(4.0, 0.0, 0.0), size=(1.0, 0.0, 0.0))
+    return Scenario(obstacles=(rock,), goal=goal, initial_velocity=(0.5, 0.0, 0.0), lighting=Lighting())
+
+
+def _task(scn: Scenario, seed: int):
+    from orbitdata.fly.pilot import Task
+
+    return Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)
+
+
+def test_other_draws_of_the_expert_plan_the_same_task_anew(env):
+    scn = _rock_between()
+    own = fly_episode(env, make_pilot("expert"), seed=3, scenario=scn)
+    assert _digest(fly_episode(env, make_pilot("expert", plan_draw=0, noise_draw=0), seed=3, scenario=scn)) == _digest(own)
+    plans = {}
+    for name, options in {"own": {}, "plan": {"plan_draw": 1}, "noise": {"noise_draw": 1}}.items():
+        pilot = make_pilot("expert", **options)
+        pilot.reset(_task(scn, 3), scenario=scn)
+        plans[name] = pilot.trajectory.points
+    assert np.array_equal(plans["noise"], plans["own"])  # another noise draw flies the same plan
+    assert plans["plan"].shape != plans["own"].shape or not np.allclose(plans["plan"], plans["own"])
+    noisy = fly_episode(env, make_pilot("expert", noise_draw=1), seed=3, scenario=scn)
+    assert not np.array_equal(noisy.actions[:5], own.actions[:5])
+    for bad in ("x", "-1", "1.5"):
+        with pytest.raises(ValueError, match="plan_draw"):
+            make_pilot("expert", plan_draw=bad)
+
+
+def test_the_expert_takes_its_plan_up_again_at_a_recorded_state(env):
+    """An expert without thrust noise, handed a state of its own flight, acts as it did there;
+    its plan could be there, and could not be a metre to the side."""
+    from orbitdata.fly.pilots.config import ExpertConfig
+    from orbitdata.fly.pilots.control import Controller
+    from orbitdata.fly.pilots.expert import ExpertPilot
+
+    scn = _rock_between()
+    quiet = ExpertConfig(noise_std=0.0)
+    flown = fly_episode(env, ExpertPilot(quiet, controller=Controller()), seed=3, scenario=scn)
+    assert flown.outcome == "success"
+    pilot = ExpertPilot(quiet, controller=Controller())
+    pilot.reset(_task(scn, 3), scenario=scn)
+    for t in range(0, flown.length - 1, 7):
+        state = flown.states[t]
+        assert pilot.rejoin(state) is not None
+        assert np.allclose(pilot.act({"state": state}), flown.actions[t], atol=1e-6), t
+    middle = flown.states[flown.length // 2].copy()
+    assert pilot.could_be_at(middle, 0.1, 0.1, 30.0)
+    middle[2] += 1.0  # a metre off the path
+    assert not pilot.could_be_at(middle, 0.1, 0.1, 30.0)

@@ -20,6 +20,7 @@ from orbitdata import schema as S
 from orbitmodel.baselines.diffusion import train as T
 from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
+from orbitmodel.baselines.diffusion.expert_floor import expert_floor
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.cli.app import app
 from orbitmodel.data import read_dataset_meta
@@ -267,6 +268,34 @@ def test_evaluate(trained, tiny_dataset_master):
     assert reported["windows"] == 3 and reported["noise_scale"] == 0.5
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--device", "cpu"])
     assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
+
+
+def test_expert_floor_scores_other_plans_where_the_policy_is_scored(trained, tiny_dataset_master):
+    """Other RRT* plans of each episode's task that pass by the state at frame t act at the recorded
+    states; the policy is scored on exactly those windows and frames."""
+    out, _ = trained
+    floor = expert_floor(out, tiny_dataset_master, stride=8, plans=4, position_m=0.5, speed_mps=0.5, angle_deg=60.0)
+    assert 0 < floor.scored_windows <= floor.windows and floor.frames > 0 and floor.plans_per_window >= 1
+    assert floor.policy["windows"] == floor.scored_windows and floor.policy["frames"] == floor.frames
+    for parts in (floor.per_index, floor.per_band):
+        assert sum(r["frames"] for r in parts) == floor.frames
+        for name in ("other", "own", "mean_action"):
+            total = sum(r[name] * r["frames"] for r in parts if r["frames"])
+            assert total / floor.frames == pytest.approx(getattr(floor, name), rel=1e-9)
+    # the episode's own plan taken up at its recorded states differs from the record by thrust noise only
+    assert 0 < floor.own < 0.25 * floor.mean_action
+    assert 0.5 <= floor.own_plan_could <= 1
+    assert expert_floor(out, tiny_dataset_master, stride=8, plans=4, position_m=0.5, speed_mps=0.5, angle_deg=60.0) == floor
+    cli = runner.invoke(app, ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--stride", "8", "--plans",
+                              "4", "--position-m", "0.5", "--speed-mps", "0.5", "--angle-deg", "60", "--json",
+                              "--device", "cpu"])
+    assert cli.exit_code == 0, cli.output
+    assert json.loads(cli.stdout.strip().splitlines()[-1]) == json.loads(json.dumps(floor.to_dict()))
+    cli = runner.invoke(app, ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--stride", "8", "--plans",
+                              "4", "--position-m", "0.5", "--speed-mps", "0.5", "--angle-deg", "60", "--no-policy"])
+    assert cli.exit_code == 0 and "another expert" in cli.output and "policy" not in cli.output, cli.output
+    assert "tolerances" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master),
+                                           "--position-m", "0"])
 
 
 def one_line_error(args) -> str:

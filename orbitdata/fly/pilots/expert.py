@@ -11,7 +11,7 @@ from orbitdata.fly.pilots.planner import plan_path
 from orbitdata.fly.pilots.trajectory import Trajectory, time_parametrise
 from orbitdata.scenario.spec import Scenario
 from orbitdata.seeding import rng as make_rng
-from orbitdata.state import POSITION
+from orbitdata.state import POSITION, so3_log
 
 # m: when the look-ahead point is closer than this (the end of the path), look at the goal instead.
 MIN_LOOK_DISTANCE = 0.2
@@ -23,23 +23,28 @@ class ExpertPilot(ControlledPilot):
     and feed-forward acceleration. The camera looks ``lookahead`` metres down the path.
     If RRT* finds no path, the episode is flown goal-seeking and ``planner.solved`` is False.
     Privileged: it plans around the true obstacles of the scenario.
+
+    ``plan_draw`` and ``noise_draw`` k > 0 give the k-th other draw of the task's RRT* plan and
+    of its thrust noise (0: the episode's own, what the dataset records): other experts for the
+    same task, for measuring how much of the expert's action its state does not determine.
     """
 
     name = "expert"
     privileged = True
 
-    def __init__(self, config: ExpertConfig = ExpertConfig(), **kwargs):
+    def __init__(self, config: ExpertConfig = ExpertConfig(), plan_draw: int = 0, noise_draw: int = 0, **kwargs):
         super().__init__(**kwargs)
         self.config = config
+        self.plan_draw, self.noise_draw = int(plan_draw), int(noise_draw)
 
     def reset(self, task: Task, scenario: Scenario) -> None:
         cfg = self.config
         self.goal = np.asarray(task.goal, dtype=np.float64)
-        self.rng = make_rng(task.seed, "pilot")
+        self.rng = make_rng(task.seed, "pilot", self.noise_draw)
         inflation = self.controller.cubesat.bounding_radius + cfg.planner.margin
         v0 = float(np.linalg.norm(task.initial_velocity))
         plan = plan_path((0.0, 0.0, 0.0), task.goal, scenario.obstacles, inflation, cfg.planner,
-                         make_rng(task.seed, "planner"))
+                         make_rng(task.seed, "planner", self.plan_draw))
         self.plan = plan
         self.trajectory: Trajectory | None = None
         if plan.solved:
@@ -47,6 +52,36 @@ class ExpertPilot(ControlledPilot):
         self._index = 0
         self._ahead = max(1, int(round(cfg.lookahead / cfg.trajectory.spacing)))
         self._cruise = max(cfg.trajectory.cruise_speed, v0)
+
+    def rejoin(self, state: np.ndarray) -> int | None:
+        """Take the path up again at its sample closest to ``state``'s position, searching the
+        whole path rather than ahead of the last one (for states of another flight); returns the
+        sample's index, or None without a path."""
+        if self.trajectory is None:
+            return None
+        self._index = self._closest_anywhere(state[POSITION].astype(np.float64))
+        return self._index
+
+    def _closest_anywhere(self, p: np.ndarray) -> int:
+        return int(np.argmin(np.sum((self.trajectory.points - p) ** 2, axis=1)))
+
+    def could_be_at(self, state: np.ndarray, position_m: float, speed_mps: float, angle_deg: float) -> bool:
+        """Whether an expert flying this plan could be in ``state``: the path passes within
+        ``position_m`` of it, its reference velocity there is within ``speed_mps`` of the state's,
+        and the camera points within ``angle_deg`` of where this plan would have it look."""
+        traj = self.trajectory
+        if traj is None:
+            return False
+        p, v, R, *_ = self.controller.unpack(state)
+        i = self._closest_anywhere(p)
+        pos_ref, vel_ref, _ = traj.reference(i)
+        if np.linalg.norm(p - pos_ref) > position_m or np.linalg.norm(v - vel_ref) > speed_mps:
+            return False
+        look = traj.points[min(i + self._ahead, len(traj.points) - 1)] - p
+        if i >= len(traj.points) - 1 or np.linalg.norm(look) < MIN_LOOK_DISTANCE:
+            look = self.goal - p
+        turn = so3_log(R.T @ face(self.controller, state, look))
+        return bool(np.degrees(np.linalg.norm(turn)) <= angle_deg)
 
     def act(self, obs: dict) -> np.ndarray:
         state = obs["state"]

@@ -2,10 +2,12 @@
 
     orbitmodel train-policy DATASET --preset cpu --out RUN
     orbitmodel eval policy RUN DATASET          # action MSE on held-out expert windows
+    orbitmodel eval expert-floor RUN DATASET    # other RRT* plans of the expert on the same windows
     pilot = load_policy_pilot(RUN)              # an orbitdata pilot: reset(task), act(obs)
 
 Modules: ``config`` (presets), ``unet`` (ConditionalUnet1D, FiLM), ``encoder`` (observations),
-``policy`` (DDPM training, DDIM sampling, EMA), ``train``, ``pilot``, ``evaluate``.
+``policy`` (DDPM training, DDIM sampling, EMA), ``train``, ``pilot``, ``evaluate``,
+``expert_floor`` (the expert against itself).
 Heavy imports (torch, diffusers) happen when a name is first used.
 """
 
@@ -18,6 +20,7 @@ _EXPORTS = {
     "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "config",
     "DiffusionPilot": "pilot", "load_policy_pilot": "pilot",
     "evaluate_policy": "evaluate", "ActionMSE": "evaluate",
+    "ExpertFloor": "expert_floor",  # and expert_floor.expert_floor(RUN, DATASET)
 }
 __all__ = list(_EXPORTS)
 

@@ -43,10 +43,11 @@ from orbitmodel.runs import check_image_size, resolve_run
 GOAL_BANDS_M = (1.0, 2.0, 4.0, 8.0)  # metres: upper edges of the bands of distance to the goal
 
 
-class _Errors:
-    """Squared errors summed per group (an index, a band): of the policy's first sample
-    (``policy``), of the mean action (``mean_action``), and with several samples of the samples'
-    variance and of their mean."""
+class Errors:
+    """Squared errors summed per group (an index, a band), one sum per name: of the policy's
+    first sample (``policy``), of the mean action (``mean_action``), with several samples of the
+    samples' variance and of their mean, or of other experts (``expert_floor``). A row gives each
+    as a ratio to the mean action's: ``ratio`` for ``policy``, ``NAME_ratio`` for the others."""
 
     def __init__(self, groups: int, names: tuple[str, ...]):
         self.sums = {name: np.zeros(groups) for name in names}
@@ -66,10 +67,10 @@ class _Errors:
             n = int(self.frames[i])
             row = {**label, "frames": n, **{k: (float(v[i] / n) if n else None) for k, v in self.sums.items()}}
             mean = row["mean_action"]
-            row["ratio"] = row["policy"] / mean if n and mean > 0 else None
-            for name in ("draws", "variance", "sample_mean"):
-                if name in row:
-                    row[f"{name}_ratio"] = row[name] / mean if n and mean > 0 else None
+            for name in self.sums:
+                if name != "mean_action":
+                    key = "ratio" if name == "policy" else f"{name}_ratio"
+                    row[key] = row[name] / mean if n and mean > 0 else None
             out.append(row)
         return out
 
@@ -120,13 +121,15 @@ def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
                     device: str = "cpu", use_ema: bool = True, samples: int = 1,
-                    without_obstacles: bool = False, noise_scale: float = 1.0) -> ActionMSE:
+                    without_obstacles: bool = False, noise_scale: float = 1.0, indices=None) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
     start; the first ``max_windows`` when > 0), against predicting the mean training action;
     ``samples`` > 1 draws each window that many times and splits the error (module docstring).
     ``without_obstacles``: a privileged policy is told no obstacle (every slot empty), a knock-out
     of how much it relies on them. ``noise_scale``: the scale of the noise each draw starts from, as
-    the pilot's (:meth:`DiffusionPolicy.sample_actions`)."""
+    the pilot's (:meth:`DiffusionPolicy.sample_actions`). ``indices``: score only these of the
+    split's windows (positions in its window list, as ``expert_floor`` reports them) instead of
+    the first ``max_windows``."""
     if stride < 1 or batch_size < 1 or max_windows < 0 or samples < 1:
         raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}, samples={samples}: "
                          "give stride, batch size and samples >= 1 and max_windows >= 0")
@@ -150,15 +153,21 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     if without_obstacles:
         obstacles = torch.zeros_like(obstacles)
     baseline = torch.as_tensor(mean_action(dataset, levels, outcomes, held_out), dtype=torch.float32)  # (8,)
-    n = len(windows) if max_windows == 0 else min(max_windows, len(windows))
+    if indices is None:
+        order = list(range(len(windows) if max_windows == 0 else min(max_windows, len(windows))))
+    else:
+        order = [int(i) for i in indices]
+        if any(not 0 <= i < len(windows) for i in order):
+            raise ValueError(f"indices: split {split!r} of {dataset} has {len(windows)} windows; give positions below that")
+    n = len(order)
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
     seeds = [seed] + [int(np.random.SeedSequence([seed, k]).generate_state(1)[0]) for k in range(1, samples)]
     generators = [torch.Generator().manual_seed(k) for k in seeds]
     executed = slice(c.action_start, c.action_start + c.n_action_steps)
     names = ("policy", "mean_action") + (("draws", "variance", "sample_mean") if samples > 1 else ())
-    by_index, by_band = _Errors(c.n_action_steps, names), _Errors(len(GOAL_BANDS_M) + 1, names)
+    by_index, by_band = Errors(c.n_action_steps, names), Errors(len(GOAL_BANDS_M) + 1, names)
     To = c.n_obs_steps
-    batches = [list(range(first, min(first + batch_size, n))) for first in range(0, n, batch_size)]
+    batches = [order[first:first + batch_size] for first in range(0, n, batch_size)]
     for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
         goal = goals[batch[S.EPISODE_INDEX][:, 0]]
         images = batch[S.IMAGE][:, :To] if c.images else None
