@@ -17,6 +17,7 @@ PlannerPresetName = Enum("PlannerPresetName", {name: name for name in PLANNER_PR
 PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
 DepthHead = Enum("DepthHead", {"auto": "auto", "stage1": "stage1", "refit": "refit"}, type=str)
 VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
+Pick = Enum("Pick", {"mean": "mean", "central": "central"}, type=str)  # DiffusionPilot.PICKS
 
 
 def register(app: typer.Typer) -> None:
@@ -78,8 +79,10 @@ def closed_loop(
                                                                     "chunk [default: its config's]")] = None,
     ensemble: Annotated[Optional[float], typer.Option(min=0.0, help="a policy run: temporal ensembling of "
                                                                     "overlapping chunks with this decay")] = None,
-    draws: Annotated[Optional[int], typer.Option(min=1, help="a policy run: fly the mean of this many chunks "
-                                                             "sampled together [default: 1, one draw]")] = None,
+    draws: Annotated[Optional[int], typer.Option(min=1, help="a policy run: make each chunk of this many draws "
+                                                             "sampled together (--pick) [default: 1, one draw]")] = None,
+    pick: Annotated[Optional[Pick], typer.Option(help="a policy run with --draws: fly their mean, or the central "
+                                                      "draw (the one nearest their mean) [default: mean]")] = None,
     noise_scale: Annotated[Optional[float], typer.Option(
         min=0.0, help="a policy run: scale of the noise each draw starts from (0: one deterministic chunk per "
                       "observation) [default: 1, as trained]")] = None,
@@ -115,7 +118,7 @@ def closed_loop(
         planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, draws=draws,
-        noise_scale=noise_scale, video_dir=video,
+        noise_scale=noise_scale, pick=pick.value if pick else None, video_dir=video,
         video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     if loop.name != req.variant.value and (options or planner.value != "paper"):

@@ -47,8 +47,8 @@ class ClosedLoopRequest:
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
         image_codec: hand the pilot its camera through the dataset's JPEG codec (``orbitdata.fly``).
-        action_steps, ensemble, draws, noise_scale: how a policy run samples and executes its
-            chunks (``DiffusionPilot``).
+        action_steps, ensemble, draws, noise_scale, pick: how a policy run samples and executes
+            its chunks (``DiffusionPilot``).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
     """
 
@@ -67,6 +67,7 @@ class ClosedLoopRequest:
     ensemble: float | None = None
     draws: int | None = None
     noise_scale: float | None = None
+    pick: str | None = None
     video_dir: Path | None = None
     video_format: str = ".mp4"
 
@@ -119,12 +120,13 @@ def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfi
         if req.variant != Variant.PLANNER:
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
         pilot = load_policy_pilot(run, action_steps=req.action_steps, ensemble=req.ensemble, draws=req.draws or 1,
-                                  noise_scale=1.0 if req.noise_scale is None else req.noise_scale)
+                                  noise_scale=1.0 if req.noise_scale is None else req.noise_scale,
+                                  pick=req.pick or "mean")
         if req.image_codec and not pilot.needs_images:
             raise RunError(f"--image-codec: the policy of {req.run} flies without the camera; drop --image-codec")
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
-    if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale)):
-        raise RunError(f"--action-steps, --ensemble, --draws and --noise-scale are for a policy run; "
+    if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale, req.pick)):
+        raise RunError(f"--action-steps, --ensemble, --draws, --pick and --noise-scale are for a policy run; "
                        f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot")
     pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value
@@ -167,7 +169,7 @@ class ClosedLoop:
 
     def report(self, result: ClosedLoopResult) -> dict:
         """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
-        ``action_steps``, ``ensemble``, ``draws`` and ``noise_scale``) and the torch threads it flew on."""
+        ``action_steps``, ``ensemble``, ``draws``, ``pick`` and ``noise_scale``) and the torch threads it flew on."""
         planning = self.name == self.req.variant.value
         report = closed_loop_report(self.req, result, None if planning else self.name)
         return {**report, "pilot_settings": None if planning else self.pilot.metadata(),

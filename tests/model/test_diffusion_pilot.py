@@ -214,6 +214,7 @@ def test_loads_from_a_run_folder(policy, tmp_path):
         make_diffusion_pilot(config, run=str(run.path))
     # --pilot-option values arrive as text
     assert make_diffusion_pilot(None, run=str(run.path), noise_scale="0.5", draws="2").metadata()["noise_scale"] == 0.5
+    assert make_diffusion_pilot(None, run=str(run.path), draws="3", pick="central").metadata()["pick"] == "central"
     with pytest.raises(ValueError, match="noise_scale=cold"):
         make_diffusion_pilot(None, run=str(run.path), noise_scale="cold")
 
@@ -242,12 +243,18 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
-    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1, "noise_scale": 1.0}
+    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1, "noise_scale": 1.0,
+                                        "pick": "mean"}
     assert report["threads"] >= 1
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", *grid, "--json", str(out)])
-    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["draws"] == 2, res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", "--pick", "central", *grid,
+                                   "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert json.loads(out.read_text())["pilot_settings"]["draws"] == 2
+    assert json.loads(out.read_text())["episodes"][0]["pick"] == "central"
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--draws", "2", *grid])
     assert res.exit_code == 2 and "--draws" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--pick", "central", *grid])
+    assert res.exit_code == 2 and "--pick" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--noise-scale", "0", *grid, "--json", str(out)])
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--noise-scale", "0", *grid])
@@ -268,16 +275,18 @@ class ChunkPolicy(torch.nn.Module):
     """Stands in for a trained policy: sample k (0-based) is the chunk k * 100 + frame offset, so an
     executed action says which sample and which offset it came from; row i of a batch adds 10 i."""
 
-    def __init__(self):
+    def __init__(self, rows: tuple[float, ...] | None = None):
         super().__init__()
         self.config, self.samples, self.noise_scales = PRESET.model, 0, []
+        self.rows = rows  # the offset of each row of a batch, when not 10 i
 
     def sample_actions(self, images, states, goal, generator=None, use_ema=True, noise_scale=1.0):
         c = self.config
         self.noise_scales.append(noise_scale)
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
-        rows = 10 * torch.arange(len(states), dtype=torch.float32)  # (B,)
+        rows = (10 * torch.arange(len(states), dtype=torch.float32) if self.rows is None
+                else torch.tensor(self.rows[:len(states)], dtype=torch.float32))  # (B,)
         return (chunk[None, :, None] + rows[:, None, None]).expand(len(states), c.horizon, c.action_dim)
 
 
@@ -295,12 +304,19 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0}
+    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0, "pick": "mean"}
     averaged = DiffusionPilot(ChunkPolicy(), action_steps=2, draws=3)  # rows 0, 10, 20 of one call: their mean
     assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
     assert averaged.metadata()["draws"] == 3
     with pytest.raises(ValueError, match="draws=0"):
         DiffusionPilot(ChunkPolicy(), draws=0)
+    # the central draw: the one nearest the draws' mean (rows 0, 10 and 40: mean 16.7, nearest 10), flown as drawn
+    central = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), action_steps=2, draws=3, pick="central")
+    assert _fly_steps(central, 3) == [10, 11, 110] and central.metadata()["pick"] == "central"
+    averaged = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), action_steps=2, draws=3)
+    assert _fly_steps(averaged, 1)[0] == pytest.approx(50 / 3)
+    with pytest.raises(ValueError, match="pick='median'"):
+        DiffusionPilot(ChunkPolicy(), draws=3, pick="median")
     cooled = DiffusionPilot(ChunkPolicy(), action_steps=2, noise_scale=0.25)  # every chunk sampled at that scale
     _fly_steps(cooled, 5)
     assert cooled.policy.noise_scales == [0.25] * 3 and cooled.metadata()["noise_scale"] == 0.25

@@ -256,6 +256,8 @@ def test_evaluate(trained, tiny_dataset_master):
     # draws started from zero noise are one deterministic chunk: no variance, whatever the seed
     still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3, noise_scale=0.0)
     assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
+    assert still.central == pytest.approx(still.policy, rel=1e-6)  # every draw is central when all are one chunk
+    assert three.central is not None and all(r["central_ratio"] is not None for r in three.per_band if r["frames"])
     assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
                                            noise_scale=0.0).policy
     for bad in ("inf", "-1"):

@@ -16,7 +16,8 @@ draws), and the mean of the N samples (``sample_mean``) carries the first part a
 second; over the N draws, a draw's MSE (``draws``) is the mean's MSE plus (N-1)/N of the
 variance. Where the variance is most of the error, the policy spreads its samples over actions
 the expert did not take at that moment (several ways round an obstacle, or noise), rather than
-missing the expert's action on average.
+missing the expert's action on average. ``central`` scores the draw nearest the N draws' mean over
+the executed actions, what the pilot flies with ``draws=N, pick="central"``: a real sample.
 """
 
 from __future__ import annotations
@@ -87,12 +88,13 @@ class ActionMSE:
     mean_action: float  # baseline: always predict the training mean action
     per_index: tuple = ()  # per executed index k (frame t + k): {"index", "frames", "policy", "mean_action", "ratio"}
     per_band: tuple = ()  # per band of goal distance at frame t: {"from_m", "to_m", "frames", ...}
-    samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance" and "sample_mean"
+    samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance", "sample_mean", "central"
     noise_scale: float = 1.0  # of the noise each draw starts from (1: as trained)
     without_obstacles: bool = False  # a privileged policy told no obstacle (the knock-out)
     draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
     variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
     sample_mean: float | None = None  # MSE of the mean of the N draws
+    central: float | None = None  # MSE of the central draw, the one nearest the N draws' mean (the pilot's pick)
 
     @property
     def ratio(self) -> float:
@@ -164,7 +166,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     seeds = [seed] + [int(np.random.SeedSequence([seed, k]).generate_state(1)[0]) for k in range(1, samples)]
     generators = [torch.Generator().manual_seed(k) for k in seeds]
     executed = slice(c.action_start, c.action_start + c.n_action_steps)
-    names = ("policy", "mean_action") + (("draws", "variance", "sample_mean") if samples > 1 else ())
+    names = ("policy", "mean_action") + (("draws", "variance", "sample_mean", "central") if samples > 1 else ())
     by_index, by_band = Errors(c.n_action_steps, names), Errors(len(GOAL_BANDS_M) + 1, names)
     To = c.n_obs_steps
     batches = [order[first:first + batch_size] for first in range(0, n, batch_size)]
@@ -181,6 +183,10 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
             errors["draws"] = ((draws - truth) ** 2).mean(-1).mean(0)
             errors["variance"] = draws.var(0, unbiased=True).mean(-1)
             errors["sample_mean"] = ((draws.mean(0) - truth) ** 2).mean(-1)
+            # the draw nearest the draws' mean over the executed actions (the one the others are closest to)
+            spread = ((draws - draws.mean(0)) ** 2).flatten(2).sum(-1)  # (N, B)
+            central = draws[spread.argmin(0), torch.arange(draws.shape[1])]  # (B, 8, 8)
+            errors["central"] = ((central - truth) ** 2).mean(-1)
         errors = {k: v.numpy()[real] for k, v in errors.items()}  # (B, 8 steps) -> the real frames
         distance = (goal - batch[S.STATE][:, c.action_start, P]).norm(dim=-1).numpy()  # (B,) metres at frame t
         band = np.searchsorted(GOAL_BANDS_M, distance, side="right")  # (B,)
@@ -199,4 +205,5 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                      samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles,
                      draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
-                     sample_mean=by_index.total("sample_mean") if several else None)
+                     sample_mean=by_index.total("sample_mean") if several else None,
+                     central=by_index.total("central") if several else None)

@@ -7,8 +7,10 @@ queues those for frames t .. t + action_steps - 1. At the first step of an episo
 observation stands in for both (the reference's padding). With ``ensemble`` = m (temporal
 ensembling, as ACT does), every chunk sampled so far that covers the current frame votes, the
 oldest with weight 1 and each newer one exp(-m) times the one before. With ``draws`` = N > 1 a
-chunk is the mean of N samples drawn together: the policy's mean action rather than one draw
-(``eval policy --samples`` measures what that removes from the error). ``noise_scale`` below 1
+chunk is made of N samples drawn together: their mean (``pick="mean"``: the policy's mean action
+rather than one draw), or the central draw (``pick="central"``: the one nearest their mean over
+the executed actions, a real sample, on the side of an obstacle most draws take); ``eval policy
+--samples`` measures what each removes from the error. ``noise_scale`` below 1
 starts each draw from scaled-down noise (:meth:`DiffusionPolicy.sample_actions`): 0 flies the one
 chunk that the zero noise gives.
 
@@ -32,6 +34,9 @@ from orbitdata.seeding import rng
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy, check_noise_scale
 
 
+PICKS = ("mean", "central")  # how a chunk is made of several draws
+
+
 class DiffusionPilot(Pilot):
     """Flies a trained :class:`DiffusionPolicy` (EMA weights unless ``use_ema=False``).
 
@@ -44,7 +49,7 @@ class DiffusionPilot(Pilot):
     needs_images = True
 
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
-                 ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0):
+                 ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0, pick: str = "mean"):
         c = policy.config
         if c.obstacles:
             raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
@@ -62,6 +67,9 @@ class DiffusionPilot(Pilot):
         if not int(draws) >= 1:
             raise ValueError(f"draws={draws}: average 1 or more sampled chunks")
         self.draws = int(draws)
+        if pick not in PICKS:
+            raise ValueError(f"pick={pick!r}: choose one of {', '.join(PICKS)} (how a chunk is made of the draws)")
+        self.pick = pick
         self.noise_scale = check_noise_scale(noise_scale)  # refused here, before any flight
         self._goal: torch.Tensor | None = None
         self._history: deque = deque(maxlen=c.n_obs_steps)
@@ -111,27 +119,34 @@ class DiffusionPilot(Pilot):
         images = (torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
                   if self.policy.config.images else None)
         states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
-        actions = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
-                                             self.use_ema, noise_scale=self.noise_scale).mean(0)  # (H, 8)
-        return actions[self.policy.config.action_start:].cpu().numpy().astype(np.float32)
+        draws = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
+                                           self.use_ema, noise_scale=self.noise_scale)  # (N, H, 8)
+        c = self.policy.config
+        if self.pick == "central":
+            executed = draws[:, c.action_start:c.action_start + self.action_steps]
+            actions = draws[int(((executed - executed.mean(0)) ** 2).flatten(1).sum(1).argmin())]
+        else:
+            actions = draws.mean(0)  # (H, 8)
+        return actions[c.action_start:].cpu().numpy().astype(np.float32)
 
     def metadata(self) -> dict:
         return {"action_steps": self.action_steps, "ensemble": self.ensemble, "draws": self.draws,
-                "noise_scale": self.noise_scale}
+                "noise_scale": self.noise_scale, "pick": self.pick}
 
 
 def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True, action_steps: int | None = None,
-                      ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0) -> DiffusionPilot:
+                      ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0,
+                      pick: str = "mean") -> DiffusionPilot:
     """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub repo id."""
     return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema, action_steps=action_steps,
-                          ensemble=ensemble, draws=draws, noise_scale=noise_scale)
+                          ensemble=ensemble, draws=draws, noise_scale=noise_scale, pick=pick)
 
 
 def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", action_steps=None,
-                         ensemble=None, draws=1, noise_scale=1.0) -> DiffusionPilot:
+                         ensemble=None, draws=1, noise_scale=1.0, pick="mean") -> DiffusionPilot:
     """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
-    (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``, ``noise_scale=0.5``: see
-    :class:`DiffusionPilot`)."""
+    (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``, ``noise_scale=0.5``,
+    ``pick=central``: see :class:`DiffusionPilot`)."""
     if run is None:
         raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
     try:
@@ -144,7 +159,7 @@ def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str
         raise ValueError(f"--pilot-option noise_scale={noise_scale}: give a number >= 0 (1: as trained)") from None
     pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
                               ensemble=None if ensemble is None else float(ensemble), draws=draws,
-                              noise_scale=noise_scale)
+                              noise_scale=noise_scale, pick=str(pick))
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if pilot.needs_images and size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
