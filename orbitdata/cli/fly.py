@@ -94,7 +94,7 @@ def register(app: typer.Typer) -> None:
             except TypeError as exc:
                 raise TypeError(f"--pilot-option: pilot {pilot!r} {exc}") from None
         with usage_errors(ValueError):  # an option value the factory refuses, before anything flies
-            factory(cfg, **options)
+            built = factory(cfg, **options)
         recorder = None
         if video is not None:
             from orbitdata.viz.flight import FlightVideos
@@ -111,9 +111,9 @@ def register(app: typer.Typer) -> None:
                     recorder.episode(cell, k, result)
                 bar.advance(task)
 
-            cells = fly_grid(factory, obstacles, speeds, episodes, seed, cfg, render=render,
+            cells = fly_grid(lambda _config: built, obstacles, speeds, episodes, seed, cfg, render=render,
                              frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode,
-                             image_codec=image_codec, thrust_noise=thrust_noise, noise_hold=noise_hold, **options)
+                             image_codec=image_codec, thrust_noise=thrust_noise, noise_hold=noise_hold)
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")

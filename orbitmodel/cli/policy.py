@@ -152,9 +152,12 @@ def eval_expert_floor(
     if as_json:
         typer.echo(json.dumps(r.to_dict()))
         return
+    d = r.own_plan_deviation
+    deviation = f"{d['position_m'][1]:.2f} m, {d['speed_mps'][1]:.2f} m/s, {d['angle_deg'][1]:.0f} deg"
     typer.echo(f"{r.scored_windows} of {r.windows} {split.value} windows have another of {r.plans} plans within "
                f"{r.position_m:g} m, {r.speed_mps:g} m/s, {r.angle_deg:g} deg ({r.plans_per_window:.1f} per window; "
-               f"the own plan passes in {r.own_plan_could:.0%}); ratio to the mean action over {r.frames} frames: "
+               f"the own plan passes in {r.own_plan_could:.0%}, 90 % of its flights within {deviation}); ratio to "
+               f"the mean action over {r.frames} frames: "
                f"another expert {r.ratio:.3f}, own plan {r.own / r.mean_action:.3f}"
                + (f", policy {r.policy['ratio']:.3f}" if r.policy else ""))
     bands = r.policy["per_band"] if r.policy else [None] * len(r.per_band)

@@ -121,11 +121,26 @@ def test_the_expert_takes_its_plan_up_again_at_a_recorded_state(env):
     assert flown.outcome == "success"
     pilot = ExpertPilot(quiet, controller=Controller())
     pilot.reset(_task(scn, 3), scenario=scn)
-    for t in range(0, flown.length - 1, 7):
-        state = flown.states[t]
-        assert pilot.rejoin(state) is not None
-        assert np.allclose(pilot.act({"state": state}), flown.actions[t], atol=1e-6), t
-    middle = flown.states[flown.length // 2].copy()
-    assert pilot.could_be_at(middle, 0.1, 0.1, 30.0)
-    middle[2] += 1.0  # a metre off the path
-    assert not pilot.could_be_at(middle, 0.1, 0.1, 30.0)
+    for t in range(0, flown.length - 8, 7):  # taken up at frame t, it acts as it did at t .. t+7
+        assert pilot.rejoin(flown.states[t]) is not None
+        acts = [pilot.act({"state": flown.states[k]}) for k in range(t, t + 8)]
+        assert np.allclose(acts, flown.actions[t:t + 8], atol=1e-6), t
+    middle = flown.states[flown.length // 2]
+    assert all(d < limit for d, limit in zip(pilot.deviation(middle), (0.1, 0.1, 27.0)))
+    assert pilot.could_be_at(middle, 0.1, 0.1, 27.0)
+    from orbitdata.state import ROT6D, VELOCITY, matrix_to_rot6d, rot6d_to_matrix
+
+    aside, faster, turned = middle.copy(), middle.copy(), middle.copy()
+    aside[2] += 1.0  # a metre off the path
+    faster[VELOCITY] *= 1.5  # half as fast again as the plan there
+    c, s_ = np.cos(np.radians(45)), np.sin(np.radians(45))
+    yaw = np.array([[c, -s_, 0.0], [s_, c, 0.0], [0.0, 0.0, 1.0]])
+    R = rot6d_to_matrix(middle[ROT6D].astype(np.float64))
+    turned[ROT6D] = matrix_to_rot6d(yaw @ R)  # the camera 45 degrees off, the same world velocity
+    turned[VELOCITY] = (yaw @ R).T @ (R @ middle[VELOCITY].astype(np.float64))
+    assert pilot.deviation(aside)[0] > 0.1
+    for state, which in ((faster, 1), (turned, 2)):  # off in speed only, in attitude only
+        d = pilot.deviation(state)
+        assert [x > limit for x, limit in zip(d, (0.1, 0.1, 27.0))] == [k == which for k in range(3)], (which, d)
+    for state in (aside, faster, turned):
+        assert not pilot.could_be_at(state, 0.1, 0.1, 27.0)

@@ -278,7 +278,7 @@ class ChunkPolicy(torch.nn.Module):
     def __init__(self, rows: tuple[float, ...] | None = None):
         super().__init__()
         self.config, self.samples, self.noise_scales = PRESET.model, 0, []
-        self.rows = rows  # the offset of each row of a batch, when not 10 i
+        self.rows = rows  # the offset of each row of a batch (B,) or of each row and frame (B, H), when not 10 i
 
     def sample_actions(self, images, states, goal, generator=None, use_ema=True, noise_scale=1.0):
         c = self.config
@@ -286,8 +286,9 @@ class ChunkPolicy(torch.nn.Module):
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
         rows = (10 * torch.arange(len(states), dtype=torch.float32) if self.rows is None
-                else torch.tensor(self.rows[:len(states)], dtype=torch.float32))  # (B,)
-        return (chunk[None, :, None] + rows[:, None, None]).expand(len(states), c.horizon, c.action_dim)
+                else torch.as_tensor(self.rows, dtype=torch.float32)[:len(states)])
+        rows = rows[:, None].expand(-1, c.horizon) if rows.ndim == 1 else rows  # (B, H)
+        return (chunk[None, :, None] + rows[:, :, None]).expand(len(states), c.horizon, c.action_dim)
 
 
 def _fly_steps(pilot, steps: int) -> list[float]:
@@ -310,9 +311,14 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     assert averaged.metadata()["draws"] == 3
     with pytest.raises(ValueError, match="draws=0"):
         DiffusionPilot(ChunkPolicy(), draws=0)
-    # the central draw: the one nearest the draws' mean (rows 0, 10 and 40: mean 16.7, nearest 10), flown as drawn
-    central = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), action_steps=2, draws=3, pick="central")
+    # the central draw: the one nearest the draws' mean over the actions it executes (2 here: rows 0, 10 and
+    # 40, mean 16.7, nearest 10), flown as drawn, though row 1 strays past them (1000 from frame t+2 on)
+    rows = torch.tensor([0.0, 10.0, 40.0])[:, None].repeat(1, PRESET.model.horizon)
+    rows[1, PRESET.model.action_start + 2:] = 1000.0
+    central = DiffusionPilot(ChunkPolicy(rows=rows), action_steps=2, draws=3, pick="central")
     assert _fly_steps(central, 3) == [10, 11, 110] and central.metadata()["pick"] == "central"
+    with pytest.raises(ValueError, match="draws=N with N >= 2"):
+        DiffusionPilot(ChunkPolicy(), pick="central")
     averaged = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), action_steps=2, draws=3)
     assert _fly_steps(averaged, 1)[0] == pytest.approx(50 / 3)
     with pytest.raises(ValueError, match="pick='median'"):

@@ -272,6 +272,26 @@ def test_evaluate(trained, tiny_dataset_master):
     assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
 
 
+def test_the_central_draw_is_scored_as_drawn(trained, tiny_dataset_master, monkeypatch):
+    """--samples 3 with draws that are constant chunks 0, 0.3 and 1 (in that order, every window):
+    the central draw, nearest their mean 0.43, is the 0.3 chunk, scored as a policy that always says 0.3."""
+    out, _ = trained
+    values, calls = [], []
+
+    def constant(self, images, states, goal, generator=None, use_ema=True, obstacles=None, noise_scale=1.0):
+        calls.append(values[len(calls) % len(values)])
+        return torch.full((len(states), self.config.horizon, self.config.action_dim), calls[-1])
+
+    monkeypatch.setattr(DiffusionPolicy, "sample_actions", constant)
+    values[:] = [0.0, 0.3, 1.0]
+    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3)
+    values[:], calls[:] = [0.3], []
+    fixed = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert three.central == pytest.approx(fixed.policy, rel=1e-6) and three.central != three.policy
+    for r, f in zip(three.per_band, fixed.per_band):
+        assert r["central"] == (pytest.approx(f["policy"], rel=1e-6) if r["frames"] else None)
+
+
 def test_expert_floor_scores_other_plans_where_the_policy_is_scored(trained, tiny_dataset_master):
     """Other RRT* plans of each episode's task that pass by the state at frame t act at the recorded
     states; the policy is scored on exactly those windows and frames."""

@@ -19,18 +19,23 @@ class ControlledPilot(Pilot):
 APPROACH_SPEED_FLOOR = 0.3
 
 
+def goal_seeking_velocity(p: np.ndarray, goal: np.ndarray, cruise: float, brake_accel: float = 1.0) -> np.ndarray:
+    """The velocity goal-seeking flight aims for at position ``p``: along the line of sight, slowing on arrival."""
+    to_goal = goal - p
+    dist = float(np.linalg.norm(to_goal))
+    if dist < 1e-9:
+        return np.zeros(3)
+    return to_goal / dist * min(cruise, np.sqrt(2.0 * brake_accel * dist) + APPROACH_SPEED_FLOOR)
+
+
 def goal_seeking_accel(controller: Controller, state: np.ndarray, goal: np.ndarray, cruise: float,
                        brake_accel: float = 1.0) -> np.ndarray:
     """PD towards the goal: aim for a velocity along the line of sight that slows on arrival."""
     p, *_ = controller.unpack(state)
-    to_goal = goal - p
-    dist = float(np.linalg.norm(to_goal))
-    if dist < 1e-9:
+    if np.linalg.norm(goal - p) < 1e-9:
         return controller.track_accel(state, goal, np.zeros(3))
-    speed = min(cruise, np.sqrt(2.0 * brake_accel * dist) + APPROACH_SPEED_FLOOR)
-    v_ref = to_goal / dist * speed
     # Position error is along v_ref already; damp the velocity error only (pure pursuit).
-    return controller.track_accel(state, p, v_ref)
+    return controller.track_accel(state, p, goal_seeking_velocity(p, goal, cruise, brake_accel))
 
 
 def face(controller: Controller, state: np.ndarray, direction: np.ndarray) -> np.ndarray:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from orbitdata.fly.pilot import Task
-from orbitdata.fly.pilots.common import ControlledPilot, face, goal_seeking_accel
+from orbitdata.fly.pilots.common import ControlledPilot, face, goal_seeking_accel, goal_seeking_velocity
 from orbitdata.fly.pilots.config import ExpertConfig
 from orbitdata.fly.pilots.planner import plan_path
 from orbitdata.fly.pilots.trajectory import Trajectory, time_parametrise
@@ -65,23 +65,30 @@ class ExpertPilot(ControlledPilot):
     def _closest_anywhere(self, p: np.ndarray) -> int:
         return int(np.argmin(np.sum((self.trajectory.points - p) ** 2, axis=1)))
 
-    def could_be_at(self, state: np.ndarray, position_m: float, speed_mps: float, angle_deg: float) -> bool:
-        """Whether an expert flying this plan could be in ``state``: the path passes within
-        ``position_m`` of it, its reference velocity there is within ``speed_mps`` of the state's,
-        and the camera points within ``angle_deg`` of where this plan would have it look."""
+    def deviation(self, state: np.ndarray) -> tuple[float, float, float] | None:
+        """How far ``state`` is from flying this plan: (metres to the path, m/s from the velocity
+        it would aim for there, degrees from the attitude it would command); None without a path.
+        Past the path's end, where the expert flies goal-seeking, the velocity is goal-seeking's."""
         traj = self.trajectory
         if traj is None:
-            return False
+            return None
         p, v, R, *_ = self.controller.unpack(state)
         i = self._closest_anywhere(p)
         pos_ref, vel_ref, _ = traj.reference(i)
-        if np.linalg.norm(p - pos_ref) > position_m or np.linalg.norm(v - vel_ref) > speed_mps:
-            return False
         look = traj.points[min(i + self._ahead, len(traj.points) - 1)] - p
+        if i >= len(traj.points) - 1:
+            vel_ref = goal_seeking_velocity(p, self.goal, self._cruise)
         if i >= len(traj.points) - 1 or np.linalg.norm(look) < MIN_LOOK_DISTANCE:
             look = self.goal - p
         turn = so3_log(R.T @ face(self.controller, state, look))
-        return bool(np.degrees(np.linalg.norm(turn)) <= angle_deg)
+        return (float(np.linalg.norm(p - pos_ref)), float(np.linalg.norm(v - vel_ref)),
+                float(np.degrees(np.linalg.norm(turn))))
+
+    def could_be_at(self, state: np.ndarray, position_m: float, speed_mps: float, angle_deg: float) -> bool:
+        """Whether an expert flying this plan could be in ``state``: its :meth:`deviation` is
+        within ``position_m``, ``speed_mps`` and ``angle_deg``."""
+        d = self.deviation(state)
+        return d is not None and d[0] <= position_m and d[1] <= speed_mps and d[2] <= angle_deg
 
     def act(self, obs: dict) -> np.ndarray:
         state = obs["state"]

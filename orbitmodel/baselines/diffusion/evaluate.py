@@ -17,7 +17,8 @@ second; over the N draws, a draw's MSE (``draws``) is the mean's MSE plus (N-1)/
 variance. Where the variance is most of the error, the policy spreads its samples over actions
 the expert did not take at that moment (several ways round an obstacle, or noise), rather than
 missing the expert's action on average. ``central`` scores the draw nearest the N draws' mean over
-the executed actions, what the pilot flies with ``draws=N, pick="central"``: a real sample.
+the executed actions, a real sample: what the pilot flies with ``draws=N, pick="central"`` and its
+config's executed actions (the pilot picks over the ones it executes).
 """
 
 from __future__ import annotations

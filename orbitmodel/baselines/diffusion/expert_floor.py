@@ -42,6 +42,7 @@ from orbitmodel.kinematics import P
 from orbitmodel.runs import resolve_run
 
 COLUMNS = (S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad
+OWN_NOISE_DRAW = 2 ** 31 - 1  # the own plan's other thrust noise: a draw no other plan uses
 
 
 @dataclass(frozen=True)
@@ -49,6 +50,8 @@ class ExpertFloor:
     """Squared errors (thrust units squared) of other experts at the recorded states, beside the
     mean action's, over the ``frames`` real frames of the windows where another plan could be."""
 
+    run: str
+    dataset: str
     split: str
     levels: tuple[str, ...]
     windows: int  # windows looked at (those ``eval policy`` scores with the same run and flags)
@@ -59,6 +62,8 @@ class ExpertFloor:
     scored_windows: int  # windows with at least one other plan that could be there
     frames: int  # real frames t .. t+7 of those windows
     own_plan_could: float  # fraction of the windows whose own plan passes the same test (its recall)
+    own_plan_deviation: dict  # how far the recorded flight is from its own plan at frame t, per quantity
+    # ("position_m", "speed_mps", "angle_deg"): its 50th and 90th percentiles over the windows
     plans_per_window: float  # other plans that could be there, mean over the scored windows
     other: float  # MSE of another expert, averaged over the plans that could be there
     own: float  # MSE of the episode's own plan with other thrust noise
@@ -92,7 +97,7 @@ class _Experts:
                              "its scenarios (made by another version of orbitdata?)")
         task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity,
                     seed=int(row[S.SEED]))
-        self.own = make_pilot("expert", generation, plan_draw=0, noise_draw=plans + 1)
+        self.own = make_pilot("expert", generation, plan_draw=0, noise_draw=OWN_NOISE_DRAW)
         self.others = [make_pilot("expert", generation, plan_draw=k, noise_draw=k) for k in range(1, plans + 1)]
         for pilot in (self.own, *self.others):
             pilot.reset(task, scenario=scn)
@@ -140,7 +145,7 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
     names = ("other", "own", "mean_action")
     by_index, by_band = Errors(K, names), Errors(len(GOAL_BANDS_M) + 1, names)
     experts, episode = None, None
-    scored, own_could, could_total = [], 0, 0
+    scored, own_could, could_total, looked, own_deviation = [], 0, 0, 0, []
     batches = [list(range(first, min(first + 64, n))) for first in range(0, n, 64)]
     try:
         for indices, batch in zip(batches, DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows)):
@@ -154,7 +159,11 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
                 truth = batch[S.ACTION][b, t0:t0 + K].numpy()
                 real = ~(batch[IS_PAD][b, t0:t0 + K] | batch[S.IS_LAST][b, t0:t0 + K]).numpy()
                 could = [e for e in experts.others if e.could_be_at(states[0], position_m, speed_mps, angle_deg)]
+                looked += 1
                 own_could += experts.own.could_be_at(states[0], position_m, speed_mps, angle_deg)
+                deviation = experts.own.deviation(states[0])
+                if deviation is not None:
+                    own_deviation.append(deviation)
                 if not could or not real.any():
                     continue
                 scored.append(index)
@@ -180,9 +189,13 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
         policy = evaluate_policy(run, dataset, split=split, levels=levels, stride=stride, seed=seed, device=device,
                                  indices=scored).to_dict()
     edges = (0.0, *GOAL_BANDS_M, None)
-    return ExpertFloor(split=split, levels=tuple(levels), windows=n, plans=plans, position_m=position_m,
+    quantiles = np.percentile(np.asarray(own_deviation).reshape(-1, 3), [50, 90], axis=0) if own_deviation else None
+    spread = {name: ([float(q) for q in quantiles[:, k]] if quantiles is not None else None)
+              for k, name in enumerate(("position_m", "speed_mps", "angle_deg"))}
+    return ExpertFloor(run=str(run), dataset=str(dataset), split=split, levels=tuple(levels), windows=n, plans=plans, position_m=position_m,
                        speed_mps=speed_mps, angle_deg=angle_deg, scored_windows=len(scored), frames=frames,
-                       own_plan_could=own_could / n, plans_per_window=could_total / len(scored),
+                       own_plan_could=own_could / looked, own_plan_deviation=spread,
+                       plans_per_window=could_total / len(scored),
                        other=by_index.total("other"), own=by_index.total("own"),
                        mean_action=by_index.total("mean_action"),
                        per_index=tuple(by_index.rows([{"index": k} for k in range(K)])),

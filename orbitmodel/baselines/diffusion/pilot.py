@@ -9,7 +9,7 @@ ensembling, as ACT does), every chunk sampled so far that covers the current fra
 oldest with weight 1 and each newer one exp(-m) times the one before. With ``draws`` = N > 1 a
 chunk is made of N samples drawn together: their mean (``pick="mean"``: the policy's mean action
 rather than one draw), or the central draw (``pick="central"``: the one nearest their mean over
-the executed actions, a real sample, on the side of an obstacle most draws take); ``eval policy
+the executed actions: a real sample, the most typical of the N); ``eval policy
 --samples`` measures what each removes from the error. ``noise_scale`` below 1
 starts each draw from scaled-down noise (:meth:`DiffusionPolicy.sample_actions`): 0 flies the one
 chunk that the zero noise gives.
@@ -69,6 +69,8 @@ class DiffusionPilot(Pilot):
         self.draws = int(draws)
         if pick not in PICKS:
             raise ValueError(f"pick={pick!r}: choose one of {', '.join(PICKS)} (how a chunk is made of the draws)")
+        if pick == "central" and self.draws < 2:
+            raise ValueError("pick='central' chooses among several draws: give draws=N with N >= 2")
         self.pick = pick
         self.noise_scale = check_noise_scale(noise_scale)  # refused here, before any flight
         self._goal: torch.Tensor | None = None
