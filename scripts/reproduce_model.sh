@@ -103,8 +103,9 @@ fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.js
   shift
   fly "$GDIR/$pilot.json" "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@"
 }
-DP_FLY=(--image-codec)  # how the policy flies: 8 actions per chunk (its config), the camera through the dataset's
-# JPEG codec, chosen on validation seed 1 (docs/results/validation/diffusion/)
+DP_SAMPLE=(--timestep-spacing trailing)  # DDIM from the top noise level, chosen on validation seeds 0-2
+DP_FLY=(--image-codec "${DP_SAMPLE[@]}")  # how the policy flies: 8 actions per chunk (its config), the camera
+# through the dataset's JPEG codec, chosen on validation seeds (docs/results/validation/diffusion/)
 fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
   fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}" "${DP_FLY[@]}"
 }
@@ -161,8 +162,8 @@ train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with
 }
 if [ "$POLICY" = 1 ]; then
   step train-diffusion train_policy "$DP" cpu "$DP_STEPS"
-  step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000
-  step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 "${FLOOR[@]}"
+  step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000 "${DP_SAMPLE[@]}"
+  step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 "${DP_SAMPLE[@]}" "${FLOOR[@]}"
   step train-diffusion-state train_policy "$DPS" cpu-state
   step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000
 fi

@@ -18,6 +18,7 @@ PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
 DepthHead = Enum("DepthHead", {"auto": "auto", "stage1": "stage1", "refit": "refit"}, type=str)
 VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
 Pick = Enum("Pick", {"mean": "mean", "central": "central"}, type=str)  # DiffusionPilot.PICKS
+Spacing = Enum("Spacing", {"leading": "leading", "trailing": "trailing"}, type=str)  # TIMESTEP_SPACINGS
 
 
 def register(app: typer.Typer) -> None:
@@ -83,6 +84,8 @@ def closed_loop(
                                                              "sampled together (--pick) [default: 1, one draw]")] = None,
     pick: Annotated[Optional[Pick], typer.Option(help="a policy run with --draws: fly their mean, or the central "
                                                       "draw (the one nearest their mean) [default: mean]")] = None,
+    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
+        help="a policy run: DDIM timestep spacing to sample with [default: the run's]")] = None,
     noise_scale: Annotated[Optional[float], typer.Option(
         min=0.0, help="a policy run: scale of the noise each draw starts from (0: one deterministic chunk per "
                       "observation) [default: 1, as trained]")] = None,
@@ -118,7 +121,8 @@ def closed_loop(
         planner=planner_config(planner.value, **options),
         planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, draws=draws,
-        noise_scale=noise_scale, pick=pick.value if pick else None, video_dir=video,
+        noise_scale=noise_scale, pick=pick.value if pick else None,
+        timestep_spacing=timestep_spacing.value if timestep_spacing else None, video_dir=video,
         video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     if loop.name != req.variant.value and (options or planner.value != "paper"):

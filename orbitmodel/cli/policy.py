@@ -15,6 +15,7 @@ from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
 PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
 Split = Enum("Split", {"test": "test", "val": "val", "train": "train"}, type=str)
+Spacing = Enum("Spacing", {"leading": "leading", "trailing": "trailing"}, type=str)  # TIMESTEP_SPACINGS
 
 
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
@@ -93,6 +94,10 @@ def eval_policy(
     noise_scale: Annotated[float, typer.Option(
         min=0.0, help="scale of the noise each draw starts from, as eval closed-loop's (0: one deterministic chunk "
                       "per window)")] = 1.0,
+    inference_steps: Annotated[Optional[int], typer.Option(
+        min=1, help="DDIM steps to sample with [default: the run's]")] = None,
+    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
+        help="DDIM timestep spacing to sample with, as eval closed-loop's [default: the run's]")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -104,7 +109,9 @@ def eval_policy(
     levels = tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS
     result = evaluate_policy(run, dataset, split=split.value, levels=levels, stride=stride, max_windows=max_windows,
                              batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)),
-                             samples=samples, without_obstacles=without_obstacles, noise_scale=noise_scale)
+                             samples=samples, without_obstacles=without_obstacles, noise_scale=noise_scale,
+                             inference_steps=inference_steps,
+                             timestep_spacing=timestep_spacing.value if timestep_spacing else None)
     if as_json:
         typer.echo(json.dumps(result.to_dict()))
         return
@@ -137,6 +144,8 @@ def eval_expert_floor(
     angle_deg: Annotated[float, typer.Option(min=0.0, help="... and a camera attitude this close")] = 27.0,
     policy: Annotated[bool, typer.Option(help="score the policy on the same windows")] = True,
     seed: Annotated[int, typer.Option(min=0, help="the policy's sampling noise")] = 0,
+    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
+        help="the policy's DDIM timestep spacing, as eval policy's [default: the run's]")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -148,7 +157,8 @@ def eval_expert_floor(
 
     r = expert_floor(run, dataset, split=split.value, stride=stride, max_windows=max_windows, plans=plans,
                      position_m=position_m, speed_mps=speed_mps, angle_deg=angle_deg, with_policy=policy, seed=seed,
-                     device=str(resolve_device(device.value)))
+                     device=str(resolve_device(device.value)),
+                     timestep_spacing=timestep_spacing.value if timestep_spacing else None)
     if as_json:
         typer.echo(json.dumps(r.to_dict()))
         return

@@ -47,8 +47,8 @@ class ClosedLoopRequest:
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
         image_codec: hand the pilot its camera through the dataset's JPEG codec (``orbitdata.fly``).
-        action_steps, ensemble, draws, noise_scale, pick: how a policy run samples and executes
-            its chunks (``DiffusionPilot``).
+        action_steps, ensemble, draws, noise_scale, pick, timestep_spacing: how a policy run
+            samples and executes its chunks (``DiffusionPilot``).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
     """
 
@@ -68,6 +68,7 @@ class ClosedLoopRequest:
     draws: int | None = None
     noise_scale: float | None = None
     pick: str | None = None
+    timestep_spacing: str | None = None
     video_dir: Path | None = None
     video_format: str = ".mp4"
 
@@ -121,12 +122,14 @@ def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfi
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
         pilot = load_policy_pilot(run, action_steps=req.action_steps, ensemble=req.ensemble, draws=req.draws or 1,
                                   noise_scale=1.0 if req.noise_scale is None else req.noise_scale,
-                                  pick=req.pick or "mean")
+                                  pick=req.pick or "mean", timestep_spacing=req.timestep_spacing)
         if req.image_codec and not pilot.needs_images:
             raise RunError(f"--image-codec: the policy of {req.run} flies without the camera; drop --image-codec")
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
-    if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale, req.pick)):
-        raise RunError(f"--action-steps, --ensemble, --draws, --pick and --noise-scale are for a policy run; "
+    if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale, req.pick,
+                                   req.timestep_spacing)):
+        raise RunError(f"--action-steps, --ensemble, --draws, --pick, --noise-scale and --timestep-spacing are for a "
+                       f"policy run; "
                        f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot")
     pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value

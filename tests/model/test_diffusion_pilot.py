@@ -215,6 +215,10 @@ def test_loads_from_a_run_folder(policy, tmp_path):
     # --pilot-option values arrive as text
     assert make_diffusion_pilot(None, run=str(run.path), noise_scale="0.5", draws="2").metadata()["noise_scale"] == 0.5
     assert make_diffusion_pilot(None, run=str(run.path), draws="3", pick="central").metadata()["pick"] == "central"
+    trailing = make_diffusion_pilot(None, run=str(run.path), timestep_spacing="trailing")
+    assert trailing.metadata()["timestep_spacing"] == "trailing" and int(trailing.policy.sampler.timesteps[0]) == 99
+    with pytest.raises(ValueError, match="timestep_spacing"):
+        make_diffusion_pilot(None, run=str(run.path), timestep_spacing="middle")
     with pytest.raises(ValueError, match="noise_scale=cold"):
         make_diffusion_pilot(None, run=str(run.path), noise_scale="cold")
 
@@ -244,7 +248,7 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
     assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1, "noise_scale": 1.0,
-                                        "pick": "mean"}
+                                        "pick": "mean", "timestep_spacing": "leading"}
     assert report["threads"] >= 1
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", "--pick", "central", *grid,
                                    "--json", str(out)])
@@ -255,6 +259,12 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 2 and "--draws" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--pick", "central", *grid])
     assert res.exit_code == 2 and "--pick" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--timestep-spacing", "trailing", *grid,
+                                   "--json", str(out)])
+    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["timestep_spacing"] == "trailing"
+    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--timestep-spacing", "trailing",
+                                   *grid])
+    assert res.exit_code == 2 and "--timestep-spacing" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--noise-scale", "0", *grid, "--json", str(out)])
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--noise-scale", "0", *grid])
@@ -305,7 +315,8 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0, "pick": "mean"}
+    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0, "pick": "mean",
+                                    "timestep_spacing": "leading"}
     averaged = DiffusionPilot(ChunkPolicy(), action_steps=2, draws=3)  # rows 0, 10, 20 of one call: their mean
     assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
     assert averaged.metadata()["draws"] == 3

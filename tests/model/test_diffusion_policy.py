@@ -68,6 +68,27 @@ def test_config_errors():
         PolicyConfig(image_size=72)
     with pytest.raises(ValueError, match="prediction_type"):
         PolicyConfig(prediction_type="v_prediction")
+    with pytest.raises(ValueError, match="timestep_spacing"):
+        PolicyConfig(timestep_spacing="middle")
+
+
+def test_timestep_spacing_decides_where_ddim_starts(config):
+    """"leading" (the reference's) visits 90 .. 0 with 10 of 100 levels, "trailing" 99 .. 9, starting
+    where the unit noise it draws belongs; a policy samples with either, whatever its config says."""
+    leading = make_schedulers(PolicyConfig())[1].timesteps.tolist()
+    trailing = make_schedulers(PolicyConfig(timestep_spacing="trailing"))[1].timesteps.tolist()
+    assert leading == list(range(90, -1, -10)) and trailing == list(range(99, 8, -10))
+    policy = DiffusionPolicy(config)
+    states = torch.zeros(1, config.n_obs_steps, 16)
+    images = torch.zeros(1, config.n_obs_steps, 3, config.image_size, config.image_size, dtype=torch.uint8)
+    goal = torch.tensor([[3.0, 0.0, 0.0]])
+    before = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0))
+    policy.set_sampler(timestep_spacing="trailing")
+    assert policy.config.timestep_spacing == "trailing" and int(policy.sampler.timesteps[0]) == config.train_timesteps - 1
+    after = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0))
+    assert not torch.equal(before, after)
+    policy.set_sampler(inference_steps=2)
+    assert len(policy.sampler.timesteps) == 2 and policy.config.timestep_spacing == "trailing"
 
 
 def test_ddpm_round_trip():

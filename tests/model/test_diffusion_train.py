@@ -257,6 +257,11 @@ def test_evaluate(trained, tiny_dataset_master):
     still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3, noise_scale=0.0)
     assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
     assert still.central == pytest.approx(still.policy, rel=1e-6)  # every draw is central when all are one chunk
+    # another DDIM spacing or step count than the run's: recorded, and sampled with
+    trailing = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, timestep_spacing="trailing")
+    assert (result.timestep_spacing, trailing.timestep_spacing) == ("leading", "trailing")
+    assert trailing.policy != result.policy and trailing.frames == result.frames
+    assert evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, inference_steps=2).inference_steps == 2
     assert three.central is not None and all(r["central_ratio"] is not None for r in three.per_band if r["frames"])
     assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
                                            noise_scale=0.0).policy
@@ -268,6 +273,12 @@ def test_evaluate(trained, tiny_dataset_master):
     assert cli.exit_code == 0, cli.output
     reported = json.loads(cli.stdout.strip().splitlines()[-1])
     assert reported["windows"] == 3 and reported["noise_scale"] == 0.5
+    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
+                              "--device", "cpu", "--max-windows", "3", "--timestep-spacing", "trailing",
+                              "--inference-steps", "2"])
+    assert cli.exit_code == 0, cli.output
+    reported = json.loads(cli.stdout.strip().splitlines()[-1])
+    assert (reported["timestep_spacing"], reported["inference_steps"]) == ("trailing", 2)
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--device", "cpu"])
     assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
 

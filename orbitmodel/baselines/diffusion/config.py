@@ -22,6 +22,7 @@ from orbitmodel.runs import CONFIG, POLICY, HeldOut, RunDir, RunError
 GOAL_DIM = 3  # the goal in the body frame, metres
 FAMILY = "diffusion"  # config.json's "policy": the policy family of a policy run
 PREDICTION_TYPES = ("epsilon", "sample")
+TIMESTEP_SPACINGS = ("leading", "trailing")  # DDIM timestep spacings (PolicyConfig.timestep_spacing)
 
 
 @dataclass(frozen=True)
@@ -42,6 +43,10 @@ class PolicyConfig:
         kernel_size: temporal kernel of the U-Net's convolutions [kernel_size].
         train_timesteps: DDPM noise levels in training [num_train_timesteps].
         inference_steps: DDIM denoising steps when acting [num_inference_steps].
+        timestep_spacing: which of the training noise levels DDIM visits (``diffusers``' option):
+            "leading" (the reference's, its default: 10 of 100 steps visit 90, 80, .., 0, so the
+            unit starting noise enters at level 90) or "trailing" (99, 89, .., 9: it enters at
+            the top level, where unit noise belongs). Sampling only: any run samples either way.
         beta_schedule: the noise schedule's name in ``diffusers`` [beta_schedule].
         clip_sample: clip the predicted clean sample to [-1, 1] at each step [clip_sample].
         prediction_type: what the U-Net predicts [prediction_type]: "epsilon" (the noise, the
@@ -66,6 +71,7 @@ class PolicyConfig:
     kernel_size: int = 5
     train_timesteps: int = 100
     inference_steps: int = 10
+    timestep_spacing: str = "leading"
     beta_schedule: str = "squaredcos_cap_v2"
     clip_sample: bool = True
     prediction_type: str = "epsilon"
@@ -89,6 +95,8 @@ class PolicyConfig:
         if not 1 <= self.inference_steps <= self.train_timesteps:
             raise ValueError(f"inference_steps={self.inference_steps} must be in [1, train_timesteps="
                              f"{self.train_timesteps}]")
+        if self.timestep_spacing not in TIMESTEP_SPACINGS:
+            raise ValueError(f"timestep_spacing={self.timestep_spacing!r}: choose one of {', '.join(TIMESTEP_SPACINGS)}")
         if self.prediction_type not in PREDICTION_TYPES:
             raise ValueError(f"prediction_type={self.prediction_type!r}: choose one of {', '.join(PREDICTION_TYPES)}")
         side = 2 ** len(self.cnn_channels)

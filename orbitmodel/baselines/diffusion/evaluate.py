@@ -91,6 +91,8 @@ class ActionMSE:
     per_band: tuple = ()  # per band of goal distance at frame t: {"from_m", "to_m", "frames", ...}
     samples: int = 1  # draws per window; with more than one, the rows add "draws", "variance", "sample_mean", "central"
     noise_scale: float = 1.0  # of the noise each draw starts from (1: as trained)
+    inference_steps: int | None = None  # the DDIM steps it sampled with
+    timestep_spacing: str | None = None  # ... and their spacing
     without_obstacles: bool = False  # a privileged policy told no obstacle (the knock-out)
     draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
     variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
@@ -124,7 +126,8 @@ def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
                     device: str = "cpu", use_ema: bool = True, samples: int = 1,
-                    without_obstacles: bool = False, noise_scale: float = 1.0, indices=None) -> ActionMSE:
+                    without_obstacles: bool = False, noise_scale: float = 1.0, indices=None,
+                    inference_steps: int | None = None, timestep_spacing: str | None = None) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
     start; the first ``max_windows`` when > 0), against predicting the mean training action;
     ``samples`` > 1 draws each window that many times and splits the error (module docstring).
@@ -132,11 +135,13 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     of how much it relies on them. ``noise_scale``: the scale of the noise each draw starts from, as
     the pilot's (:meth:`DiffusionPolicy.sample_actions`). ``indices``: score only these of the
     split's windows (positions in its window list, as ``expert_floor`` reports them) instead of
-    the first ``max_windows``."""
+    the first ``max_windows``. ``inference_steps``, ``timestep_spacing``: sample with these DDIM
+    settings instead of the run's (:meth:`DiffusionPolicy.set_sampler`)."""
     if stride < 1 or batch_size < 1 or max_windows < 0 or samples < 1:
         raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}, samples={samples}: "
                          "give stride, batch size and samples >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
+    policy.set_sampler(inference_steps, timestep_spacing)
     c = policy.config
     if without_obstacles and not c.obstacles:
         raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
@@ -204,6 +209,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
                      per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
                      per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
                      samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles,
+                     inference_steps=c.inference_steps, timestep_spacing=c.timestep_spacing,
                      draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
                      sample_mean=by_index.total("sample_mean") if several else None,

@@ -10,8 +10,9 @@ oldest with weight 1 and each newer one exp(-m) times the one before. With ``dra
 chunk is made of N samples drawn together: their mean (``pick="mean"``: the policy's mean action
 rather than one draw), or the central draw (``pick="central"``: the one nearest their mean over
 the executed actions: a real sample, the most typical of the N); ``eval policy
---samples`` measures what each removes from the error. ``noise_scale`` below 1
-starts each draw from scaled-down noise (:meth:`DiffusionPolicy.sample_actions`): 0 flies the one
+--samples`` measures what each removes from the error. ``timestep_spacing``
+samples with that DDIM spacing instead of the run's (``PolicyConfig.timestep_spacing``).
+``noise_scale`` below 1 starts each draw from scaled-down noise (:meth:`DiffusionPolicy.sample_actions`): 0 flies the one
 chunk that the zero noise gives.
 
     pilot = load_policy_pilot("runs/policy")
@@ -49,7 +50,10 @@ class DiffusionPilot(Pilot):
     needs_images = True
 
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
-                 ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0, pick: str = "mean"):
+                 ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0, pick: str = "mean",
+                 timestep_spacing: str | None = None):
+        if timestep_spacing is not None:  # sampling only: the run's own unless given
+            policy.set_sampler(timestep_spacing=timestep_spacing)
         c = policy.config
         if c.obstacles:
             raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
@@ -133,22 +137,24 @@ class DiffusionPilot(Pilot):
 
     def metadata(self) -> dict:
         return {"action_steps": self.action_steps, "ensemble": self.ensemble, "draws": self.draws,
-                "noise_scale": self.noise_scale, "pick": self.pick}
+                "noise_scale": self.noise_scale, "pick": self.pick,
+                "timestep_spacing": self.policy.config.timestep_spacing}
 
 
 def load_policy_pilot(run_dir: str | Path, device: str = "cpu", use_ema: bool = True, action_steps: int | None = None,
                       ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0,
-                      pick: str = "mean") -> DiffusionPilot:
+                      pick: str = "mean", timestep_spacing: str | None = None) -> DiffusionPilot:
     """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub repo id."""
     return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), use_ema=use_ema, action_steps=action_steps,
-                          ensemble=ensemble, draws=draws, noise_scale=noise_scale, pick=pick)
+                          ensemble=ensemble, draws=draws, noise_scale=noise_scale, pick=pick,
+                          timestep_spacing=timestep_spacing)
 
 
 def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", action_steps=None,
-                         ensemble=None, draws=1, noise_scale=1.0, pick="mean") -> DiffusionPilot:
+                         ensemble=None, draws=1, noise_scale=1.0, pick="mean", timestep_spacing=None) -> DiffusionPilot:
     """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
     (``--pilot-option action_steps=4``, ``ensemble=0.1``, ``draws=4``, ``noise_scale=0.5``,
-    ``pick=central``: see :class:`DiffusionPilot`)."""
+    ``pick=central``, ``timestep_spacing=trailing``: see :class:`DiffusionPilot`)."""
     if run is None:
         raise ValueError("pilot 'diffusion' needs its run folder: pass --pilot-option run=RUN")
     try:
@@ -161,7 +167,8 @@ def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str
         raise ValueError(f"--pilot-option noise_scale={noise_scale}: give a number >= 0 (1: as trained)") from None
     pilot = load_policy_pilot(run, device, action_steps=None if action_steps is None else int(action_steps),
                               ensemble=None if ensemble is None else float(ensemble), draws=draws,
-                              noise_scale=noise_scale, pick=str(pick))
+                              noise_scale=noise_scale, pick=str(pick),
+                              timestep_spacing=None if timestep_spacing is None else str(timestep_spacing))
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if pilot.needs_images and size is not None and size != pilot.policy.config.image_size:
         raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "

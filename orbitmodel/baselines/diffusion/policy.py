@@ -31,6 +31,7 @@ from torch import nn
 from orbitmodel.baselines.diffusion.config import PolicyConfig, read_policy_run
 from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
+from orbitmodel.config import replace_given
 from orbitmodel.kinematics import P, body_to_world
 from orbitmodel.model.normalise import NormalisedStates
 from orbitmodel.runs import RunError, load_weights, resolve_run
@@ -51,7 +52,7 @@ def make_schedulers(config: PolicyConfig):
                          prediction_type=config.prediction_type)
     ddim = DDIMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
                          clip_sample=config.clip_sample, set_alpha_to_one=True, steps_offset=0,
-                         prediction_type=config.prediction_type)
+                         prediction_type=config.prediction_type, timestep_spacing=config.timestep_spacing)
     ddim.set_timesteps(config.inference_steps)
     return ddpm, ddim
 
@@ -102,6 +103,12 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         self.register_buffer("action_high", torch.ones(config.action_dim))
         self.register_buffer("goal_scale", torch.tensor(1.0))  # metres per unit of the goal input
         self.noise_scheduler, self.sampler = make_schedulers(config)
+
+    def set_sampler(self, inference_steps: int | None = None, timestep_spacing: str | None = None) -> None:
+        """Sample with other DDIM settings than the run's config (None: keep its own); training
+        does not depend on them, so any run samples either way."""
+        self.config = replace_given(self.config, inference_steps=inference_steps, timestep_spacing=timestep_spacing)
+        self.noise_scheduler, self.sampler = make_schedulers(self.config)
 
     def set_normalisation(self, state_mean, state_std, action_low, action_high, goal_scale: float) -> None:
         """Take the dataset's statistics (meta/stats.json): state mean/std (16,), action min/max (8,),
