@@ -80,11 +80,15 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
     return "\n".join(lines) + "\n"
 
 
+FLIGHT_KEYS = ("pilot_settings", "image_codec")  # how a grid was flown, beside the pilot and its run
+
+
 def pool_seeds(reports: list[dict]) -> dict:
     """One pilot's grid flown on several root seeds, as one table: per setting, the episodes and
     outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
     and ``worst_setting`` names the lowest-rate (seed, setting). Refuses reports of different
-    pilots, grids or a repeated seed: pooling is for fresh episodes only."""
+    pilots, grids, pilot settings (a policy's sampling, the camera codec) or a repeated seed:
+    pooling is for fresh episodes of one way of flying only."""
     if not reports:
         raise ValueError("give the grid results of at least one seed")
     first = reports[0]
@@ -101,6 +105,10 @@ def pool_seeds(reports: list[dict]) -> dict:
     for r in reports:
         if r["pilot"] != first["pilot"]:
             raise ValueError(f"pilots differ ({first['pilot']!r}, {r['pilot']!r}): pool one pilot's seeds")
+        for key in FLIGHT_KEYS:
+            if r.get(key) != first.get(key):
+                raise ValueError(f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
+                                 f"{first.get(key)!r}: pool one way of flying")
         mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
         if sorted(mine) != keys:
             raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")
@@ -112,7 +120,7 @@ def pool_seeds(reports: list[dict]) -> dict:
             if worst is None or rate < worst["rate"]:
                 worst = {"seed": int(r["seed"]), "obstacles": k[0], "speed": k[1], "rate": rate,
                          "success": int(x["success"]), "episodes": int(x["episodes"])}
-    out = {key: first[key] for key in ("pilot", "run", "planner_preset", "planner") if key in first}
+    out = {key: first[key] for key in ("pilot", "run", "planner_preset", "planner", *FLIGHT_KEYS) if key in first}
     return {**out, "seed": seeds[0] if len(seeds) == 1 else None, "seeds": seeds, "settings": list(pooled.values()),
             "per_seed": per_seed, "worst_setting": worst}
 

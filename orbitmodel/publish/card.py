@@ -98,12 +98,14 @@ def _policy_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_
         summary=(f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, {params / 1e6:.2f} M "
                  f"parameters, trained on {data_sentence}."),
         contents="`config.json` and `model.safetensors` (with the EMA weights), and its evaluations",
-        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
-                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} "
-                   f"--image-size {raw['dataset']['image_size']}"),
+        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --obstacles 1,3,5 --speeds 1,2 --episodes 20 "
+                   f"--image-codec --timestep-spacing trailing   # as the reported grids fly it\n"
+                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --pilot-option timestep_spacing=trailing "
+                   f"--image-codec --image-size {raw['dataset']['image_size']}"),
         python_usage=(f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot\n"
                       f"policy = DiffusionPolicy.from_pretrained(\"{repo_id}\")\n"
-                      f"pilot = load_policy_pilot(\"{repo_id}\")           # an orbitdata.fly pilot: reset(task), act(obs)"),
+                      f"pilot = load_policy_pilot(\"{repo_id}\", timestep_spacing=\"trailing\")  "
+                      f"# an orbitdata.fly pilot: reset(task), act(obs)"),
         training=_training(run, "policy"), results=_grids(files),
         reproduce=f"orbitmodel train-policy DATA --preset {preset['name']} --out RUN")
 

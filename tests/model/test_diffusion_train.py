@@ -329,6 +329,8 @@ def test_expert_floor_scores_other_plans_where_the_policy_is_scored(trained, tin
     assert cli.exit_code == 0 and "another expert" in cli.output and "policy" not in cli.output, cli.output
     assert "tolerances" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master),
                                            "--position-m", "0"])
+    assert "drop one" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master), "--no-policy",
+                                         "--timestep-spacing", "trailing"])
 
 
 def one_line_error(args) -> str:

@@ -86,9 +86,15 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
     assert row == "| planner | 57/60 | 59/60 | 96.7 % [91.7, 98.7] (116/120) | 4 collisions | 17/20 (seed 4, 1 obst. 1 m/s) |"
     for bad, match in (([seeds[0], seeds[0]], "repeat"), ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
                        ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid"),
-                       ([seeds[0], {**seeds[1], "seed": None}], "root seed")):
+                       ([seeds[0], {**seeds[1], "seed": None}], "root seed"),
+                       ([{**seeds[0], "pilot_settings": {"timestep_spacing": "leading"}},
+                         {**seeds[1], "pilot_settings": {"timestep_spacing": "trailing"}}], "one way of flying"),
+                       ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec")):
         with pytest.raises(ValueError, match=match):
             pool_seeds(bad)
+    flown = [{**s, "pilot_settings": {"draws": 1}, "image_codec": True} for s in seeds]
+    assert {k: pool_seeds(flown)[k] for k in ("pilot_settings", "image_codec")} == {
+        "pilot_settings": {"draws": 1}, "image_codec": True}  # how the seeds were flown, carried into the pool
     for s in seeds:
         (tmp_path / f"seed{s['seed']}.json").write_text(json.dumps(s))
     res = CliRunner().invoke(app, ["eval", "pool", *(str(tmp_path / f"seed{k}.json") for k in (3, 4, 5)),

@@ -123,6 +123,9 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
     if stride < 1 or max_windows < 0 or plans < 1:
         raise ValueError(f"stride={stride}, max_windows={max_windows}, plans={plans}: give stride and plans >= 1 and "
                          "max_windows >= 0")
+    if timestep_spacing is not None and not with_policy:
+        raise ValueError(f"timestep_spacing={timestep_spacing!r} samples the policy, which with_policy=False (--no-policy) "
+                         "does not score; drop one of them")
     if not (position_m > 0 and speed_mps > 0 and angle_deg > 0):
         raise ValueError(f"tolerances {position_m} m, {speed_mps} m/s, {angle_deg} deg: give positive ones")
     from orbitdata.sim.env import CubeSatEnv

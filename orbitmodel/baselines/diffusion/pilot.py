@@ -39,7 +39,8 @@ PICKS = ("mean", "central")  # how a chunk is made of several draws
 
 
 class DiffusionPilot(Pilot):
-    """Flies a trained :class:`DiffusionPolicy` (EMA weights unless ``use_ema=False``).
+    """Flies a trained :class:`DiffusionPolicy` (EMA weights unless ``use_ema=False``). The pilot
+    owns the policy it is given: ``timestep_spacing`` sets that policy's sampler.
 
     Every sampling draw comes from a generator seeded by the task's seed, so an episode is
     reproducible.
@@ -52,12 +53,12 @@ class DiffusionPilot(Pilot):
     def __init__(self, policy: DiffusionPolicy, use_ema: bool = True, action_steps: int | None = None,
                  ensemble: float | None = None, draws: int = 1, noise_scale: float = 1.0, pick: str = "mean",
                  timestep_spacing: str | None = None):
-        if timestep_spacing is not None:  # sampling only: the run's own unless given
-            policy.set_sampler(timestep_spacing=timestep_spacing)
-        c = policy.config
-        if c.obstacles:
+        if policy.config.obstacles:
             raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
                              "cpu-state-obstacles): no pilot is told them, so it cannot fly; score it with eval policy")
+        if timestep_spacing is not None:  # sampling only: the run's own unless given; the pilot owns ``policy``
+            policy.set_sampler(timestep_spacing=timestep_spacing)
+        c = policy.config
         self.policy = policy.eval()
         self.needs_images = c.images  # a policy without images flies without rendering
         self.use_ema = use_ema
