@@ -32,12 +32,10 @@ def _expert(config: GenerationConfig, plan_draw=0, noise_draw=0) -> Pilot:
 
     draws = {}
     for name, value in (("plan_draw", plan_draw), ("noise_draw", noise_draw)):
-        try:
-            draws[name] = int(value)
-        except (TypeError, ValueError):
-            draws[name] = -1
-        if draws[name] < 0 or str(value).strip() != str(draws[name]):
+        text = str(value).strip()  # option values arrive as text; "1.5" and "True" are no whole numbers
+        if not text.isdecimal():
             raise ValueError(f"--pilot-option {name}={value}: give a whole number >= 0 (0: the episode's own)")
+        draws[name] = int(text)
     return ExpertPilot(config.pilots.expert, controller=Controller(config.sim.cubesat, config.pilots.gains), **draws)
 
 

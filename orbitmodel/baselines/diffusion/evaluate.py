@@ -122,6 +122,20 @@ def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out
     return actions.mean(axis=0)
 
 
+def scored_windows(dataset, config, held_out: ValidationSplit, split: str, levels, outcomes, stride: int, columns):
+    """(dataset split, windows) that the open-loop evaluations score for a policy with ``config``
+    (a PolicyConfig): every ``stride``-th window of ``split`` ("test", "val": the run's
+    ``held_out`` episodes, or "train") among the chosen levels and outcomes, padded past the end."""
+    source_split, episodes = ("train", None) if split == "train" else split_selection(split, held_out)
+    chosen = episode_filter(list(levels), list(outcomes))
+    if episodes is not None:  # the held-out episodes of the chosen levels and outcomes
+        keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())
+        chosen = [e for e in episodes if e in keep]
+    return source_split, load_windows(dataset, split=source_split, context=config.n_obs_steps,
+                                      horizon=config.horizon - config.n_obs_steps, stride=stride, pad=True,
+                                      columns=columns, episodes=chosen)
+
+
 @torch.no_grad()
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
@@ -149,13 +163,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     if c.images:
         check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     held_out = read_policy_run(resolve_run(run)).validation
-    source_split, episodes = ("train", None) if split == "train" else split_selection(split, held_out)
-    chosen = episode_filter(list(levels), list(outcomes))
-    if episodes is not None:  # the held-out episodes of the chosen levels and outcomes
-        keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())
-        chosen = [e for e in episodes if e in keep]
-    windows = load_windows(dataset, split=source_split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
-                           stride=stride, pad=True, columns=policy_columns(c), episodes=chosen)
+    source_split, windows = scored_windows(dataset, c, held_out, split, levels, outcomes, stride, policy_columns(c))
     goals = episode_goals(dataset, source_split)
     obstacles = episode_obstacles(dataset, source_split, c.obstacles) if c.obstacles else None  # privileged
     if without_obstacles:

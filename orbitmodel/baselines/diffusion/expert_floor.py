@@ -30,14 +30,12 @@ import numpy as np
 from torch.utils.data import DataLoader
 
 from orbitdata import schema as S
-from orbitdata.load import IS_PAD, collate_windows, load_windows
-from orbitdata.load.select import select_episodes
+from orbitdata.load import IS_PAD, collate_windows
 from orbitdata.load.source import read_meta
 from orbitdata.load.tables import load_episode_table
 from orbitmodel.baselines.diffusion.config import read_policy_run
-from orbitmodel.baselines.diffusion.evaluate import GOAL_BANDS_M, Errors, mean_action
+from orbitmodel.baselines.diffusion.evaluate import GOAL_BANDS_M, Errors, mean_action, scored_windows
 from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS
-from orbitmodel.data import episode_filter, split_selection
 from orbitmodel.kinematics import P
 from orbitmodel.runs import resolve_run
 
@@ -132,15 +130,9 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
 
     policy_run = read_policy_run(resolve_run(run))
     held_out, c = policy_run.validation, policy_run.preset.model
-    source_split, episodes = ("train", None) if split == "train" else split_selection(split, held_out)
-    table = load_episode_table(dataset, source_split, {})
     levels = DEFAULT_LEVELS  # the experts' own episodes: another plan is compared with the recorded one
-    chosen = episode_filter(list(levels), [])
-    if episodes is not None:
-        keep = set(select_episodes(table, chosen, source_split).tolist())
-        chosen = [e for e in episodes if e in keep]
-    windows = load_windows(dataset, split=source_split, context=c.n_obs_steps, horizon=c.horizon - c.n_obs_steps,
-                           stride=stride, pad=True, columns=list(COLUMNS), episodes=chosen)
+    source_split, windows = scored_windows(dataset, c, held_out, split, levels, (), stride, list(COLUMNS))
+    table = load_episode_table(dataset, source_split, {})
     rows = {int(r[S.EPISODE_INDEX]): r for r in table.select([S.EPISODE_INDEX, S.SEED, S.GOAL]).to_pylist()}
     generation = read_meta(dataset)[0].generation_config()
     env = CubeSatEnv(replace(generation.sim, render=False), generation.scenario)
@@ -197,8 +189,8 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
     quantiles = np.percentile(np.asarray(own_deviation).reshape(-1, 3), [50, 90], axis=0) if own_deviation else None
     spread = {name: ([float(q) for q in quantiles[:, k]] if quantiles is not None else None)
               for k, name in enumerate(("position_m", "speed_mps", "angle_deg"))}
-    return ExpertFloor(run=str(run), dataset=str(dataset), split=split, levels=tuple(levels), windows=n, plans=plans, position_m=position_m,
-                       speed_mps=speed_mps, angle_deg=angle_deg, scored_windows=len(scored), frames=frames,
+    return ExpertFloor(run=str(run), dataset=str(dataset), split=split, levels=tuple(levels), windows=n, plans=plans,
+                       position_m=position_m, speed_mps=speed_mps, angle_deg=angle_deg, scored_windows=len(scored), frames=frames,
                        own_plan_could=own_could / looked, own_plan_deviation=spread,
                        plans_per_window=could_total / len(scored),
                        other=by_index.total("other"), own=by_index.total("own"),
