@@ -11,26 +11,8 @@ The light contract (no MuJoCo, no OMPL): ``orbitdata.schema`` (columns), ``orbit
 ``orbitdata.info`` (typed meta/info.json).
 """
 
-__version__ = "0.1.0"
-
-
-
-def lazy_getattr(package: str, exports: dict[str, str]):
-    """A module ``__getattr__`` that imports ``exports[name]`` (a module path) when ``name`` is first used.
-
-    Packages whose names pull in heavy libraries (MuJoCo, OMPL, torch) export them through this,
-    so that importing the package, or a light module inside it, stays light.
-    """
-
-    def __getattr__(name: str):
-        if name in exports:
-            import importlib
-
-            return getattr(importlib.import_module(exports[name]), name)
-        raise AttributeError(f"module {package!r} has no attribute {name!r}")
-
-    return __getattr__
-
+from orbitdata.lazy import lazy_getattr
+from orbitdata.version import __version__
 
 _LAZY = {
     "load_windows": "orbitdata.load",

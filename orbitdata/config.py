@@ -13,6 +13,7 @@ import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from orbitdata.fly.config import FlightConfig
 from orbitdata.fly.pilots.config import PilotsConfig
 from orbitdata.scenario.config import ScenarioConfig
 from orbitdata.schema import LEVELS
@@ -77,6 +78,11 @@ class GenerationConfig:
     scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
     sim: SimConfig = field(default_factory=SimConfig)
     pilots: PilotsConfig = field(default_factory=PilotsConfig)
+
+    @property
+    def flight(self) -> FlightConfig:
+        """The sections that flying reads (a pilot factory, the evaluation grid)."""
+        return FlightConfig(sim=self.sim, scenario=self.scenario, pilots=self.pilots)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)

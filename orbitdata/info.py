@@ -71,7 +71,7 @@ class Info:
         if version is None:
             raise ValueError(f"{where} has no schema_version; it was not written by orbitdata")
         if not S.readable_schema(version):
-            from orbitdata import __version__
+            from orbitdata.version import __version__
 
             raise ValueError(f"{where}: the dataset has schema version {version!r}, but orbitdata {__version__} reads "
                              f"schema {S.SCHEMA_VERSION.split('.')[0]}.x; install the orbitdata release that matches "

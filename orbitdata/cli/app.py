@@ -26,7 +26,9 @@ _register()
 
 
 def main() -> None:
-    app()
+    from orbitdata.cli.errors import run_app
+
+    run_app(app)
 
 
 if __name__ == "__main__":

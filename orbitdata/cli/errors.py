@@ -1,4 +1,10 @@
-"""One-line errors for the CLI: the library raises, only the CLI exits."""
+"""One-line errors for the CLI: the library raises, only the CLI exits.
+
+Exit codes: 2 for a usage error (a bad flag value, an unknown option, a path that is not what
+the command takes), 1 for a failure at run time (the Hub cannot be reached, a disk error),
+130 when interrupted. :func:`run_app` runs a typer app so that its parse errors follow the same
+rule: one line naming the flag, exit 2.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +13,11 @@ import functools
 import sys
 
 import typer
+
+try:  # recent typer carries its own copy of click (typer._click), whose exceptions it raises
+    from typer._click import exceptions as click_errors
+except ImportError:  # pragma: no cover - older typer runs on click itself
+    from click import exceptions as click_errors
 
 # Errors that mean "the user asked for something impossible": print one line, exit 1.
 USER_ERRORS = (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, RuntimeError)
@@ -49,3 +60,60 @@ def friendly(func):
             fail(f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": "))
 
     return wrapper
+
+
+def _flag(param) -> str:
+    """How the user wrote ``param``: its long option (``--episodes``), or an argument's name (``OUT``)."""
+    opts = [o for o in getattr(param, "opts", []) if o.startswith("-")]
+    if opts:
+        return max(opts, key=len)
+    return (getattr(param, "name", None) or "argument").upper()
+
+
+def usage_line(exc: Exception) -> str:
+    """One line for a parse error: the flag, the value given and what it must be, without
+    pydantic's wording (``Input should be ...``) or click's box."""
+    param = getattr(exc, "param", None)
+    cause = exc.__cause__
+    if isinstance(exc, click_errors.MissingParameter):
+        message = exc.format_message()
+    elif isinstance(exc, click_errors.BadParameter) and param is not None and hasattr(cause, "errors"):
+        first = cause.errors()[0]  # a pydantic ValidationError: typer checks min/max and choices with it
+        error = (first.get("ctx") or {}).get("error")
+        why = str(error) if error is not None else first["msg"].replace("Input should be", "must be", 1)
+        message = f"{_flag(param)} {first.get('input')}: {why}"
+    elif isinstance(exc, click_errors.BadParameter) and param is not None:
+        message = f"{_flag(param)}: {exc.message}"
+    else:
+        message = exc.format_message()
+    ctx = getattr(exc, "ctx", None)
+    hint = f" (see `{ctx.command_path} --help`)" if ctx is not None else ""
+    return " ".join(f"{message.strip().rstrip('.')}{hint}".split())
+
+
+def run_app(app: typer.Typer, args: list[str] | None = None) -> None:
+    """Run a typer app as a program (``args``: the command line, default ``sys.argv[1:]``) and exit.
+
+    A usage error (a bad or missing flag value, an unknown option or command) prints one line,
+    ``error: <flag> ...``, and exits 2; ``--help`` prints the help; a command's ``typer.Exit``
+    code is the exit code.
+    """
+    command = typer.main.get_command(app)
+    name = app.info.name if isinstance(app.info.name, str) else None  # None: from sys.argv, as click does
+    try:
+        code = command.main(args=args, prog_name=name, standalone_mode=False)
+    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:  # the bare command: its help
+        typer.echo(exc.format_message())
+        sys.exit(exc.exit_code)
+    except click_errors.UsageError as exc:
+        _exit(usage_line(exc), 2)
+    except click_errors.ClickException as exc:
+        _exit(" ".join(exc.format_message().split()), exc.exit_code)
+    except typer.Abort:
+        _exit("aborted", 1)
+    sys.exit(code if type(code) is int else 0)
+
+
+def _exit(message: str, code: int) -> None:
+    typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
+    sys.exit(code)

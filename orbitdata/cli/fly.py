@@ -66,7 +66,8 @@ def register(app: typer.Typer) -> None:
                                        "action chunk) [default: every step]."),
         image_codec: bool = typer.Option(False, "--image-codec/--raw-images",
                                          help="Hand the pilot its camera through the dataset's JPEG codec (the "
-                                              "config's quality), as the dataset stores it [default: raw renders]."),
+                                              "config's quality), as the dataset stores it [default: raw renders, unless the pilot asks "
+                                              "for the codec, as a policy's flight preset does]."),
         config: Path = typer.Option(None, help="TOML config (scenario/sim/pilots settings)."),
         pilot_option: list[str] = typer.Option([], help="KEY=VALUE passed to the pilot's factory (repeatable)."),
     ):
@@ -90,11 +91,12 @@ def register(app: typer.Typer) -> None:
         factory = pilot_factory(pilot)
         with usage_errors(TypeError):  # an option the pilot's factory does not take
             try:
-                inspect.signature(factory).bind(cfg, **options)
+                inspect.signature(factory).bind(cfg.flight, **options)
             except TypeError as exc:
                 raise TypeError(f"--pilot-option: pilot {pilot!r} {exc}") from None
         with usage_errors(ValueError):  # an option value the factory refuses, before anything flies
-            built = factory(cfg, **options)
+            built = factory(cfg.flight, **options)
+        image_codec = image_codec or bool(getattr(built, "image_codec", False))  # the flag, or the pilot's own
         recorder = None
         if video is not None:
             from orbitdata.viz.flight import FlightVideos
@@ -111,9 +113,10 @@ def register(app: typer.Typer) -> None:
                     recorder.episode(cell, k, result)
                 bar.advance(task)
 
-            cells = fly_grid(lambda _config: built, obstacles, speeds, episodes, seed, cfg, render=render,
+            cells = fly_grid(lambda _config: built, obstacles, speeds, episodes, seed, cfg.flight, render=render,
                              frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode,
-                             image_codec=image_codec, thrust_noise=thrust_noise, noise_hold=noise_hold)
+                             image_quality=cfg.dataset.jpeg_quality if image_codec else None,
+                             thrust_noise=thrust_noise, noise_hold=noise_hold)
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import typer
 
-from orbitdata.cli.errors import friendly, usage_errors
+from orbitdata.cli.errors import friendly, usage, usage_errors
 from orbitdata.config import DatasetConfig
 from orbitdata.sim.config import CameraConfig
 
@@ -67,6 +67,7 @@ def register(app: typer.Typer) -> None:
 
         from orbitdata.config import GenerationConfig
         from orbitdata.viz import overview_figure
+        from orbitdata.write.generate import UnusableOutput
         from orbitdata.write.generate import generate as run
 
         with usage_errors():
@@ -81,7 +82,7 @@ def register(app: typer.Typer) -> None:
         workers = workers or os.cpu_count() or 1
         out = out.expanduser()
         if out.exists() and not os.access(out, os.W_OK):
-            raise PermissionError(f"{out} is not writable; choose another OUT or fix its permissions")
+            usage(f"{out} is not writable; choose another OUT or fix its permissions")
         console = Console(stderr=True)
         bar = _progress_bar(console)
         task = bar.add_task("generate", total=cfg.dataset.episodes, eps=0.0, fps=0.0)
@@ -99,11 +100,14 @@ def register(app: typer.Typer) -> None:
                 console.print(f"generate: {p.episodes_done}/{p.episodes_total} episodes, {eps:.2f} ep/s, "
                               f"{fps:.0f} frames/s, ETA {eta:.0f} s", highlight=False)
 
-        with bar:
+        with bar, usage_errors(UnusableOutput):  # OUT is a file, holds something else, or is read-only
             info = run(out, cfg, workers=workers, executor=executor.value, ray_address=ray_address,
                        overwrite=overwrite, progress=report, repo_id=repo_id, figure=overview_figure)
             bar.update(task, completed=cfg.dataset.episodes)
         typer.echo(f"wrote {info.counts['episodes']} episodes ({info.counts['frames']} frames) to {out}")
+        if "test" not in info.counts["splits"] and cfg.dataset.test_fraction > 0:
+            typer.echo("note: no test split: one episode is all train; pass --episodes 2 or more for a test split",
+                       err=True)
 
     @app.command()
     @friendly
@@ -115,11 +119,12 @@ def register(app: typer.Typer) -> None:
         from orbitdata import schema as S
         from orbitdata.load.source import local_folder
         from orbitdata.viz import overview_figure
-        from orbitdata.write.finalize import finalize
+        from orbitdata.write.finalize import NoDataset, finalize
 
         with usage_errors(FileNotFoundError, NotADirectoryError):
             folder = local_folder(folder, repo_ok=False)
-        info = finalize(folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
-                        figure=overview_figure)
+        with usage_errors(NoDataset):
+            info = finalize(folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
+                            figure=overview_figure)
         shards = [rel for rel in info.files if S.SHARD_RE.match(rel)]
         typer.echo(f"sharded {info.counts['episodes']} episodes into {len(shards)} files in {folder}")

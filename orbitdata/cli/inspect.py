@@ -129,8 +129,12 @@ def register(app: typer.Typer) -> None:
 
         A repo id downloads only meta/info.json and the episodes shards (no frames).
         """
+        from orbitdata.load.source import dataset_folder, local_folder
         from orbitdata.load.summary import summarize
 
+        with usage_errors(FileNotFoundError, NotADirectoryError):  # neither a dataset folder nor a repo id
+            if local_folder(source) is not None:
+                dataset_folder(source)
         summary = summarize(source)
         if as_json:
             typer.echo(json.dumps(summary, indent=2))
@@ -157,7 +161,8 @@ def register(app: typer.Typer) -> None:
             check_format(out)
             if not fps > 0:
                 raise ValueError(f"--fps {fps} must be positive")
-        folder = dataset_folder(folder)
+        with usage_errors(FileNotFoundError, NotADirectoryError):
+            folder = dataset_folder(folder)
         if episode is None:
             usage(f"pass --episode N: {folder} holds {index_range(folder)}")
         try:

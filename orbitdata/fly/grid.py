@@ -13,7 +13,7 @@ from typing import Callable
 
 import numpy as np
 
-from orbitdata.config import GenerationConfig
+from orbitdata.fly.config import FlightConfig
 from orbitdata.fly.pilot import Pilot
 from orbitdata.fly.registry import PilotFactory, make_pilot
 from orbitdata.fly.rollout import EpisodeResult, FrameSink, fly_episode
@@ -61,11 +61,11 @@ def fly_grid(
     speeds: list[float],
     episodes: int,
     seed: int = 0,
-    config: GenerationConfig = GenerationConfig(),
+    config: FlightConfig = FlightConfig(),
     render: bool | None = None,
     frame_sink: FrameSink | None = None,
     on_episode: EpisodeHook | None = None,
-    image_codec: bool = False,
+    image_quality: int | None = None,
     thrust_noise: float = 0.0,
     noise_hold: int = 1,
     **options,
@@ -74,14 +74,15 @@ def fly_grid(
 
     Args:
         pilot: a registered pilot name, or a factory ``factory(config, **options) -> Pilot``.
+        config: the simulator, scenario and built-in pilots' settings (``GenerationConfig.flight``).
         render: render the camera (``obs["image"]``; ``obs["depth"]`` and ``obs["depth_low"]`` for a
             pilot that ``sees_depth``);
             ``None``: when the pilot needs images or ``frame_sink`` wants frames.
         frame_sink: called with every rendered frame (``t`` restarts at 0 each episode).
         on_episode: called after every episode (progress bars, videos).
-        image_codec: hand the pilot its camera through the dataset's JPEG codec (at
-            ``config.dataset.jpeg_quality``), as the dataset stores it: what a pilot trained on
-            the dataset saw.
+        image_quality: hand the pilot its camera through the dataset's JPEG codec at this quality
+            (a dataset's ``DatasetConfig.jpeg_quality``), as the dataset stores it: what a pilot
+            trained on the dataset saw. ``None``: the raw renders.
         thrust_noise, noise_hold: add Gaussian noise of this sigma to every action, redrawn every
             ``noise_hold`` control steps (``orbitdata.fly.noise.ThrustNoise``; 0: none).
         **options: passed to the pilot's factory.
@@ -107,7 +108,7 @@ def fly_grid(
                 cell = CellResult(obstacles=n, speed=float(v), episodes=episodes)
                 for k in range(episodes):
                     result = fly_episode(env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink,
-                                         image_quality=config.dataset.jpeg_quality if image_codec else None)
+                                         image_quality=image_quality)
                     cell.add(result.outcome)
                     if on_episode:
                         on_episode(cell, k, result)

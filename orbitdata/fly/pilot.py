@@ -65,12 +65,15 @@ class Pilot(ABC):
         privileged: ``reset`` also gets ``scenario=``, the ground truth (obstacles included).
         needs_images: ``act`` reads the camera, so the env must render.
         sees_depth: ``act`` is given the rendered depth as well (a privileged sensor).
+        image_codec: ``act`` sees its camera through the dataset's JPEG codec, as a pilot trained
+            on the dataset's frames saw them (``orbitdata fly --image-codec`` asks it of any pilot).
     """
 
     name: ClassVar[str] = ""
     privileged: ClassVar[bool] = False
     needs_images: ClassVar[bool] = False
     sees_depth: ClassVar[bool] = False
+    image_codec: bool = False
 
     @abstractmethod
     def reset(self, task: Task) -> None:

@@ -1,7 +1,8 @@
 """Pilots by name: the built-in levels, pilots registered at run time, and other packages' pilots.
 
 A factory makes a pilot for a run: ``factory(config, **options) -> Pilot``, where ``config`` is
-the run's :class:`~orbitdata.config.GenerationConfig` (camera, CubeSat, pilot settings) and
+the run's :class:`~orbitdata.fly.config.FlightConfig` (``sim``: camera and CubeSat, ``scenario``,
+``pilots``: the built-in pilots' settings; a ``GenerationConfig`` has the same sections) and
 ``options`` are the factory's own keyword arguments (``orbitdata fly --pilot-option KEY=VALUE``
 passes strings). Another package adds its pilots with an entry point in its ``pyproject.toml``::
 
@@ -18,14 +19,14 @@ from importlib import metadata
 from typing import TYPE_CHECKING, Callable
 
 if TYPE_CHECKING:
-    from orbitdata.config import GenerationConfig
+    from orbitdata.fly.config import FlightConfig
     from orbitdata.fly.pilot import Pilot
 
 ENTRY_POINT_GROUP = "orbitdata.pilots"
-PilotFactory = Callable[..., "Pilot"]  # factory(config: GenerationConfig, **options) -> Pilot
+PilotFactory = Callable[..., "Pilot"]  # factory(config: FlightConfig, **options) -> Pilot
 
 
-def _expert(config: GenerationConfig, plan_draw=0, noise_draw=0) -> Pilot:
+def _expert(config: FlightConfig, plan_draw=0, noise_draw=0) -> Pilot:
     """``plan_draw`` / ``noise_draw`` k > 0: another RRT* plan / thrust noise of the same task."""
     from orbitdata.fly.pilots.control import Controller
     from orbitdata.fly.pilots.expert import ExpertPilot
@@ -39,14 +40,14 @@ def _expert(config: GenerationConfig, plan_draw=0, noise_draw=0) -> Pilot:
     return ExpertPilot(config.pilots.expert, controller=Controller(config.sim.cubesat, config.pilots.gains), **draws)
 
 
-def _risky(config: GenerationConfig) -> Pilot:
+def _risky(config: FlightConfig) -> Pilot:
     from orbitdata.fly.pilots.control import Controller
     from orbitdata.fly.pilots.risky import RiskyPilot
 
     return RiskyPilot(config.pilots.risky, controller=Controller(config.sim.cubesat, config.pilots.gains))
 
 
-def _exploratory(config: GenerationConfig) -> Pilot:
+def _exploratory(config: FlightConfig) -> Pilot:
     from orbitdata.fly.pilots.control import Controller
     from orbitdata.fly.pilots.exploratory import ExploratoryPilot
 
@@ -90,13 +91,13 @@ def pilot_factory(name: str) -> PilotFactory:
     return _FACTORIES[name]
 
 
-def make_pilot(name: str, config: GenerationConfig | None = None, **options) -> Pilot:
-    """A new pilot ``name`` for a run with ``config`` (default: ``GenerationConfig()``)."""
-    from orbitdata.config import GenerationConfig
+def make_pilot(name: str, config: FlightConfig | None = None, **options) -> Pilot:
+    """A new pilot ``name`` for a run with ``config`` (default: ``FlightConfig()``)."""
+    from orbitdata.fly.config import FlightConfig
     from orbitdata.fly.pilot import Pilot
 
     factory = pilot_factory(name)
-    pilot = factory(config if config is not None else GenerationConfig(), **options)
+    pilot = factory(config if config is not None else FlightConfig(), **options)
     if not isinstance(pilot, Pilot):
         raise TypeError(f"the factory of pilot {name!r} returned {type(pilot).__name__}, not an orbitdata.fly.Pilot")
     return pilot

@@ -31,8 +31,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from orbitdata import lazy_getattr
 from orbitdata.info import Info
+from orbitdata.lazy import lazy_getattr
 from orbitdata.load.config import IS_PAD, WindowConfig
 from orbitdata.load.source import HubUnavailable, dataset_folder, is_repo_id, read_info, read_meta
 

@@ -83,12 +83,44 @@ def _offline() -> bool:
     return bool(constants.HF_HUB_OFFLINE) or env
 
 
+def _unreachable(repo_id: str, filename: str, why: str) -> HubUnavailable:
+    from huggingface_hub import constants
+
+    return HubUnavailable(f"cannot fetch {filename} of dataset repo {repo_id!r}: the Hugging Face Hub at "
+                          f"{constants.ENDPOINT} could not be reached ({why}); check your connection (and "
+                          "HF_ENDPOINT), or pass a local dataset folder")
+
+
+def _check_reachable(repo_id: str, filename: str, revision: str | None, token) -> None:
+    """One request for the file's metadata, without the client's retries: raises HubUnavailable at
+    once when the Hub cannot be reached (the client would retry for half a minute, then report a
+    missing file). Any other answer (not found, gated) is left to the download to report."""
+    from httpx2 import TransportError  # huggingface_hub's HTTP client (declared in pyproject.toml)
+    from huggingface_hub import get_hf_file_metadata, hf_hub_url
+
+    try:
+        get_hf_file_metadata(hf_hub_url(repo_id, filename, repo_type="dataset", revision=revision), token=token)
+    except TransportError as exc:
+        raise _unreachable(repo_id, filename, str(exc).strip().splitlines()[0] if str(exc).strip()
+                           else type(exc).__name__) from None
+    except Exception:  # the download below says what it means
+        pass
+
+
 def hub_file(repo_id: str, filename: str, revision: str | None = None, token=None) -> Path:
     """Download one file of a dataset repo (or take it from the local cache)."""
-    from huggingface_hub import hf_hub_download
-    from huggingface_hub.errors import (EntryNotFoundError, GatedRepoError, RepositoryNotFoundError,
-                                        RevisionNotFoundError)
+    from huggingface_hub import hf_hub_download, try_to_load_from_cache
+    from huggingface_hub.errors import (
+        EntryNotFoundError,
+        GatedRepoError,
+        LocalEntryNotFoundError,
+        RepositoryNotFoundError,
+        RevisionNotFoundError,
+    )
 
+    if not _offline() and not isinstance(try_to_load_from_cache(repo_id, filename, revision=revision,
+                                                                repo_type="dataset"), str):
+        _check_reachable(repo_id, filename, revision, token)  # not cached: the Hub must answer
     try:
         return Path(hf_hub_download(repo_id, filename, repo_type="dataset", revision=revision, token=token))
     except Exception as exc:  # the client raises many types; every one means "not available"
@@ -100,6 +132,8 @@ def hub_file(repo_id: str, filename: str, revision: str | None = None, token=Non
                    "or log in with `hf auth login`")
         elif isinstance(exc, RevisionNotFoundError):
             why = f"the repo has no revision {revision!r}"
+        elif isinstance(exc, LocalEntryNotFoundError):  # a connection problem, and the file is not cached
+            raise _unreachable(repo_id, filename, "no connection, and the file is not in the local cache") from None
         elif isinstance(exc, EntryNotFoundError):
             why = "the repo has no such file: was it pushed with `orbitdata push`?"
         else:

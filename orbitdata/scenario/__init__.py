@@ -3,7 +3,7 @@
 Names import on first use, so that ``orbitdata.scenario.config`` (the settings) stays light.
 """
 
-from orbitdata import lazy_getattr
+from orbitdata.lazy import lazy_getattr
 
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("ScenarioConfig",), "orbitdata.scenario.config"),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 
 import numpy as np
 
@@ -101,9 +102,9 @@ def sample_scenario(
     c = config
     n = int(rng.integers(c.n_obstacles[0], c.n_obstacles[1] + 1))
     if n_obstacles is not None:
-        if n_obstacles < 0:
-            raise ValueError(f"n_obstacles must be >= 0, got {n_obstacles}")
-        n = n_obstacles
+        if isinstance(n_obstacles, bool) or not isinstance(n_obstacles, numbers.Integral) or n_obstacles < 0:
+            raise ValueError(f"n_obstacles must be a whole number >= 0, got {n_obstacles!r}")
+        n = int(n_obstacles)
     v0 = float(rng.uniform(*c.speed))
     if speed is not None:
         if not (math.isfinite(speed) and speed >= 0):

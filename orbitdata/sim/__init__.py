@@ -6,7 +6,7 @@ MuJoCo::
     from orbitdata.sim import CubeSatEnv, SimConfig
 """
 
-from orbitdata import lazy_getattr
+from orbitdata.lazy import lazy_getattr
 
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("CameraConfig", "CubeSatConfig", "SimConfig"), "orbitdata.sim.config"),

@@ -13,31 +13,46 @@ Spec (the same world and episodes as :class:`orbitdata.sim.env.CubeSatEnv` and t
 
 * **Action**: ``Box(0, 1, (8,), float32)``, the normalised thrust of thrusters 0..7, held for
   one control step of 0.04 s. Values outside [0, 1], NaN or Inf raise ``ValueError``.
-* **Observation**: ``Dict`` of ``state`` (16,) float32 ``[p, v_body, rot6d, w_body, fuel]``
-  (``orbitdata.state``), ``goal`` (3,) float32 metres, world frame relative to the start (as p),
-  and, unless ``images=False``, ``image`` (S, S, 3) uint8 RGB and ``depth`` (S, S) float32 metres
-  along the optical axis (0 = no return) from the onboard camera.
+* **Observation**: a ``Dict`` keyed by the dataset's column names, with the values a dataset row
+  decodes to (``orbitdata.schema``), so a policy trained on the dataset reads the env unchanged:
+  ``observation.state`` (16,) float32 ``[p, v_body, rot6d, w_body, fuel]`` (``orbitdata.state``),
+  ``goal`` (3,) float32 metres, world frame relative to the start (as p; the episodes table's
+  ``goal``), and, unless ``images=False``, ``observation.image`` (S, S, 3) uint8 RGB,
+  ``observation.depth`` (S, S) float32 metres along the optical axis (0 = no return) and
+  ``observation.depth_low`` (16, 16) float32 metres (no return counts as the far plane). The
+  dataset stores the image as JPEG and the depth in whole millimetres; the env hands over the
+  render itself.
 * **Episode end**: ``terminated`` on a collision, on entering the 0.5 m goal sphere
-  (``success``) or with an empty tank (``out_of_fuel``); ``truncated`` at frame 299 (``timeout``,
-  12 s). **Reward**: +1 on success, -1 on a collision, 0 otherwise.
+  (``success``) or with an empty tank (``out_of_fuel``); ``truncated`` after ``max_steps`` steps
+  (``timeout``; by default 299 steps, 12 s: the dataset's episodes of at most 300 frames).
+  **Reward**: +1 on success, -1 on a collision, 0 otherwise.
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``min_clearance`` (m),
   ``fuel_kg``, ``mass``, ``thrust`` (after fuel limits), ``position_world``, ``step``, and
   ``episode_seed``: the seed that drew the episode's world (obstacles, goal, initial velocity,
   attitude, lighting), so ``reset(seed=episode_seed)`` flies it again.
-* **Arguments** (``gym.make`` keywords): ``n_obstacles`` and ``speed`` (m/s) fix those draws of
-  every episode (None: drawn from the scenario's ranges, 1-5 obstacles, 0.5-2.5 m/s); ``image_size``
-  (px, square); ``seed``: the first ``reset``'s seed when it is given none; ``images``: render the
-  camera (False: state and goal only, much faster); ``max_steps``; ``sim`` and ``scenario``: the
-  full :class:`~orbitdata.sim.config.SimConfig` and :class:`~orbitdata.scenario.config.ScenarioConfig`
+* **Arguments** (``gym.make`` keywords, checked there): ``n_obstacles`` (a whole number >= 0) and
+  ``speed`` (m/s, >= 0) fix those draws of every episode (None: drawn from the scenario's ranges,
+  1-5 obstacles, 0.5-2.5 m/s); ``image_size`` (px, square, a multiple of 16); ``seed``: the first
+  ``reset``'s seed when it is given none; ``images``: render the camera (False: state and goal
+  only, much faster, and no ``render_mode``); ``max_steps``: ``step`` calls before ``truncated``
+  (None: the simulator's frame limit less one); ``sim`` and ``scenario``: the full
+  :class:`~orbitdata.sim.config.SimConfig` and :class:`~orbitdata.scenario.config.ScenarioConfig`
   (a dataset's are in its ``meta/info.json``). ``reset(options=...)`` takes ``n_obstacles``,
   ``speed`` or a whole ``scenario`` for one episode.
+* **Vector envs**: ``gym.make_vec("CubeSat-v1", num_envs=N, vectorization_mode="async")`` works in
+  a process that has rendered already: the renderer releases its OpenGL state before a fork
+  (``orbitdata.sim.gl``).
 
-Version history: v1, the simulator of dataset schema 1.0.
+Version history: v1, the simulator of dataset schema 1.0. The observation keys took the dataset's
+column names, ``observation.depth_low`` was added and ``max_steps`` became the number of steps
+(it had counted frames) with the simulator unchanged.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import numbers
 
 import numpy as np
 
@@ -48,13 +63,32 @@ except ImportError:  # the optional extra
     raise ImportError("CubeSat-v1 as a Gymnasium environment needs gymnasium: pip install 'orbitdata[gym]'") \
         from None
 
+from orbitdata import schema as S
 from orbitdata.scenario.config import ScenarioConfig
-from orbitdata.schema import ACTION_DIM, STATE_DIM
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
 
 ENV_ID = CubeSatEnv.version  # "CubeSat-v1"
 SEED_BOUND = 2**63 - 1  # episode seeds drawn by reset() without one
+KEYS = {"state": S.STATE, "image": S.IMAGE, "depth": S.DEPTH, "depth_low": S.DEPTH_LOW}  # simulator -> dataset
+
+
+def _whole(name: str, value, low: int, what: str, none: str | None = None):
+    """``value`` as an int >= ``low``, or None when ``none`` says what None means; else ValueError naming it."""
+    if value is None and none is not None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+        raise ValueError(f"{name}={value!r}: give {what}" + (f", or None {none}" if none else ""))
+    return int(value)
+
+
+def _speed(value, name: str = "speed") -> float | None:
+    """An initial speed in m/s (finite, >= 0) or None; else ValueError naming it."""
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or value < 0:
+        raise ValueError(f"{name}={value!r}: give a finite speed >= 0 in m/s, or None to draw it per episode")
+    return float(value)
 
 
 class CubeSatGymEnv(gymnasium.Env):
@@ -65,23 +99,41 @@ class CubeSatGymEnv(gymnasium.Env):
     def __init__(self, n_obstacles: int | None = None, speed: float | None = None, image_size: int | None = None,
                  seed: int | None = None, images: bool = True, max_steps: int | None = None,
                  sim: SimConfig | None = None, scenario: ScenarioConfig | None = None, render_mode: str | None = None):
-        sim = sim or SimConfig()
-        camera = sim.camera if image_size is None else dataclasses.replace(sim.camera, image_size=int(image_size))
-        sim = dataclasses.replace(sim, camera=camera, render=bool(images), max_steps=max_steps or sim.max_steps)
-        if render_mode not in (None, "rgb_array") or (render_mode and not images):
+        n_obstacles = _whole("n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0",
+                             "to draw 1-5 per episode")
+        speed = _speed(speed)
+        image_size = _whole("image_size", image_size, 16, "a whole number of pixels, a multiple of 16",
+                            "for the simulator's camera")
+        seed = _whole("seed", seed, 0, "a whole number >= 0", "to draw the first episode's seed")
+        max_steps = _whole("max_steps", max_steps, 1, "a whole number of steps >= 1",
+                           "for the simulator's frame limit less one")
+        if not isinstance(images, bool):
+            raise ValueError(f"images={images!r}: give True (render the camera) or False (state and goal only)")
+        for name, value, cls in (("sim", sim, SimConfig), ("scenario", scenario, ScenarioConfig)):
+            if value is not None and not isinstance(value, cls):
+                raise ValueError(f"{name}={type(value).__name__}: give an orbitdata {cls.__name__}, or None")
+        self.metadata = {**self.metadata, "render_modes": ["rgb_array"] if images else []}
+        if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r}: CubeSat-v1 renders 'rgb_array' (with images=True) only")
+        sim = sim or SimConfig()
+        camera = sim.camera if image_size is None else dataclasses.replace(sim.camera, image_size=image_size)
+        frames = sim.max_steps if max_steps is None else max_steps + 1  # the simulator counts frames
+        sim = dataclasses.replace(sim, camera=camera, render=images, max_steps=frames)  # checks the image size
         self.env = CubeSatEnv(sim, scenario or ScenarioConfig())
         self.n_obstacles, self.speed, self.render_mode = n_obstacles, speed, render_mode
         self._first_seed = seed  # the first reset's, when it is given none
         self._reset_before = False
-        s = camera.image_size
-        observations = {"state": spaces.Box(-np.inf, np.inf, (STATE_DIM,), np.float32),
-                        "goal": spaces.Box(-np.inf, np.inf, (3,), np.float32)}
+        s, far = camera.image_size, float(camera.far)
+        observations = {S.STATE: spaces.Box(-np.inf, np.inf, (S.STATE_DIM,), np.float32),
+                        S.GOAL: spaces.Box(-np.inf, np.inf, (3,), np.float32)}
         if images:
-            observations["image"] = spaces.Box(0, 255, (s, s, 3), np.uint8)
-            observations["depth"] = spaces.Box(0.0, float(camera.far), (s, s), np.float32)
+            side = S.DEPTH_LOW_SIDE
+            observations[S.IMAGE] = spaces.Box(0, 255, (s, s, 3), np.uint8)
+            observations[S.DEPTH] = spaces.Box(0.0, far, (s, s), np.float32)
+            # A far patch's mean may round a few ulps past the far plane.
+            observations[S.DEPTH_LOW] = spaces.Box(0.0, far * 1.001, (side, side), np.float32)
         self.observation_space = spaces.Dict(observations)
-        self.action_space = spaces.Box(0.0, 1.0, (ACTION_DIM,), np.float32)
+        self.action_space = spaces.Box(0.0, 1.0, (S.ACTION_DIM,), np.float32)
         self._image: np.ndarray | None = None
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -93,6 +145,10 @@ class CubeSatGymEnv(gymnasium.Env):
         options = {"n_obstacles": self.n_obstacles, "speed": self.speed, **(options or {})}
         if options.get("scenario") is not None:
             options = {"scenario": options["scenario"]}
+        else:
+            options["n_obstacles"] = _whole("options['n_obstacles']", options["n_obstacles"], 0,
+                                            "a whole number of obstacles >= 0", "to draw it")
+            options["speed"] = _speed(options["speed"], "options['speed']")
         obs, info = self.env.reset(seed=int(episode_seed), options=options)
         self._episode_seed = int(episode_seed)
         return self._observation(obs), self._info(info)
@@ -108,11 +164,9 @@ class CubeSatGymEnv(gymnasium.Env):
         self.env.close()
 
     def _observation(self, obs: dict) -> dict:
-        out = {"state": obs["state"].astype(np.float32),
-               "goal": np.asarray(self.env.scenario.goal, dtype=np.float32)}
-        if "image" in obs:
-            out["image"], out["depth"] = obs["image"], obs["depth"].astype(np.float32)
-            self._image = obs["image"]
+        out = {KEYS[key]: value.astype(np.float32) if key != "image" else value for key, value in obs.items()}
+        out[S.GOAL] = np.asarray(self.env.scenario.goal, dtype=np.float32)
+        self._image = obs.get("image")
         return out
 
     def _info(self, info: dict) -> dict:

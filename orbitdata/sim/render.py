@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import atexit
+import os
 import weakref
 
 import mujoco
@@ -35,16 +36,28 @@ def _close_all() -> None:
         renderer.close()
 
 
+def _release_all() -> None:
+    # Before a fork (see sim.gl): no context may be left for the child to inherit.
+    for renderer in list(_LIVE):
+        renderer.release()
+
+
+os.register_at_fork(before=_release_all)  # runs before sim.gl's hook, registered earlier
+
+
 class CameraRenderer:
     """Renders the named camera of a model offscreen.
 
     ``render(data)`` returns ``(rgb, depth)``: uint8 (H, W, 3) and float32 (H, W) z-depth in
-    metres along the optical axis, with 0 where nothing lies within [near, far].
+    metres along the optical axis, with 0 where nothing lies within [near, far]. The GL context is
+    made on the first frame and again after a fork released it (:meth:`release`).
     """
 
     def __init__(self, model: mujoco.MjModel, camera: str, cfg: CameraConfig, backend: str | None = None):
         size = cfg.image_size
-        self._ctx = make_context(size, size, backend)
+        self._size, self._backend = size, backend
+        self._ctx = self._con = None
+        self._closed = False
         self._model = model
         self._rect = mujoco.MjrRect(0, 0, size, size)
         self._scene = mujoco.MjvScene(model, maxgeom=64)
@@ -52,9 +65,6 @@ class CameraRenderer:
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self._camera.fixedcamid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
-        self._con = mujoco.MjrContext(model, mujoco.mjtFontScale.mjFONTSCALE_150)
-        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
-        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
         self._rgb = np.empty((size, size, 3), np.uint8)
         self._zbuf = np.empty((size, size), np.float32)
         # Reversed-Z depth buffer -> metric z: depth = d / (z + c) (see mujoco's Renderer).
@@ -63,9 +73,20 @@ class CameraRenderer:
         self._c = 0.5 * (far + near) / (far - near) - 0.5
         self._d = far * near / (far - near)
         self.near, self.far = float(near), float(far)
+        self._open()
         _LIVE.add(self)
 
+    def _open(self) -> None:
+        self._ctx = make_context(self._size, self._size, self._backend)
+        self._con = mujoco.MjrContext(self._model, mujoco.mjtFontScale.mjFONTSCALE_150)
+        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
+        self._con.readDepthMap = mujoco.mjtDepthMap.mjDEPTH_ZEROFAR
+
     def render(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+        if self._closed:
+            raise RuntimeError("the renderer is closed")
+        if self._ctx is None:
+            self._open()
         self._ctx.make_current()
         mujoco.mjv_updateScene(
             self._model, data, self._option, None, self._camera, mujoco.mjtCatBit.mjCAT_ALL, self._scene
@@ -78,13 +99,22 @@ class CameraRenderer:
         depth[depth >= np.float32(self.far) * np.float32(0.9999)] = 0.0
         return rgb, depth
 
-    def close(self) -> None:
+    def release(self) -> None:
+        """Free the GL context; the next frame makes a new one."""
         if self._con is not None:
+            try:
+                self._ctx.make_current()  # free the objects in their own context, not another renderer's
+            except Exception:  # at exit the display may be gone already, and the objects with it
+                pass
             self._con.free()
             self._con = None
         if self._ctx is not None:
             self._ctx.free()
             self._ctx = None
+
+    def close(self) -> None:
+        self.release()
+        self._closed = True
 
     def __del__(self) -> None:  # contexts hold GPU/driver memory
         try:

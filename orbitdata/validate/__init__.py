@@ -9,7 +9,7 @@ group of them, :mod:`~orbitdata.validate.rowgroup` is the unit of parallel work 
 :mod:`~orbitdata.validate.runner` puts it together. Names import on first use.
 """
 
-from orbitdata import lazy_getattr
+from orbitdata.lazy import lazy_getattr
 
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("CHECKS", "Check"), "orbitdata.validate.checks"),

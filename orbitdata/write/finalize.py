@@ -16,27 +16,41 @@ import pyarrow as pa
 from orbitdata import schema as S
 from orbitdata.config import GenerationConfig
 from orbitdata.info import Info
+from orbitdata.load.source import read_info
 from orbitdata.write import parts
 from orbitdata.write.card import render_card
 from orbitdata.write.meta import build_info, write_json
 from orbitdata.write.parts import atomic_write
 from orbitdata.write.shard import write_shards
 
+
+class NoDataset(FileNotFoundError):
+    """The folder holds neither the part files of a generation nor a finished dataset."""
+
+
 # Draws a figure of the dataset in OUT from its episodes table and config; returns the path it
 # wrote (relative to OUT), or None when it cannot draw (e.g. without the plotting extra).
 Figure = Callable[[Path, pa.Table, GenerationConfig], "str | None"]
 
 
+def existing_config(out: Path) -> dict | None:
+    """The config of the generation in ``out``: its parts' manifest, else its meta/info.json."""
+    manifest = parts.read_manifest(out)
+    if manifest is not None:
+        return manifest["config"]
+    if (out / S.INFO_PATH).exists():
+        return read_info(out).config
+    return None
+
+
 def finalize(out: Path, config: GenerationConfig | None = None, repo_id: str | None = None,
              max_shard_bytes: int | None = None, figure: Figure | None = None) -> Info:
     """Compact parts (or re-shard existing shards) and write meta/ and the card. Returns the info."""
-    from orbitdata.write.generate import existing_config
-
     out = Path(out)
     if config is None:
         existing = existing_config(out)
         if existing is None:
-            raise FileNotFoundError(f"{out} holds no orbitdata dataset (no {S.PARTS_DIR}/{parts.MANIFEST_FILE} or "
+            raise NoDataset(f"{out} holds no orbitdata dataset (no {S.PARTS_DIR}/{parts.MANIFEST_FILE} or "
                                     f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`")
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
     if max_shard_bytes is not None:

@@ -9,20 +9,22 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
-from orbitdata import __version__, schema as S
+from orbitdata import schema as S
 from orbitdata.config import GenerationConfig
 from orbitdata.info import Info
 from orbitdata.load.source import read_info
+from orbitdata.version import __version__
 from orbitdata.write import parts
 from orbitdata.write.executors import run_local, run_ray
-from orbitdata.write.finalize import Figure, finalize
+from orbitdata.write.finalize import Figure, existing_config, finalize
 from orbitdata.write.plan import plan_units
 
 OWNED = (S.DATA_DIR, S.EPISODES_DIR, S.META_DIR, S.PARTS_DIR, S.CARD_PATH)
 
 
-class DatasetExists(RuntimeError):
-    """OUT holds a dataset (or other files) that this run would clobber."""
+class UnusableOutput(RuntimeError):
+    """OUT cannot take this dataset: it is a file, holds another dataset (or other files) that this
+    run would clobber, or cannot be written. The message says which and what to do."""
 
 
 @dataclass
@@ -42,32 +44,23 @@ def _manifest(config: GenerationConfig) -> dict:
     return {"config": config.to_dict(), "schema_version": S.SCHEMA_VERSION, "codebase_version": __version__}
 
 
-def existing_config(out: Path) -> dict | None:
-    """The config of the generation in ``out``: its parts' manifest, else its meta/info.json."""
-    manifest = parts.read_manifest(out)
-    if manifest is not None:
-        return manifest["config"]
-    if (out / S.INFO_PATH).exists():
-        return read_info(out).config
-    return None
-
-
 def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool:
     """Make OUT ready. Returns True if the dataset there is already complete."""
     if out.exists() and not out.is_dir():
-        raise DatasetExists(f"{out} exists and is not a folder; choose another OUT")
+        raise UnusableOutput(f"{out} exists and is not a folder; choose another OUT")
     existing = existing_config(out) if out.exists() else None
     mine = json.loads(json.dumps(config.to_dict()))  # tuples -> lists, as stored
     if existing is not None and existing != mine:
         if not overwrite:
-            raise DatasetExists(
+            raise UnusableOutput(
                 f"{out} holds a dataset generated with a different config; "
                 "pass --overwrite to replace it, or choose another OUT"
             )
         clear_output(out)
     elif existing is None and out.exists() and any(out.iterdir()):
         if not overwrite:
-            raise DatasetExists(f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite")
+            raise UnusableOutput(f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass "
+                                 "--overwrite")
         clear_output(out)
     complete = (out / S.INFO_PATH).exists() and not parts.parts_dir(out).exists() and existing == mine
     if not complete:
@@ -75,7 +68,7 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
             out.mkdir(parents=True, exist_ok=True)
             parts.write_manifest(out, _manifest(config))
         except OSError as exc:
-            raise PermissionError(
+            raise UnusableOutput(
                 f"cannot write to {out} ({exc.strerror}); choose another OUT or fix its permissions"
             ) from None
     return complete

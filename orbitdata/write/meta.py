@@ -8,12 +8,13 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
-from orbitdata import __version__, schema as S
+from orbitdata import schema as S
 from orbitdata.codecs import PNG_FILTER
 from orbitdata.config import GenerationConfig
 from orbitdata.info import FileEntry, Info, counts
 from orbitdata.sim.thrusters import thruster_layout, wrench_matrix
 from orbitdata.state import STATE_NAMES
+from orbitdata.version import __version__
 from orbitdata.write.parts import atomic_write
 
 

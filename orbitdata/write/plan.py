@@ -45,7 +45,12 @@ def _largest_remainder(total: int, shares) -> list[int]:
 
 
 def plan_episodes(cfg: DatasetConfig) -> list[EpisodeTask]:
-    """Levels in the configured proportions, shuffled; per level a stratified test share."""
+    """Levels in the configured proportions, shuffled; per level a stratified test share.
+
+    A dataset too small for any level's share to round to one test episode still gets one (drawn
+    from the split stream after the levels' shares, so larger plans are unchanged), as long as a
+    test share is asked for and one episode is left to train on.
+    """
     n = cfg.episodes
     counts = _largest_remainder(n, cfg.level_mix)
     labels = np.repeat(np.arange(len(LEVELS)), counts)
@@ -56,6 +61,8 @@ def plan_episodes(cfg: DatasetConfig) -> list[EpisodeTask]:
         members = np.flatnonzero(labels == level)
         n_test = int(round(len(members) * cfg.test_fraction))
         split[split_rng.permutation(members)[:n_test]] = "test"
+    if cfg.test_fraction > 0 and n >= 2 and not (split == "test").any():
+        split[int(split_rng.integers(n))] = "test"
     return [
         EpisodeTask(index=i, split=str(split[i]), level=LEVELS[labels[i]], seed=episode_seed(cfg.seed, i))
         for i in range(n)

@@ -14,13 +14,13 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from orbitdata import schema as S
-from orbitdata.config import GenerationConfig
 from orbitdata.codecs import encode_depth, encode_rgb
-from orbitdata.write.plan import Unit
-from orbitdata.write.record import episode_row, episodes_table, steps_table
+from orbitdata.config import GenerationConfig
 from orbitdata.fly.registry import make_pilot
 from orbitdata.fly.rollout import fly_episode
 from orbitdata.sim.env import CubeSatEnv
+from orbitdata.write.plan import Unit
+from orbitdata.write.record import episode_row, episodes_table, steps_table
 
 
 @dataclass
@@ -72,7 +72,7 @@ def run_unit(config: GenerationConfig, unit: Unit) -> UnitResult:
             rgb.append(encode_rgb(image, ds.jpeg_quality))
             depth.append(encode_depth(depth_m, ds.png_compression))
 
-        pilot = make_pilot(task.level, config)
+        pilot = make_pilot(task.level, config.flight)
         result = fly_episode(env, pilot, task.seed, frame_sink=sink)
         tables.append(steps_table(result, task.index, rgb, depth))
         rows.append(episode_row(result, task.index, task.split))

@@ -16,12 +16,12 @@ from typer.testing import CliRunner
 
 from orbitdata.cli.app import app
 from orbitdata.config import GenerationConfig
-from orbitdata.fly import Pilot, fly_grid, list_pilots, make_pilot, register_pilot
-from orbitdata.fly import registry
+from orbitdata.fly import Pilot, fly_grid, list_pilots, make_pilot, register_pilot, registry
 
 runner = CliRunner()
 HERE = Path(__file__).parent
 TINY = GenerationConfig().replace(sim={"camera": GenerationConfig().sim.camera.__class__(image_size=32)})
+FLIGHT = TINY.flight  # what flying reads: sim, scenario, pilots
 
 
 @pytest.fixture
@@ -67,7 +67,7 @@ def test_registering_checks_names_and_clashes(stub_registered):
 
 def test_a_registered_pilot_flies_the_grid_with_rendering(stub_registered, tmp_path):
     log = tmp_path / "seen.json"
-    cells = fly_grid("stub", [1], [2.0], 2, config=TINY, log=str(log))
+    cells = fly_grid("stub", [1], [2.0], 2, config=FLIGHT, log=str(log))
     assert sum(c.success + c.collision + c.timeout + c.out_of_fuel for c in cells) == 2
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
 
@@ -79,7 +79,7 @@ def test_only_a_pilot_that_declares_it_sees_the_rendered_depth(tmp_path):
 
     for cls, depth in ((SeeingPilot, False), (DepthSensing, True)):
         log = tmp_path / f"{cls.__name__}.json"
-        fly_grid(lambda config, cls=cls, log=log: cls(str(log)), [1], [1.0], 1, config=TINY)
+        fly_grid(lambda config, cls=cls, log=log: cls(str(log)), [1], [1.0], 1, config=FLIGHT)
         check_sees_images_not_obstacles(json.loads(log.read_text()), 32, depth=depth)
 
 
@@ -90,10 +90,10 @@ def test_fly_grid_takes_a_factory_and_one_pilot_flies_every_episode(tmp_path):
         made.append(SeeingPilot())
         return made[-1]
 
-    fly_grid(factory, [0, 1], [1.0], 2, config=TINY)
+    fly_grid(factory, [0, 1], [1.0], 2, config=FLIGHT)
     assert len(made) == 1 and len(made[0].episodes) == 4
     with pytest.raises(ValueError, match="needs camera images"):
-        fly_grid(factory, [0], [1.0], 1, config=TINY, render=False)
+        fly_grid(factory, [0], [1.0], 1, config=FLIGHT, render=False)
 
 
 def test_only_a_privileged_pilot_gets_the_scenario():
@@ -155,7 +155,7 @@ def test_an_entry_point_pilot_flies_the_real_command(tmp_path):
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
 
 
-def test_image_codec_hands_the_pilot_the_datasets_jpeg_of_its_camera():
+def test_image_quality_hands_the_pilot_the_datasets_jpeg_of_its_camera():
     """--image-codec: the pilot sees each frame as the dataset would store it (JPEG at the config's
     quality); the raw render is what it sees without, and what the frame sink always gets."""
     from orbitdata.codecs import decode_rgb, encode_rgb
@@ -168,9 +168,9 @@ def test_image_codec_hands_the_pilot_the_datasets_jpeg_of_its_camera():
     for codec in (False, True):
         pilot, raw = Recorder(), []
         pilot.images = []
-        fly_grid(lambda config: pilot, [1], [1.0], 1, config=TINY.replace(sim={"max_steps": 4}), image_codec=codec,
-                 frame_sink=lambda t, rgb, *_: raw.append(rgb.copy()))
         quality = TINY.dataset.jpeg_quality
+        fly_grid(lambda config: pilot, [1], [1.0], 1, config=TINY.replace(sim={"max_steps": 4}).flight,
+                 image_quality=quality if codec else None, frame_sink=lambda t, rgb, *_: raw.append(rgb.copy()))
         expected = [decode_rgb(encode_rgb(r, quality)) if codec else r for r in raw[:len(pilot.images)]]
         assert len(pilot.images) == 3 and all(np.array_equal(a, b) for a, b in zip(pilot.images, expected))
         assert codec == any(not np.array_equal(a, r) for a, r in zip(pilot.images, raw))

@@ -3,16 +3,22 @@
 from __future__ import annotations
 
 import json
+import os
+import socket
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import orbitdata
 from orbitdata import schema as S
 from orbitdata.cli.app import app
+from orbitdata.load.episodes import read_episodes
 from orbitdata.load.source import is_repo_id
 from orbitdata.load.summary import summarize
-from orbitdata.load.episodes import read_episodes
 
 runner = CliRunner()
 
@@ -78,8 +84,25 @@ def test_a_repo_id_offline_is_one_clear_line(tmp_path, monkeypatch):
 ])
 def test_info_on_something_that_is_not_a_dataset(tmp_path, make, message):
     res = runner.invoke(app, ["info", str(make(tmp_path))])
-    assert res.exit_code == 1 and message in res.output
+    assert res.exit_code == 2 and message in res.output  # a usage error
     assert len(res.output.strip().splitlines()) == 1
+
+
+def test_an_unreachable_hub_is_said_to_be_unreachable_without_retrying(tmp_path):
+    """It used to retry for half a minute, then say that the repo had no such file."""
+    with socket.socket() as sock:  # a port nothing listens on
+        sock.bind(("127.0.0.1", 0))
+        port = sock.getsockname()[1]
+    paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+    env = {k: v for k, v in os.environ.items() if not k.startswith("HF_")}
+    env.update(PYTHONPATH=os.pathsep.join(p for p in paths if p), HF_ENDPOINT=f"http://127.0.0.1:{port}",
+               HF_HOME=str(tmp_path / "hf"))
+    res = subprocess.run([sys.executable, "-m", "orbitdata", "info", "owner/name"], env=env, capture_output=True,
+                         text=True, timeout=120, cwd=tmp_path)  # a guard: a second normally
+    assert res.returncode == 1 and res.stdout == ""
+    assert res.stderr.strip().splitlines() == [res.stderr.strip()]  # one line: no retry warnings, no traceback
+    assert f"the Hugging Face Hub at http://127.0.0.1:{port} could not be reached" in res.stderr
+    assert "no such file" not in res.stderr and "'owner/name'" in res.stderr
 
 
 def test_repo_ids_are_told_from_paths(tmp_path, monkeypatch):

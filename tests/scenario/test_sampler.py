@@ -76,5 +76,6 @@ def test_bad_settings_are_rejected():
         ScenarioConfig(n_obstacles=(3, 1))
     with pytest.raises(ValueError, match="shapes"):
         ScenarioConfig(shapes=("cube",))
-    with pytest.raises(ValueError, match="n_obstacles must be >= 0"):
-        sample_scenario(0, n_obstacles=-1)
+    for bad in (-1, 2.5, True):  # 2.5 used to reach range() as a bare TypeError
+        with pytest.raises(ValueError, match="n_obstacles must be a whole number >= 0"):
+            sample_scenario(0, n_obstacles=bad)

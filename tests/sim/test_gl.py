@@ -1,7 +1,7 @@
 """Headless OpenGL: EGL by default, OSMesa as the fallback, a clear error when neither works."""
 
-import hashlib
 import os
+import signal
 import subprocess
 import sys
 
@@ -51,3 +51,43 @@ def test_clear_error_names_the_packages_to_install(monkeypatch):
     monkeypatch.setattr(gl, "_works", lambda b: (False, "no display"))
     with pytest.raises(gl.RenderBackendError, match="apt-get install libegl1 libgl1-mesa-dri.*libosmesa6"):
         gl.select_backend()
+
+
+FORK = """
+import os
+from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
+env = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=32)))
+first = env.reset(seed=4)[0]["image"]
+pid = os.fork()
+if pid == 0:
+    try:
+        child = CubeSatEnv(SimConfig(camera=CameraConfig(image_size=32)))
+        print("child", "same" if (child.reset(seed=4)[0]["image"] == first).all() else "different", flush=True)
+    except Exception as exc:
+        print("child", type(exc).__name__, exc, flush=True)
+    os._exit(0)
+os.waitpid(pid, 0)
+print("parent", "same" if (env.reset(seed=4)[0]["image"] == first).all() else "different", flush=True)
+"""
+
+
+@pytest.mark.parametrize("backend, child", [
+    ("egl", "child same"),  # the display is released before the fork: the child renders the same pixels
+    ("osmesa", "child RenderBackendError this process was forked from one that had rendered with MUJOCO_GL=osmesa"),
+])
+def test_a_child_forked_after_rendering_renders_or_says_why_it_cannot(backend, child):
+    """It used to wait forever in the renderer; the script runs in its own process group, killed
+    whole if it does not finish."""
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
+    env["MUJOCO_GL"] = backend
+    proc = subprocess.Popen([sys.executable, "-c", FORK], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        out, err = proc.communicate(timeout=120)  # seconds normally; a guard against a hang
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"a forked child hung rendering with {backend}")
+    lines = out.strip().splitlines()
+    assert proc.returncode == 0 and len(lines) == 2, err
+    assert lines[0].startswith(child) and lines[1] == "parent same"

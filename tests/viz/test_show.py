@@ -10,9 +10,9 @@ from typer.testing import CliRunner
 
 from orbitdata import schema as S
 from orbitdata.cli.app import app
+from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_episodes
 from orbitdata.viz import plots as P
 from orbitdata.viz.contact_sheet import ContactSheet, key_frames
-from orbitdata.load.episodes import EpisodeNotFound, load_episode, read_episodes
 from orbitdata.viz.show import EpisodeVideo, show_episode
 from orbitdata.viz.topdown import PATH
 
@@ -196,7 +196,7 @@ def test_show_cli_errors(tiny_dataset_master, tmp_path, args, code, message):
 
 def test_show_cli_on_a_missing_folder(tmp_path):
     res = runner.invoke(app, ["show", str(tmp_path / "nope"), "--episode", "0", "--out", str(tmp_path / "x.png")])
-    assert res.exit_code == 1 and "no dataset folder at" in res.output
+    assert res.exit_code == 2 and "no dataset folder at" in res.output  # a usage error, as everywhere
 
 
 def test_without_matplotlib_the_error_says_how_to_install(tiny_dataset_master, tmp_path, monkeypatch):

@@ -72,7 +72,7 @@ def unwritable_dir(tmp_path):
 def test_unwritable_out(unwritable_dir):
     out = unwritable_dir / "out"
     res = runner.invoke(app, ["generate", str(out), "--episodes", "1", "--image-size", "32"])
-    assert res.exit_code == 1, res.output
+    assert res.exit_code == 2, res.output  # a usage error: OUT is a bad path
     assert f"cannot write to {out}" in res.output and "choose another OUT" in res.output
     assert "Traceback" not in res.output
     assert not out.exists()
@@ -82,13 +82,13 @@ def test_out_that_is_a_file(tmp_path):
     f = tmp_path / "file"
     f.write_text("x")
     res = runner.invoke(app, ["generate", str(f), "--episodes", "1", "--image-size", "32"])
-    assert res.exit_code == 1 and "not a folder" in res.output
+    assert res.exit_code == 2 and "not a folder" in res.output
 
 
 def test_config_clash_needs_overwrite(tiny_dataset):
     args = ["generate", str(tiny_dataset), "--episodes", "3", "--image-size", "64", "--workers", "1"]
     res = runner.invoke(app, args)
-    assert res.exit_code == 1 and "different config" in res.output and "--overwrite" in res.output
+    assert res.exit_code == 2 and "different config" in res.output and "--overwrite" in res.output
     assert (tiny_dataset / "meta" / "info.json").exists()  # nothing was touched
 
 
@@ -97,7 +97,7 @@ def test_non_dataset_folder_is_not_clobbered(tmp_path):
     out.mkdir()
     (out / "thesis.tex").write_text("precious")
     res = runner.invoke(app, ["generate", str(out), "--episodes", "1", "--image-size", "32"])
-    assert res.exit_code == 1 and "not empty" in res.output
+    assert res.exit_code == 2 and "not empty" in res.output
     assert (out / "thesis.tex").read_text() == "precious"
 
 
@@ -117,3 +117,13 @@ def test_generate_from_toml_and_flags(tmp_path):
     assert info["config"]["scenario"]["n_obstacles"] == [5, 5]
     assert info["counts"]["splits"]["train"]["levels"]["risky"]["episodes"] == 2
     assert "test" not in info["counts"]["splits"]
+
+
+def test_a_single_episode_says_in_one_line_that_there_is_no_test_split(tmp_path):
+    cfg = tmp_path / "risky.toml"
+    cfg.write_text("[dataset]\nlevel_mix = [0.0, 1.0, 0.0]\n[sim.camera]\nimage_size = 32\n")
+    res = runner.invoke(app, ["generate", str(tmp_path / "one"), "--config", str(cfg), "--episodes", "1",
+                              "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    notes = [line for line in res.output.splitlines() if "test split" in line]
+    assert notes == ["note: no test split: one episode is all train; pass --episodes 2 or more for a test split"]

@@ -23,3 +23,26 @@ def test_plan_is_a_pure_function_of_the_config():
     units = plan_units(DatasetConfig(episodes=50, seed=3, episodes_per_unit=8))
     assert [t for u in units for t in u.episodes] == a
     assert [len(u.episodes) for u in units] == [8] * 6 + [2]
+
+
+def _digest(cfg: DatasetConfig) -> str:
+    import hashlib
+
+    return hashlib.sha256(repr([(t.index, t.split, t.level, t.seed) for t in plan_episodes(cfg)]).encode()).hexdigest()
+
+
+def test_a_small_dataset_keeps_one_test_episode():
+    """Too few episodes for any level's share to round to one: one test episode all the same."""
+    for n in range(2, 12):  # 0 test episodes each before, at the default share of 0.1
+        tasks = plan_episodes(DatasetConfig(episodes=n))
+        assert sum(t.split == "test" for t in tasks) == 1, n
+    assert all(t.split == "train" for t in plan_episodes(DatasetConfig(episodes=1)))  # nothing left to train on
+    assert all(t.split == "train" for t in plan_episodes(DatasetConfig(episodes=5, test_fraction=0.0)))
+
+
+def test_plans_with_a_test_share_are_unchanged():
+    """The default 8000-episode plan and the golden tiny dataset's, as the code made them before
+    small datasets kept a test episode (digests of (index, split, level, seed))."""
+    assert _digest(DatasetConfig()) == "6cee97857c71d48d4c3e3ceefdd58d16baf1c03a58d10483b9238e076b763dec"
+    assert _digest(DatasetConfig(episodes=6, test_fraction=0.34)) == \
+        "22b0c5cfea03ff925365508be1c03b245e586a7114bd938664db8ce30066554d"

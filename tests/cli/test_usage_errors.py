@@ -1,0 +1,96 @@
+"""Usage errors: one line naming the flag, exit 2, in every orbitdata command (``cli.errors.run_app``);
+failures at run time exit 1; ``--help`` and a command's own exit code are kept."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import typer
+from typer.testing import CliRunner
+
+import orbitdata
+from orbitdata.cli.app import app
+from orbitdata.cli.errors import run_app
+
+runner = CliRunner()
+
+
+def run(args: list[str], capsys, application: typer.Typer = app) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exit_:
+        run_app(application, args)
+    out = capsys.readouterr()
+    return exit_.value.code, out.out, out.err
+
+
+@pytest.mark.parametrize("args, line", [
+    (["--episodes", "-3"], "error: --episodes -3: must be greater than or equal to 1"),
+    (["--test-fraction", "2"], "error: --test-fraction 2: must be less than or equal to 1"),
+    (["--episodes", "many"], "error: --episodes many: must be a valid integer"),
+    (["--executor", "dask"], "error: --executor dask: 'dask' is not one of 'local', 'ray'"),
+    (["--bogus"], "error: No such option: --bogus"),
+])
+def test_a_bad_flag_is_one_line_naming_it(tmp_path, capsys, args, line):
+    code, out, err = run(["generate", str(tmp_path / "out"), *args], capsys)
+    assert code == 2 and out == ""
+    assert len(err.strip().splitlines()) == 1 and err.startswith(line), err
+    assert err.strip().endswith("(see `orbitdata generate --help`)")
+    assert "Input should" not in err and "╭" not in err and "Usage:" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_arguments_and_unknown_commands(capsys):
+    assert run(["generate"], capsys)[0::2] == (2, "error: Missing argument 'out' (see `orbitdata generate --help`)\n")
+    code, _, err = run(["fly", "--pilot", "nobody"], capsys)
+    assert code == 2 and err.startswith("error: --pilot: 'nobody' is not one of expert, risky, exploratory")
+    assert run(["frob"], capsys)[0::2] == (2, "error: No such command 'frob' (see `orbitdata --help`)\n")
+
+
+def test_help_and_a_commands_own_exit_code_are_kept(capsys):
+    code, out, err = run(["generate", "--help"], capsys)
+    assert code == 0 and "Usage: orbitdata generate" in out and err == ""
+    code, out, _ = run([], capsys)  # the bare program prints its help, as before
+    assert code == 2 and "Usage: orbitdata" in out
+    small = typer.Typer()
+
+    @small.command()
+    def check(n: int = typer.Option(1, min=0)):
+        raise typer.Exit(n)
+
+    assert run(["--n", "3"], capsys, small)[0] == 3
+    assert run(["--n", "0"], capsys, small)[0] == 0
+    code, _, err = run(["--n", "-1"], capsys, small)
+    assert code == 2 and err.startswith("error: --n -1: must be greater than or equal to 0 (see `")
+
+
+def test_the_program_runs_through_it(tmp_path):
+    paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
+    res = subprocess.run([sys.executable, "-m", "orbitdata", "generate", str(tmp_path / "out"), "--episodes", "-3"],
+                         env=env, capture_output=True, text=True, timeout=120)
+    assert res.returncode == 2 and res.stderr.startswith("error: --episodes -3: must be greater than or equal to 1")
+    assert len(res.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", [
+    ["info", "{file}"], ["generate", "{file}", "--episodes", "1"], ["validate", "{file}"], ["shard", "{file}"],
+    ["show", "{file}", "--episode", "0", "--out", "{tmp}/x.png"], ["push", "{file}", "user/orbit", "--dry-run"],
+])
+def test_a_file_where_a_folder_belongs_exits_2_everywhere(tmp_path, command):
+    f = tmp_path / "file"
+    f.write_text("x")
+    res = runner.invoke(app, [a.format(file=f, tmp=tmp_path) for a in command])
+    assert res.exit_code == 2, res.output
+    assert len(res.output.strip().splitlines()) == 1 and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("command", [
+    ["info", "{tmp}"], ["shard", "{tmp}"], ["show", "{tmp}", "--episode", "0", "--out", "x.png"],
+])
+def test_a_folder_that_is_no_dataset_exits_2(tmp_path, command):
+    res = runner.invoke(app, [a.format(tmp=tmp_path) for a in command])
+    assert res.exit_code == 2, res.output
+    assert len(res.output.strip().splitlines()) == 1 and "Traceback" not in res.output
