@@ -66,12 +66,12 @@ def main() -> None:
 
     if args.train_steps and train is not None:
         policy.train()
-        B = train.batch_size
+        B = train.loop.batch_size
         batch = {"images": torch.randint(0, 256, (B, c.n_obs_steps, 3, c.image_size, c.image_size), generator=g,
                                          dtype=torch.uint8),
                  "states": states.expand(B, -1, -1).clone(), "goal": goal.expand(B, -1).clone(),
                  "actions": torch.rand(B, c.horizon, 8, generator=g)}
-        optimizer = torch.optim.AdamW(policy.net.parameters(), lr=train.lr, betas=train.betas)
+        optimizer = torch.optim.AdamW(policy.net.parameters(), lr=train.loop.lr, betas=train.loop.betas)
         steps = []
         for step in range(1, args.train_steps + 2):
             start = time.perf_counter()

@@ -36,9 +36,9 @@ def measure(dataset: str, preset: str, steps: int, warmup: int, workers: int) ->
     steady = [r for r in records if r["step"] > warmup]
     seconds = steady[-1]["elapsed_s"] - records[warmup - 1]["elapsed_s"]
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    return {"preset": preset, "workers": workers, "steps": result.steps, "batch": p.train.batch_size,
-            "window": p.train.window, "windows_per_s": len(steady) * p.train.batch_size / seconds,
-            "frames_per_s": len(steady) * p.train.batch_size * p.train.window / seconds,
+    return {"preset": preset, "workers": workers, "steps": result.steps, "batch": p.train.loop.batch_size,
+            "window": p.train.window, "windows_per_s": len(steady) * p.train.loop.batch_size / seconds,
+            "frames_per_s": len(steady) * p.train.loop.batch_size * p.train.window / seconds,
             "seconds_per_step": seconds / len(steady), "data_wait": result.data_wait,
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
             "peak_worker_rss_mb": children if workers else 0.0}

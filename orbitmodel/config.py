@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, DEPTH_LOW_SIDE, STATE_DIM
+from orbitmodel.loop_settings import LoopSettings, StageTrainConfig
 
 
 def replace_given(config, **changes):
@@ -105,58 +106,38 @@ class ModelConfig:
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(StageTrainConfig):
     """How Stage I trains (upstream: AdamW 1e-5, wd 0.05, batch 128, 50 epochs, 3 warm-up
     epochs then cosine, clip 1.0, 20-frame windows with stride 5, jitter p 0.5).
 
     Args:
         window, window_stride: frames per training window, and between window starts.
-        batch_size: windows per step (per process under DDP).
-        lr, min_lr, weight_decay, betas: AdamW; cosine decay from lr to min_lr.
-        epochs, max_steps: the run ends at whichever comes first (max_steps 0 = no bound).
-        warmup: linear warm-up, as a fraction of the run's steps.
-        grad_clip: global gradient-norm clip.
         jitter_p, jitter: brightness and contrast factors U(1 - jitter, 1 + jitter), each with
             probability jitter_p.
-        num_workers: DataLoader worker processes.
-        log_every, save_every: steps between metric lines and between checkpoints.
-        seed: data order, augmentation, SIGReg projections and initialisation.
         val_fraction, val_seed: hold this seeded fraction of the train split's episodes (per
             level) out of Stage I and of the run's probe and depth refit: the validation split
             that choices are made on (``orbitmodel.data.validation_split``; 0: none).
+        loop: the training loop's settings (``loop_settings.LoopSettings``); its seed also draws
+            the augmentation and the SIGReg projections.
     """
 
     window: int = 20
     window_stride: int = 5
-    batch_size: int = 128
-    lr: float = 1e-5
-    min_lr: float = 0.0
-    weight_decay: float = 0.05
-    betas: tuple[float, float] = (0.9, 0.999)
-    epochs: int = 50
-    max_steps: int = 0
-    warmup: float = 0.06
-    grad_clip: float = 1.0
     jitter_p: float = 0.5
     jitter: float = 0.2
-    num_workers: int = 4
-    log_every: int = 10
-    save_every: int = 500
-    seed: int = 42
     val_fraction: float = 0.0
     val_seed: int = 0
+    loop: LoopSettings = LoopSettings(batch_size=128, lr=1e-5, min_lr=0.0, weight_decay=0.05, betas=(0.9, 0.999),
+                                      epochs=50, max_steps=0, warmup=0.06, grad_clip=1.0, num_workers=4, log_every=10,
+                                      save_every=500, seed=42)
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:
             raise ValueError(f"val_fraction={self.val_fraction} must be in [0, 1)")
         if self.window < 2:
             raise ValueError(f"window={self.window}: teacher forcing needs at least 2 frames")
-        if self.batch_size < 2:
-            raise ValueError(f"batch_size={self.batch_size}: BatchNorm and SIGReg need at least 2 windows")
-        if self.epochs < 1 or self.max_steps < 0:
-            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}: give epochs >= 1 and max_steps >= 0")
-        if not 0 <= self.warmup < 1:
-            raise ValueError(f"warmup={self.warmup} is a fraction of the run in [0, 1)")
+        if self.loop.batch_size < 2:
+            raise ValueError(f"batch_size={self.loop.batch_size}: BatchNorm and SIGReg need at least 2 windows")
 
 
 KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
@@ -171,10 +152,10 @@ def reads_thrust(inputs: str) -> bool:
 
 
 @dataclass(frozen=True)
-class ProbeTrainConfig:
-    """How Stage II trains; the loop's fields (see ``train.loop.LoopSettings``) plus the windows
-    and the loss (upstream: windows of 8 + 12 frames, weights pos 1, vel 1, rot6d 1, w 1, fuel
-    0.1, AdamW 3e-4, wd 0.01, batch 256, 25 epochs with 3 of warm-up, cosine, clip 1.0).
+class ProbeTrainConfig(StageTrainConfig):
+    """How Stage II trains: the windows, the loss and the loop (upstream: windows of 8 + 12
+    frames, weights pos 1, vel 1, rot6d 1, w 1, fuel 0.1, AdamW 3e-4, wd 0.01, batch 256, 25
+    epochs with 3 of warm-up, cosine, clip 1.0).
 
     Args:
         context, horizon, window_stride: windows of ``context + horizon`` model steps,
@@ -188,7 +169,7 @@ class ProbeTrainConfig:
             train on a seeded subset of N windows whose imagined latents are computed once and
             kept (see ``probe.cache``); the state-only reference then trains on the same N.
         scale_windows: training windows whose true increments set the output scale.
-        batch_size ... seed: as in Stage I's TrainConfig.
+        loop: the training loop's settings (``loop_settings.LoopSettings``).
     """
 
     context: int = 8
@@ -198,19 +179,9 @@ class ProbeTrainConfig:
     increment_weight: float = 0.0
     cache_windows: int = 0
     scale_windows: int = 2048
-    batch_size: int = 256
-    lr: float = 3e-4
-    min_lr: float = 0.0
-    weight_decay: float = 0.01
-    betas: tuple[float, float] = (0.9, 0.999)
-    epochs: int = 25
-    max_steps: int = 0
-    warmup: float = 0.12  # 3 of 25 epochs
-    grad_clip: float = 1.0
-    num_workers: int = 4
-    log_every: int = 10
-    save_every: int = 500
-    seed: int = 42
+    loop: LoopSettings = LoopSettings(batch_size=256, lr=3e-4, min_lr=0.0, weight_decay=0.01, betas=(0.9, 0.999),
+                                      epochs=25, max_steps=0, warmup=0.12,  # 3 of 25 epochs
+                                      grad_clip=1.0, num_workers=4, log_every=10, save_every=500, seed=42)
 
     def __post_init__(self):
         if self.context < 1 or self.horizon < 1:
@@ -221,22 +192,7 @@ class ProbeTrainConfig:
             raise ValueError(f"increment_weight={self.increment_weight}: give a weight >= 0")
         if self.cache_windows < 0:
             raise ValueError(f"cache_windows={self.cache_windows}: give 0 (no cache) or a number of windows")
-        if self.epochs < 1 or self.max_steps < 0 or self.batch_size < 1:
-            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}, batch_size={self.batch_size}: "
-                             "give epochs >= 1, max_steps >= 0, batch_size >= 1")
         object.__setattr__(self, "weights", tuple(self.weights))
-        object.__setattr__(self, "betas", tuple(self.betas))
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "ProbeTrainConfig":
-        return cls(**d)
-
-    def with_changes(self, **changes) -> "ProbeTrainConfig":
-        """The config with some settings replaced (None values are ignored)."""
-        return replace_given(self, **changes)
 
 
 @dataclass(frozen=True)
@@ -280,7 +236,7 @@ class ProbeRecipe:
     def with_changes(self, inputs: str | None = None, integrator: str | None = None, per_frame: bool | None = None,
                      **train) -> "ProbeRecipe":
         """The recipe with some settings replaced (None values are ignored); ``train`` names
-        :class:`ProbeTrainConfig` fields."""
+        :class:`ProbeTrainConfig` settings, the loop's by their own names (``epochs=``)."""
         return replace(replace_given(self, inputs=inputs, integrator=integrator, per_frame=per_frame),
                        train=self.train.with_changes(**train))
 
@@ -300,24 +256,24 @@ class Preset:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Preset":
-        """A preset as a run's config.json holds it. A run written before presets carried their
-        probe recipe gets the recipe of the built-in preset of its name (upstream's for others)."""
-        train = dict(d["train"])
-        train["betas"] = tuple(train["betas"])
+        """A preset as a run's config.json holds it (its training configs nested or flat, see
+        ``StageTrainConfig.from_dict``). A run written before presets carried their probe recipe
+        gets the recipe of the built-in preset of its name (upstream's for others)."""
         if "probe" in d:
             probe = ProbeRecipe.from_dict(d["probe"])
         else:
             probe = PRESETS[d["name"]]().probe if d["name"] in PRESETS else ProbeRecipe()
         return cls(name=d["name"], description=d["description"], model=ModelConfig(**d["model"]),
-                   train=TrainConfig(**train), probe=probe)
+                   train=TrainConfig.from_dict(d["train"]), probe=probe)
 
     def with_model(self, **changes) -> "Preset":
         """The preset with some model settings replaced (None values are ignored)."""
         return replace(self, model=replace_given(self.model, **changes))
 
     def with_train(self, **changes) -> "Preset":
-        """The preset with some training settings replaced (None values are ignored)."""
-        return replace(self, train=replace_given(self.train, **changes))
+        """The preset with some training settings replaced, the loop's by their own names
+        (``StageTrainConfig.with_changes``; None values are ignored)."""
+        return replace(self, train=self.train.with_changes(**changes))
 
 
 def _paper() -> Preset:
@@ -332,12 +288,13 @@ def _cpu() -> Preset:
     model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
                         state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
                         depth_hidden=64, sigreg_projections=256, sigreg_pool=True, lambda_sigreg=0.2)
-    train = TrainConfig(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5, weight_decay=0.05,
-                        epochs=100, max_steps=1000, warmup=0.05, num_workers=0, log_every=10, save_every=100)
+    train = TrainConfig().with_changes(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5,
+                                       weight_decay=0.05, epochs=100, max_steps=1000, warmup=0.05, num_workers=0,
+                                       log_every=10, save_every=100)
     # The probe reads latent changes and integrates by coasting; fuel weighs 100, not 0.1 (fuel
     # moves ~1e-4 per step, so at 0.1 its MSE gets no gradient to speak of); it trains 60 epochs
     # on a cache of 10,240 imagined windows (docs/model.md gives the ablation behind each).
-    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", train=ProbeTrainConfig(
+    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", train=ProbeTrainConfig().with_changes(
         window_stride=3, weights=(1.0, 1.0, 1.0, 1.0, 100.0), cache_windows=10240, batch_size=128, lr=1e-3,
         min_lr=1e-5, epochs=60, warmup=0.05, num_workers=0, log_every=20, save_every=200))
     return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
@@ -362,9 +319,9 @@ def _tiny() -> Preset:
     model = ModelConfig(image_size=64, patch_size=16, width=32, depth=1, heads=2, mlp=64, state_hidden=32,
                         state_embed=16, latent_dim=32, action_hidden=32, pred_depth=1, pred_heads=2, pred_mlp=64,
                         pred_dropout=0.1, max_seq_len=16, history=4, depth_hidden=16, sigreg_projections=32)
-    train = TrainConfig(window=6, window_stride=3, batch_size=4, lr=3e-3, min_lr=1e-4, epochs=2, max_steps=0,
-                        warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0)
-    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", hidden=32, train=ProbeTrainConfig(
+    train = TrainConfig().with_changes(window=6, window_stride=3, batch_size=4, lr=3e-3, min_lr=1e-4, epochs=2,
+                                       max_steps=0, warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0)
+    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", hidden=32, train=ProbeTrainConfig().with_changes(
         context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4, lr=3e-3, epochs=2,
         warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0))
     return Preset("tiny", "a tiny model for tests", model, train, probe)

@@ -30,12 +30,13 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable, Mapping
 
-import torch
-from safetensors import SafetensorError
-from safetensors.torch import load_file, save_file
+from typing import TYPE_CHECKING
 
 from orbitmodel.config import Preset
 from orbitmodel.data import DatasetMeta, ValidationSplit
+
+if TYPE_CHECKING:  # torch and safetensors load with the first weights read or written, not with the CLI
+    import torch
 
 CONFIG = "config.json"
 WEIGHTS = "model.safetensors"
@@ -56,17 +57,21 @@ MAKES = {WORLD_MODEL: "orbitmodel train DATASET --out RUN", PROBE: "orbitmodel p
 REPO_ID = re.compile(r"^(?P<repo>[A-Za-z0-9][\w.-]*/[\w.-]+)(?:@(?P<revision>[\w./-]+))?$")  # owner/name[@rev]
 
 
-def extends(old: dict, new: dict) -> bool:
-    """Whether ``new`` is ``old`` with a larger ``preset.train.max_steps`` and nothing else changed
-    (a run trained further, ``--resume --extend``)."""
-    def steps(config: dict) -> int:
-        return int(config.get("preset", {}).get("train", {}).get("max_steps") or 0)
+def max_steps_of(config: dict) -> int:
+    """A run config's ``preset.train.loop.max_steps`` (0: none)."""
+    return int(config.get("preset", {}).get("train", {}).get("loop", {}).get("max_steps") or 0)
 
+
+def extends(old: dict, new: dict) -> bool:
+    """Whether ``new`` is ``old`` with a larger ``preset.train.loop.max_steps`` and nothing else
+    changed (a run trained further, ``--resume --extend``); both as this version writes them."""
     def without_steps(config: dict) -> dict:
         preset = config.get("preset", {})
-        return {**config, "preset": {**preset, "train": {**preset.get("train", {}), "max_steps": None}}}
+        train = preset.get("train", {})
+        loop = {**train.get("loop", {}), "max_steps": None}
+        return {**config, "preset": {**preset, "train": {**train, "loop": loop}}}
 
-    return 0 < steps(old) < steps(new) and without_steps(old) == without_steps(new)
+    return 0 < max_steps_of(old) < max_steps_of(new) and without_steps(old) == without_steps(new)
 
 
 class RunError(ValueError):
@@ -152,6 +157,11 @@ class RunDir:
     # ---- config -----------------------------------------------------------------------------
     def read_config(self) -> dict:
         path = self.path / CONFIG
+        if self.path.is_file():
+            raise RunError(f"{self.path} is a file, not a run folder; give the folder that holds it"
+                           + (f" ({self.path.parent})" if self.path.name == CONFIG else ""))
+        if not self.path.exists():
+            raise RunError(f"{self.path} is not an orbitmodel run: no such folder")
         if not path.is_file():
             raise RunError(f"{self.path} is not an orbitmodel run: it has no {CONFIG}")
         try:
@@ -163,7 +173,7 @@ class RunDir:
         """Claim the folder for a run with ``config``: new, resumed, or overwritten. ``upgrade``:
         old config -> the same config as this version writes it (a resume then compares like with
         like, and the file is rewritten in the current form). ``extend`` (with ``resume``): the
-        config may differ from the run's in a larger ``preset.train.max_steps`` only; the run goes
+        config may differ from the run's in a larger ``preset.train.loop.max_steps`` only; the run goes
         on to the new total (its schedule from the checkpoint on is the new total's, and
         training.json records each segment's ``schedule_steps``)."""
         if extend and not resume:
@@ -192,8 +202,7 @@ class RunDir:
                 raise RunError(f"{self.path} already holds this run; pass --resume to continue it, "
                                "or --overwrite to start again")
             if extend and old == config and (self.path / WEIGHTS).exists():
-                steps = config.get("preset", {}).get("train", {}).get("max_steps")
-                raise RunError(f"--extend: {self.path} is already trained to its --max-steps {steps}; "
+                raise RunError(f"--extend: {self.path} is already trained to its --max-steps {max_steps_of(config)}; "
                                "give a larger --max-steps to train it on")
         elif resume:
             raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
@@ -207,6 +216,9 @@ class RunDir:
 
     # ---- checkpoints ------------------------------------------------------------------------
     def save_checkpoint(self, step: int, weights: dict[str, torch.Tensor], state: dict) -> None:
+        import torch
+        from safetensors.torch import save_file
+
         root = self.path / CHECKPOINTS
         root.mkdir(exist_ok=True)
         name = f"step-{step:07d}"
@@ -225,6 +237,10 @@ class RunDir:
             shutil.rmtree(old, ignore_errors=True)
 
     def latest_checkpoint(self) -> Checkpoint:
+        import torch
+        from safetensors import SafetensorError
+        from safetensors.torch import load_file
+
         root = self.path / CHECKPOINTS
         pointer = root / LATEST
         if not pointer.is_file():
@@ -246,6 +262,8 @@ class RunDir:
         write_json_atomic(path, {"segments": kept + [segment]})
 
     def save_final(self, weights: dict[str, torch.Tensor], step: int) -> None:
+        from safetensors.torch import save_file
+
         tmp = self.path / f".{WEIGHTS}.tmp"
         save_file({k: v.detach().contiguous().cpu() for k, v in weights.items()}, tmp, metadata={"step": str(step)})
         os.replace(tmp, self.path / WEIGHTS)
@@ -253,6 +271,9 @@ class RunDir:
 
 def load_weights(path: str | Path) -> dict[str, torch.Tensor]:
     """The final weights of a run folder, else its newest checkpoint's; one clear error if corrupt."""
+    from safetensors import SafetensorError
+    from safetensors.torch import load_file
+
     run = Path(path)
     candidates = [run / WEIGHTS]
     pointer = run / CHECKPOINTS / LATEST
@@ -270,6 +291,8 @@ def load_weights(path: str | Path) -> dict[str, torch.Tensor]:
 
 def fingerprint(weights: dict[str, torch.Tensor]) -> str:
     """sha256 of a state dict's names and bytes: which weights a sub-run was made from."""
+    import torch
+
     h = hashlib.sha256()
     for name in sorted(weights):
         h.update(name.encode())

@@ -3,7 +3,7 @@
     bash scripts/snapshot_checkpoints.sh RUN 2000 SNAPS          # while RUN trains
     for s in SNAPS/step-*; do
       orbitmodel eval policy $s DATA --split val --max-windows 2000 --json > $s/eval_val.json
-      orbitmodel eval closed-loop $s --obstacles 1 --speeds 1,2 --episodes 20 --seed 1 --action-steps 2 --json $s/fly.json
+      orbitmodel eval closed-loop $s --obstacles 1 --speeds 1,2 --episodes 20 --seed 1 --set action_steps=2 --json $s/fly.json
     done
     python scripts/policy_curve.py SNAPS --out curve.png --json curve.json
 

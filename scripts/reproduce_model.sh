@@ -94,7 +94,7 @@ PY
 fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> grid/NAME.json
   local run=$1 name=$2 pilot=$3
   shift 3
-  fly "$GDIR/$name.json" "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" --planner cpu "${GRID[@]}" \
+  fly "$GDIR/$name.json" "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" --preset cpu "${GRID[@]}" \
     "${FLIGHT[@]}" "$@"
 }
 fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
@@ -103,14 +103,15 @@ fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.js
   shift
   fly "$GDIR/$pilot.json" "$BIN/orbitdata" fly --pilot "$pilot" --image-size 64 "${GRID[@]}" "$@"
 }
-DP_SAMPLE=(--timestep-spacing trailing)  # DDIM from the top noise level, chosen on validation seeds 0-2
-DP_FLY=(--image-codec "${DP_SAMPLE[@]}")  # how the policy flies: 8 actions per chunk (its config), the camera
-# through the dataset's JPEG codec, chosen on validation seeds (docs/results/validation/diffusion/)
+# The policy flies the flight preset cpu (`orbitmodel presets`): 8 actions per chunk, one draw, DDIM with
+# trailing spacing, the camera through the dataset's JPEG codec, chosen on validation seeds
+# (docs/results/validation/diffusion/). Its camera-less variant was reported with the reference's sampler.
 fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
-  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" "${GRID[@]}" "${FLIGHT[@]}" "${DP_FLY[@]}"
+  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" --preset cpu "${GRID[@]}" "${FLIGHT[@]}"
 }
 fly_policy_state() {  # the policy without the camera -> grid/diffusion-state.json
-  fly "$GDIR/diffusion-state.json" "$BIN/orbitmodel" eval closed-loop "$DPS" "${GRID[@]}" "${FLIGHT[@]}"
+  fly "$GDIR/diffusion-state.json" "$BIN/orbitmodel" eval closed-loop "$DPS" --preset reference "${GRID[@]}" \
+    "${FLIGHT[@]}"
 }
 train_wm() {  # train_wm RUN PRESET [OPTIONS...]: Stage I, resuming a cut run
   local run=$1 preset=$2 resume=()
@@ -144,7 +145,9 @@ step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA"
 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
 "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
 refit "$WMS"
-max_steps_of() { "$BIN/python" -c "import json, sys; print(json.load(open(sys.argv[1]))['preset']['train']['max_steps'])" "$1/config.json"; }
+max_steps_of() {  # a run's --max-steps: under train.loop, or beside the other settings in a run from before that
+  "$BIN/python" -c "import json, sys; t = json.load(open(sys.argv[1]))['preset']['train']
+print(t.get('loop', t)['max_steps'])" "$1/config.json"; }
 train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with TO) on to TO steps; resumes a cut run.
   # With TO, RUN starts as a copy of the finished preset-length run $DP0 when there is one.
   local run=$1 preset=$2 to=${3:-} resume=()
@@ -162,17 +165,17 @@ train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with
 }
 if [ "$POLICY" = 1 ]; then
   step train-diffusion train_policy "$DP" cpu "$DP_STEPS"
-  step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000 "${DP_SAMPLE[@]}"
-  step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 "${DP_SAMPLE[@]}" "${FLOOR[@]}"
+  step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000 --preset cpu
+  step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 --preset cpu "${FLOOR[@]}"
   step train-diffusion-state train_policy "$DPS" cpu-state
-  step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000
+  step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000 --preset reference
 fi
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 # learned_pair FLY / depth_pair FLY: FLY is fly_model (the planner's run) or fly_cpu (ALL=1's cpu run)
 learned_pair() { spawn "$1" planner planner; spawn "$1" oracle-learned-dyn oracle-learned-dyn; join; }
 depth_pair() {  # the refitted depth head, and the Stage I head it replaces
   spawn "$1" oracle-true-dyn-depth oracle-true-dyn-depth
-  spawn "$1" oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --depth-head stage1
+  spawn "$1" oracle-true-dyn-depth-stage1-head oracle-true-dyn-depth --set depth_head=stage1
   join
 }
 rigid_pair() { spawn fly_model oracle-true oracle-true; spawn fly_model oracle-true-dyn-sensor oracle-true-dyn-sensor; join; }
@@ -230,9 +233,9 @@ if [ "${ALL:-0}" = 1 ]; then
     probe_and_eval "$run" 50
   done
   # The cpu-run rows (docs/results.md) were flown with the 30,000-frame x 8-epoch refit and
-  # without the planner's neighbour filter (--support 0); these pin what they were.
+  # without the planner's neighbour filter (--set support=0); these pin what they were.
   refit "$WM" --frames 30000 --epochs 8
-  fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}" --support 0; }
+  fly_cpu() { fly_run "$WM" "cpu-run/$1" "${@:2}" --set support=0; }
   step grid-cpu-learned learned_pair fly_cpu
   step grid-cpu-depth depth_pair fly_cpu
 fi

@@ -10,15 +10,10 @@ from typing import Annotated, Optional
 import typer
 
 from orbitmodel.cli.errors import fail, friendly
-from orbitmodel.plan.config import PLANNER_PRESETS
-from orbitmodel.plan.pilot import Variant
+from orbitmodel.plan.variant import Variant
 
-PlannerPresetName = Enum("PlannerPresetName", {name: name for name in PLANNER_PRESETS}, type=str)
 PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
-DepthHead = Enum("DepthHead", {"auto": "auto", "stage1": "stage1", "refit": "refit"}, type=str)
 VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
-Pick = Enum("Pick", {"mean": "mean", "central": "central"}, type=str)  # DiffusionPilot.PICKS
-Spacing = Enum("Spacing", {"leading": "leading", "trailing": "trailing"}, type=str)  # TIMESTEP_SPACINGS
 
 
 def register(app: typer.Typer) -> None:
@@ -46,55 +41,26 @@ def closed_loop(
                                                         "(`orbitmodel train-policy`), or the Hub repo id of either "
                                                         "(owner/name[@revision]); optional for the rigid-body oracles")
                    ] = None,
-    pilot: Annotated[PilotName, typer.Option(help="planner, or an oracle (true dynamics and/or obstacles)")] = "planner",
-    planner: Annotated[PlannerPresetName, typer.Option(
-        help="planner preset: paper (K 256, the model's history) or cpu (K 32, history 2: what the reported grids "
-             "fly on a 2-core CPU); the flags below change single settings of it")] = "paper",
+    pilot: Annotated[PilotName, typer.Option(help="planner, or an oracle (true dynamics and/or obstacles); a policy "
+                                                  "run flies itself")] = "planner",
+    preset: Annotated[Optional[str], typer.Option(
+        help="the pilot's preset: a planner preset (paper: K 256; cpu: K 32, history 2) or, for a policy run, a "
+             "flight preset (cpu: the reported flight; reference: the reference's sampler); `orbitmodel presets` "
+             "lists them (default: cpu for a policy; for a planner paper with CUDA, else cpu)")] = None,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="KEY=VALUE: change one setting of the preset, repeatable: for a planner a field of "
+                      "PlannerConfig, MPPIConfig or CostConfig (samples=K, horizon, history, depth_head, "
+                      "margin_per_speed, image_codec, ...), for a policy a field of PolicySampling (draws, pick, "
+                      "action_steps, ensemble, noise_scale, timestep_spacing, inference_steps, image_codec)")] = None,
     obstacles: Annotated[str, typer.Option(help="obstacle counts, comma-separated")] = "1,3,5",
     speeds: Annotated[str, typer.Option(help="initial speeds in m/s, comma-separated")] = "1,2",
-    episodes: Annotated[int, typer.Option(help="episodes per setting")] = 20,
+    episodes: Annotated[int, typer.Option(min=1, help="episodes per setting")] = 20,
     seed: Annotated[int, typer.Option(min=0, help="root seed of the grid (as orbitdata fly)")] = 0,
     json_out: Annotated[Optional[Path], typer.Option("--json", help="write the table and every episode here")] = None,
-    video: Annotated[Optional[Path], typer.Option(help="write a video of each episode to this folder")] = None,
-    video_format: Annotated[VideoFormat, typer.Option(help="mp4 or gif")] = "mp4",
-    samples: Annotated[Optional[int], typer.Option(min=2, help="MPPI samples K [default: the preset's]")] = None,
-    horizon: Annotated[Optional[int], typer.Option(
-        min=1, help="MPPI horizon H in control steps (frames), a multiple of the run's frame step "
-                    "[default: the preset's]")] = None,
-    iterations: Annotated[Optional[int], typer.Option(min=1, help="MPPI iterations per replan")] = None,
-    replan_every: Annotated[Optional[int], typer.Option(min=1, help="control steps per replan")] = None,
-    memory_frames: Annotated[Optional[int], typer.Option(min=1, help="depth frames kept in the point cloud")] = None,
-    support: Annotated[Optional[int], typer.Option(
-        min=0, max=8, help="keep a depth cell only with this many of its 8 neighbours at a similar depth (0: off)")
-    ] = None,
-    depth_head: Annotated[Optional[DepthHead], typer.Option(
-        help="stage1: the head trained with the world model; refit: RUN/depth (`orbitmodel depth`); auto: refit if "
-             "there [default: the preset's, auto]")] = None,
-    history: Annotated[Optional[int], typer.Option(min=1, help="latents the world model sees per imagined step "
-                                                               "[default: the preset's]")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
-    image_codec: Annotated[bool, typer.Option("--image-codec/--raw-images", help="hand the pilot its camera through "
-                                              "the dataset's JPEG codec, as it trained on it")] = False,
-    action_steps: Annotated[Optional[int], typer.Option(min=1, help="a policy run: actions executed per sampled "
-                                                                    "chunk [default: its config's]")] = None,
-    ensemble: Annotated[Optional[float], typer.Option(min=0.0, help="a policy run: temporal ensembling of "
-                                                                    "overlapping chunks with this decay")] = None,
-    draws: Annotated[Optional[int], typer.Option(min=1, help="a policy run: make each chunk of this many draws "
-                                                             "sampled together (--pick) [default: 1, one draw]")] = None,
-    pick: Annotated[Optional[Pick], typer.Option(help="a policy run with --draws: fly their mean, or the central "
-                                                      "draw (the one nearest their mean) [default: mean]")] = None,
-    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
-        help="a policy run: DDIM timestep spacing to sample with [default: the run's]")] = None,
-    noise_scale: Annotated[Optional[float], typer.Option(
-        min=0.0, help="a policy run: scale of the noise each draw starts from (0: one deterministic chunk per "
-                      "observation) [default: 1, as trained]")] = None,
-    compile_rollout: Annotated[Optional[bool], typer.Option(
-        "--compile/--no-compile", help="torch.compile the world model's imagined step (needs a C++ compiler) "
-                                       "[default: the preset's, off]")] = None,
-    set_: Annotated[Optional[list[str]], typer.Option(
-        "--set", help="KEY=VALUE: any other planner setting (a field of MPPIConfig, CostConfig or PlannerConfig, "
-                      "e.g. --set margin_per_speed=0.1 --set temperature=0.5); repeatable")] = None,
+    video: Annotated[Optional[Path], typer.Option(help="write a video of each episode to this folder")] = None,
+    video_format: Annotated[VideoFormat, typer.Option(help="mp4 or gif")] = "mp4",
     config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
 ) -> None:
     """Fly a planning pilot (or a policy run) over the orbitdata fly grid and print the success table.
@@ -106,27 +72,17 @@ def closed_loop(
 
     from orbitdata.config import GenerationConfig
     from orbitdata.cli.options import key_values
-    from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
-    from orbitmodel.plan.config import planner_config
+    from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
 
-    options = {k: x for k, x in dict(samples=samples, horizon=horizon, iterations=iterations,
-                                     replan_every=replan_every, memory_frames=memory_frames, history=history,
-                                     support=support, depth_head=depth_head.value if depth_head else None,
-                                     compile=compile_rollout).items() if x is not None}
-    options.update(key_values(set_ or [], "--set", "margin_per_speed=0.1"))
+    options = key_values(set_ or [], "--set", "samples=32")
+    settings, preset = pilot_settings(run, preset, **options)
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
         variant=Variant(pilot.value), run=run, obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
-        speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed,
-        planner=planner_config(planner.value, **options),
-        planner_preset=planner.value, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
-        max_steps=max_steps, image_codec=image_codec, action_steps=action_steps, ensemble=ensemble, draws=draws,
-        noise_scale=noise_scale, pick=pick.value if pick else None,
-        timestep_spacing=timestep_spacing.value if timestep_spacing else None, video_dir=video,
-        video_format=f".{video_format.value}")
+        speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed, settings=settings,
+        preset=preset, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
+        max_steps=max_steps, video_dir=video, video_format=f".{video_format.value}")
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
-    if loop.name != req.variant.value and (options or planner.value != "paper"):
-        fail(f"{run} holds a policy, which takes no planner settings; drop --planner and the MPPI and depth flags")
     report = loop.report(_fly_with_progress(loop, json_out))
     print_table(report, episodes)
     if json_out is not None:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from orbitmodel.cli.errors import friendly
-from orbitmodel.plan.depth_refit import DepthRefitConfig
+from orbitmodel.plan.depth_recipe import DepthRefitConfig
 
 _D = DepthRefitConfig()
 
@@ -36,7 +36,7 @@ def depth(
 
     Stage I's depth loss is mostly about the sky; the planner needs the obstacles within its
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
-    closed-loop` uses RUN/depth when it is there (`--depth-head stage1` for the Stage I head).
+    closed-loop` uses RUN/depth when it is there (`--set depth_head=stage1` for the Stage I head).
     """
     from orbitmodel.plan.depth_bands import comparison_lines
     from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head

@@ -15,7 +15,6 @@ from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
 PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
 Split = Enum("Split", {"test": "test", "val": "val", "train": "train"}, type=str)
-Spacing = Enum("Spacing", {"leading": "leading", "trailing": "trailing"}, type=str)  # TIMESTEP_SPACINGS
 
 
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
@@ -74,6 +73,15 @@ def train_policy(
     echo_trained("the policy", train(req), out)
 
 
+def _sampling(preset: str | None, sets: list[str] | None):
+    """(PolicySampling, preset name) from ``--preset`` and ``--set KEY=VALUE`` (default preset: cpu)."""
+    from orbitdata.cli.options import key_values
+    from orbitmodel.baselines.diffusion.sampling import DEFAULT_FLIGHT, policy_sampling
+
+    preset = preset or DEFAULT_FLIGHT
+    return policy_sampling(preset, **key_values(sets or [], "--set", "draws=4")), preset
+
+
 @friendly
 def eval_policy(
     run: Annotated[Path, typer.Argument(help="policy run folder (from `orbitmodel train-policy`)")],
@@ -86,18 +94,15 @@ def eval_policy(
     max_windows: Annotated[int, typer.Option(min=0, help="measure only the first N windows (0 = all)")] = 0,
     batch_size: Annotated[int, typer.Option(min=1, help="windows sampled together")] = 64,
     seed: Annotated[int, typer.Option(min=0, help="sampling noise")] = 0,
-    samples: Annotated[int, typer.Option(
-        min=1, help="draws per window: above 1, the error splits into the samples' variance and the MSE of their "
-                    "mean")] = 1,
+    preset: Annotated[Optional[str], typer.Option(
+        help="flight preset to sample with, as eval closed-loop flies it: cpu (the reported flight) or reference "
+             "(the reference's sampler)")] = None,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="KEY=VALUE: change one sampling setting of the preset, repeatable (draws=N: above 1, the "
+                      "error splits into the draws' variance and the MSE of their mean; noise_scale, "
+                      "timestep_spacing, inference_steps, action_steps)")] = None,
     without_obstacles: Annotated[bool, typer.Option(
         help="tell a privileged policy (cpu-state-obstacles) no obstacle: how much it relies on them")] = False,
-    noise_scale: Annotated[float, typer.Option(
-        min=0.0, help="scale of the noise each draw starts from, as eval closed-loop's (0: one deterministic chunk "
-                      "per window)")] = 1.0,
-    inference_steps: Annotated[Optional[int], typer.Option(
-        min=1, help="DDIM steps to sample with [default: the run's]")] = None,
-    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
-        help="DDIM timestep spacing to sample with, as eval closed-loop's [default: the run's]")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -107,11 +112,11 @@ def eval_policy(
     from orbitmodel.train.loop import resolve_device
 
     levels = tuple(dict.fromkeys(l.value for l in level)) if level else DEFAULT_LEVELS
+    sampling, preset = _sampling(preset, set_)
     result = evaluate_policy(run, dataset, split=split.value, levels=levels, stride=stride, max_windows=max_windows,
                              batch_size=batch_size, seed=seed, device=str(resolve_device(device.value)),
-                             samples=samples, without_obstacles=without_obstacles, noise_scale=noise_scale,
-                             inference_steps=inference_steps,
-                             timestep_spacing=timestep_spacing.value if timestep_spacing else None)
+                             sampling=sampling, without_obstacles=without_obstacles, preset=preset)
+    samples = sampling.draws
     if as_json:
         typer.echo(json.dumps(result.to_dict()))
         return
@@ -144,8 +149,9 @@ def eval_expert_floor(
     angle_deg: Annotated[float, typer.Option(min=0.0, help="... and a camera attitude this close")] = 27.0,
     policy: Annotated[bool, typer.Option(help="score the policy on the same windows")] = True,
     seed: Annotated[int, typer.Option(min=0, help="the policy's sampling noise")] = 0,
-    timestep_spacing: Annotated[Optional[Spacing], typer.Option(
-        help="the policy's DDIM timestep spacing, as eval policy's [default: the run's]")] = None,
+    preset: Annotated[Optional[str], typer.Option(help="the policy's flight preset, as eval policy's")] = None,
+    set_: Annotated[Optional[list[str]], typer.Option(
+        "--set", help="KEY=VALUE: change one sampling setting of the preset, as eval policy's")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     as_json: Annotated[bool, typer.Option("--json", help="print the result as JSON")] = False,
 ) -> None:
@@ -155,10 +161,10 @@ def eval_expert_floor(
     from orbitmodel.baselines.diffusion.expert_floor import expert_floor
     from orbitmodel.train.loop import resolve_device
 
+    sampling, preset = _sampling(preset, set_) if (policy or preset or set_) else (None, None)
     r = expert_floor(run, dataset, split=split.value, stride=stride, max_windows=max_windows, plans=plans,
                      position_m=position_m, speed_mps=speed_mps, angle_deg=angle_deg, with_policy=policy, seed=seed,
-                     device=str(resolve_device(device.value)),
-                     timestep_spacing=timestep_spacing.value if timestep_spacing else None)
+                     device=str(resolve_device(device.value)), sampling=sampling, preset=preset)
     if as_json:
         typer.echo(json.dumps(r.to_dict()))
         return

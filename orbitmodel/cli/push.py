@@ -37,7 +37,10 @@ def push(
     if dataset is not None:
         from orbitdata.load.source import check_repo_id
 
-        check_repo_id(dataset)
+        try:
+            check_repo_id(dataset)
+        except ValueError as err:
+            fail(f"--dataset: {err}")
     options = RunPushOptions(private=private, revision=branch, message=message, grids=tuple(grid or ()),
                              dataset_repo=dataset)
     if dry_run:

@@ -25,11 +25,15 @@ from orbitdata.sim.env import CubeSatEnv
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
 from orbitdata.fly.rollout import fly_episode
 from orbitmodel.kinematics import FUEL, P
-from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
+from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config
 from orbitmodel.plan.factory import build_pilot, camera_for_run
 from orbitmodel.plan.pilot import Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.runs import POLICY, RunDir, RunError, resolve_run, stage_of
+
+
+PilotSettings = PlannerConfig | PolicySampling
 
 
 @dataclass(frozen=True)
@@ -42,13 +46,11 @@ class ClosedLoopRequest:
             the Hub model repo id of either (``owner/name[@revision]``); optional for the
             rigid-body oracles, which then skip the unseen-seed check.
         obstacles, speeds, episodes, seed: the grid, as ``orbitdata fly``.
-        planner: the planning pilot's settings; ``planner_preset`` names the preset they started
-            from (None: built some other way), for the report.
+        settings: the pilot's settings: a :class:`PlannerConfig` for a planning pilot, a
+            :class:`PolicySampling` for a policy run (see :func:`pilot_settings`); checked by the
+            pilot that owns them. ``preset`` names the preset they started from, for the report.
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
-        image_codec: hand the pilot its camera through the dataset's JPEG codec (``orbitdata.fly``).
-        action_steps, ensemble, draws, noise_scale, pick, timestep_spacing: how a policy run
-            samples and executes its chunks (``DiffusionPilot``).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
     """
 
@@ -58,19 +60,31 @@ class ClosedLoopRequest:
     speeds: tuple[float, ...] = (1.0, 2.0)
     episodes: int = 20
     seed: int = 0
-    planner: PlannerConfig = field(default_factory=PlannerConfig)
-    planner_preset: str | None = None
+    settings: PilotSettings = field(default_factory=PlannerConfig)
+    preset: str | None = None
     config: GenerationConfig = field(default_factory=GenerationConfig)
     max_steps: int | None = None
-    image_codec: bool = False
-    action_steps: int | None = None
-    ensemble: float | None = None
-    draws: int | None = None
-    noise_scale: float | None = None
-    pick: str | None = None
-    timestep_spacing: str | None = None
     video_dir: Path | None = None
     video_format: str = ".mp4"
+
+
+def pilot_settings(run: str | Path | None, preset: str | None = None, **options) -> tuple[PilotSettings, str]:
+    """(settings, preset name) for flying ``run``: a policy run's flight preset
+    (``sampling.POLICY_FLIGHTS``, default ``cpu``), else a planner preset (``PLANNER_PRESETS``,
+    default: the one that suits this machine), with single fields changed by ``options``
+    (``--set KEY=VALUE``)."""
+    if run is not None and stage_of(resolve_run(run)) == POLICY:
+        from orbitmodel.baselines.diffusion.sampling import DEFAULT_FLIGHT, POLICY_FLIGHTS, policy_sampling
+
+        if preset is not None and preset not in POLICY_FLIGHTS:
+            raise ValueError(f"--preset {preset}: {run} holds a diffusion policy, whose flight presets are "
+                             f"{', '.join(POLICY_FLIGHTS)}")
+        preset = preset or DEFAULT_FLIGHT
+        return policy_sampling(preset, **options), preset
+    if preset is not None and preset not in PLANNER_PRESETS:
+        raise ValueError(f"--preset {preset}: the planning pilots' presets are {', '.join(PLANNER_PRESETS)}")
+    preset = preset or default_planner_preset()
+    return planner_config(preset, **options), preset
 
 
 @dataclass
@@ -112,25 +126,24 @@ def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
 EpisodeHook = Callable[[CellResult, dict], None]
 
 
-def load_pilot(req: "ClosedLoopRequest", run: Path | None, planner: PlannerConfig, sim, timings: Timings):
+def load_pilot(req: "ClosedLoopRequest", run: Path | None, sim, timings: Timings):
     """(pilot, simulator settings, pilot name) for ``req``, whose run is in the local folder ``run``:
     the run's policy for a policy run, else the planning pilot of ``req.variant``."""
-    if run is not None and stage_of(run) == POLICY:
+    policy = run is not None and stage_of(run) == POLICY
+    if policy:
         from orbitmodel.baselines.diffusion.pilot import load_policy_pilot
 
         if req.variant != Variant.PLANNER:
             raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
-        pilot = load_policy_pilot(run, action_steps=req.action_steps, ensemble=req.ensemble, draws=req.draws or 1,
-                                  noise_scale=1.0 if req.noise_scale is None else req.noise_scale,
-                                  pick=req.pick or "mean", timestep_spacing=req.timestep_spacing)
-        if req.image_codec and not pilot.needs_images:
-            raise RunError(f"--image-codec: the policy of {req.run} flies without the camera; drop --image-codec")
+        if not isinstance(req.settings, PolicySampling):
+            raise RunError(f"{req.run} holds a diffusion policy: fly it with a flight preset (--preset cpu) and its "
+                           "sampling settings, not planner settings")
+        pilot = load_policy_pilot(run, req.settings, preset=req.preset)
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
-    if any(x is not None for x in (req.action_steps, req.ensemble, req.draws, req.noise_scale, req.pick,
-                                   req.timestep_spacing)):
-        raise RunError(f"--action-steps, --ensemble, --draws, --pick, --noise-scale and --timestep-spacing are for a "
-                       f"policy run; "
-                       f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot")
+    if not isinstance(req.settings, PlannerConfig):
+        raise RunError(f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot: give planner settings "
+                       "(--preset cpu), not a policy's sampling settings")
+    planner = dataclasses.replace(req.settings, record=req.video_dir is not None)
     pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value
 
@@ -164,17 +177,17 @@ class ClosedLoop:
             meta = run_dataset(run)
             check_unseen_seeds([s for *_, s in self.seeds], meta.root_seed, sum(meta.episodes.values()))
         self.timings = Timings()
-        planner = dataclasses.replace(req.planner, record=req.video_dir is not None)
-        self.pilot, sim, self.name = load_pilot(req, run, planner, req.config.sim, self.timings)
-        self.image_quality = req.config.dataset.jpeg_quality if req.image_codec else None
+        self.pilot, sim, self.name = load_pilot(req, run, req.config.sim, self.timings)
+        self.image_codec = bool(getattr(self.pilot, "image_codec", False))
+        self.image_quality = req.config.dataset.jpeg_quality if self.image_codec else None
         self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
                                        max_steps=req.max_steps or sim.max_steps)
 
     def report(self, result: ClosedLoopResult) -> dict:
         """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
-        ``action_steps``, ``ensemble``, ``draws``, ``pick`` and ``noise_scale``) and the torch threads it flew on."""
+        flight preset and every sampling setting) and the torch threads it flew on."""
         planning = self.name == self.req.variant.value
-        report = closed_loop_report(self.req, result, None if planning else self.name)
+        report = closed_loop_report(self.req, result, None if planning else self.name, self.image_codec)
         return {**report, "pilot_settings": None if planning else self.pilot.metadata(),
                 "threads": torch.get_num_threads()}
 
@@ -223,18 +236,20 @@ def _stats(values: list[float]) -> dict:
     return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 
-def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: str | None = None) -> dict:
+def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: str | None = None,
+                       image_codec: bool = False) -> dict:
     """``orbitdata fly --json``'s table (pilot, seed, settings) plus episodes, settings, latency;
     ``pilot``: the name of a pilot that is not a planning variant (a policy run's), which has no
-    planner settings."""
+    planner settings; ``image_codec``: the pilot saw its camera through the dataset's codec."""
     planning = pilot is None
     report = grid_report(req.variant.value if planning else pilot, req.seed, result.cells)
     total = sum(result.timings.values()) or 1.0
     report.update({
         "run": None if req.run is None else str(req.run),
-        "planner_preset": req.planner_preset if planning else None,
-        "planner": dataclasses.asdict(req.planner) if planning else None,
-        "image_codec": req.image_codec,
+        "preset": req.preset,
+        "planner_preset": req.preset if planning else None,
+        "planner": dataclasses.asdict(req.settings) if planning else None,
+        "image_codec": image_codec,
         "max_steps": req.max_steps or req.config.sim.max_steps,  # an episode's frames at most (300: 12 s)
         "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
         "time_share": {k: v / total for k, v in sorted(result.timings.items())},

@@ -80,7 +80,7 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
     return "\n".join(lines) + "\n"
 
 
-FLIGHT_KEYS = ("pilot_settings", "image_codec")  # how a grid was flown, beside the pilot and its run
+FLIGHT_KEYS = ("preset", "pilot_settings", "image_codec")  # how a grid was flown, beside the pilot and its run
 
 
 def pool_seeds(reports: list[dict]) -> dict:

@@ -30,11 +30,12 @@ _LAZY = {
     "PlannerConfig": "orbitmodel.plan.config",
     "PLANNER_PRESETS": "orbitmodel.plan.config",
     "planner_config": "orbitmodel.plan.config",
+    "default_planner_preset": "orbitmodel.plan.config",
     "DepthRefitConfig": "orbitmodel.plan.depth_refit",
     "refit_depth_head": "orbitmodel.plan.depth_refit",
     "PlannerPilot": "orbitmodel.plan.pilot",
     "OraclePilot": "orbitmodel.plan.pilot",
-    "Variant": "orbitmodel.plan.pilot",
+    "Variant": "orbitmodel.plan.variant",
     "build_pilot": "orbitmodel.plan.factory",
     "pilot_factory": "orbitmodel.plan.factory",
 }

@@ -3,8 +3,10 @@
 ``paper`` is the design's MPPI (K = 256 samples, H = 50 frames, the world model's own history of
 latents); ``cpu`` is what the reported grids fly on a 2-core CPU with the ``cpu-step5`` world
 model: K = 32, H = 50, a history of 2 latents (its latency: ``benchmarks/bench_plan.py
---planner cpu``). Flags of ``orbitmodel eval closed-loop`` (or ``--pilot-option``) change single
-fields of the chosen preset; the result files record the preset and every field.
+--planner cpu``). Without a name, a CUDA machine flies ``paper`` and a CPU ``cpu``
+(:func:`default_planner_preset`). ``orbitmodel eval closed-loop --preset NAME --set KEY=VALUE``
+(or ``--pilot-option``) changes single fields of the chosen preset; the result files record
+the preset and every field.
 """
 
 from __future__ import annotations
@@ -14,9 +16,9 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from orbitmodel.plan.cost import CostConfig
+from orbitmodel.plan.depth_recipe import MAX_RANGE
 from orbitmodel.plan.mppi import MPPIConfig
 
-MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to plan around
 
 
 @dataclass(frozen=True)
@@ -48,6 +50,8 @@ class PlannerConfig:
             (:meth:`WorldModel.compile_rollout`; learned-dynamics pilots only). Same plans to
             float rounding, faster rollouts, slow first replans.
         record: keep each replan's best imagined path and the believed points (for videos).
+        image_codec: hand the pilot its camera through the dataset's JPEG codec (the reported
+            grids fly raw renders).
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -65,6 +69,7 @@ class PlannerConfig:
     replan_every: int = 1
     compile: bool = False
     record: bool = False
+    image_codec: bool = False
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -88,9 +93,18 @@ PLANNER_PRESETS: dict[str, Callable[[], PlannerConfig]] = {
 }
 
 
-def planner_config(preset: str = "paper", **options) -> PlannerConfig:
+def default_planner_preset() -> str:
+    """The preset that suits this machine: ``paper`` (K 256) with CUDA, ``cpu`` (K 32) without."""
+    import torch
+
+    return "paper" if torch.cuda.is_available() else "cpu"
+
+
+def planner_config(preset: str | None = None, **options) -> PlannerConfig:
     """The planner preset ``preset`` with single fields changed: ``options`` are MPPIConfig,
-    CostConfig and PlannerConfig field names (values may be strings, as a command line gives them)."""
+    CostConfig and PlannerConfig field names (values may be strings, as a command line gives them).
+    ``preset`` None: :func:`default_planner_preset`."""
+    preset = preset or default_planner_preset()
     if preset not in PLANNER_PRESETS:
         raise ValueError(f"unknown planner preset {preset!r}; choose one of {', '.join(PLANNER_PRESETS)}")
     base = PLANNER_PRESETS[preset]()
@@ -100,6 +114,8 @@ def planner_config(preset: str = "paper", **options) -> PlannerConfig:
         if owner is None or key in ("mppi", "cost"):
             raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
         kind = type(getattr(owner(), key))
+        if kind is bool and isinstance(value, str) and value.lower() not in ("1", "true", "yes", "0", "false", "no"):
+            raise ValueError(f"planner option {key}={value!r}: give true or false")
         try:
             parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
                 else kind(value)

@@ -18,57 +18,22 @@ from __future__ import annotations
 
 import copy
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from orbitdata import schema as S
-from orbitmodel.data import EVAL_SPLITS, read_dataset_meta, split_selection, training_episodes
+from orbitmodel.data import read_dataset_meta, split_selection, training_episodes
 from orbitmodel.model.world_model import WorldModel, images_to_float
-from orbitmodel.plan.config import MAX_RANGE
 from orbitmodel.plan.depth_bands import depth_by_band
+from orbitmodel.plan.depth_recipe import DepthRefitConfig
 from orbitmodel.runs import (CONFIG, DEPTH_REFIT, WEIGHTS, RunDir, RunError, check_image_size, load_weights,
                              local_run_folder, run_config, write_json_atomic)
 
 FOLDER = "depth"
 EVAL = "eval.json"
-
-
-@dataclass(frozen=True)
-class DepthRefitConfig:
-    """The refit's recipe (``docs/planner.md`` gives the comparison it was chosen from; the fit
-    holds ``frames`` x patches x width float16 tokens in memory).
-
-    Args:
-        frames: random training frames whose patch tokens are encoded once (a dataset with fewer
-            training frames needs ``--frames``; the 3000-episode 64 px dataset has ~330,000).
-        test_frames: random frames of ``eval_split`` for the before/after comparison.
-        eval_split: "test" (to report) or "val": the run's validation episodes (to choose a recipe).
-        epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
-        near_weight: extra weight of a cell whose true depth is below ``near_m``.
-        near_m: metres; the planner's range (``plan.config.MAX_RANGE``).
-        seed: frame choice and data order.
-    """
-
-    frames: int = 120000
-    test_frames: int = 4000
-    epochs: int = 30
-    batch_size: int = 256
-    lr: float = 1e-3
-    near_weight: float = 25.0
-    near_m: float = MAX_RANGE
-    seed: int = 0
-    eval_split: str = "test"
-
-    def __post_init__(self):
-        if min(self.frames, self.test_frames, self.epochs, self.batch_size) < 1:
-            raise ValueError("frames, test_frames, epochs and batch_size must be >= 1")
-        if self.eval_split not in EVAL_SPLITS:
-            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
-        if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
-            raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
 
 
 def depth_folder(run: str | Path) -> Path:

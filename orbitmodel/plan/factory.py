@@ -116,13 +116,13 @@ def pilot_factory(variant: Variant | str):
     """An ``orbitdata.fly`` factory for ``variant``: ``factory(config, run=None, **planner) -> Pilot``.
 
     ``make_planner`` below is registered as the ``orbitdata.pilots`` entry point ``planner``, so
-    ``orbitdata fly --pilot planner --pilot-option run=RUN --pilot-option planner=cpu --image-size 64``
-    flies it. ``planner`` names a planner preset (``plan.config.PLANNER_PRESETS``, default
-    ``paper``); the other options are PlannerConfig / MPPIConfig / CostConfig field names
+    ``orbitdata fly --pilot planner --pilot-option run=RUN --pilot-option preset=cpu --image-size 64``
+    flies it. ``preset`` names a planner preset (``plan.config.PLANNER_PRESETS``; default: the
+    one that suits the machine, ``plan.config.default_planner_preset``); the other options are PlannerConfig / MPPIConfig / CostConfig field names
     (``samples``, ``horizon``, ``memory_frames``, ...); ``--pilot-option`` passes strings, converted here.
     """
-    def factory(config, run: str | None = None, planner: str = "paper", **options) -> PlannerPilot:
-        pilot, sim = build_pilot(variant, run, planner_config(planner, **options), config.sim)
+    def factory(config, run: str | None = None, preset: str | None = None, **options) -> PlannerPilot:
+        pilot, sim = build_pilot(variant, run, planner_config(preset, **options), config.sim)
         if sim.camera != config.sim.camera:
             raise ValueError(f"pilot {Variant(variant).value} needs the run's camera ({sim.camera.image_size} px); "
                              "fly it with `orbitmodel eval closed-loop`, which sets it")
@@ -131,8 +131,8 @@ def pilot_factory(variant: Variant | str):
     return factory
 
 
-def make_planner(config, run: str | None = None, planner: str = "paper", **options) -> PlannerPilot:
+def make_planner(config, run: str | None = None, preset: str | None = None, **options) -> PlannerPilot:
     """The ``planner`` entry point of ``orbitdata.pilots``: the MPPI planner on a trained run."""
     if run is None:
         raise ValueError("pilot 'planner' needs its run folder: pass --pilot-option run=RUN")
-    return pilot_factory(Variant.PLANNER)(config, run, planner, **options)
+    return pilot_factory(Variant.PLANNER)(config, run, preset, **options)

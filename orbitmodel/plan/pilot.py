@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from enum import Enum
 from typing import Callable
 
 import numpy as np
@@ -40,32 +39,7 @@ from orbitmodel.plan.cost import trajectory_cost
 from orbitmodel.plan.mppi import MPPI
 from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, depth_to_points
 from orbitmodel.plan.timing import Timings
-
-
-class Variant(str, Enum):
-    PLANNER = "planner"
-    ORACLE_TRUE = "oracle-true"
-    ORACLE_LEARNED_DYN = "oracle-learned-dyn"
-    ORACLE_TRUE_DYN_DEPTH = "oracle-true-dyn-depth"
-    ORACLE_TRUE_DYN_SENSOR = "oracle-true-dyn-sensor"
-
-    @property
-    def learned_dynamics(self) -> bool:
-        return self in (Variant.PLANNER, Variant.ORACLE_LEARNED_DYN)
-
-    @property
-    def obstacles(self) -> str:
-        """'depth-head', 'sensor' (the rendered depth_low) or 'true' (the scenario's)."""
-        return {Variant.ORACLE_TRUE: "true", Variant.ORACLE_LEARNED_DYN: "true",
-                Variant.ORACLE_TRUE_DYN_SENSOR: "sensor"}.get(self, "depth-head")
-
-    @property
-    def privileged(self) -> bool:
-        return self.obstacles == "true"
-
-    @property
-    def needs_model(self) -> bool:
-        return self.learned_dynamics or self.obstacles == "depth-head"
+from orbitmodel.plan.variant import Variant
 
 
 def wrench_noise_basis(sim: SimConfig, torque_scale: float) -> torch.Tensor:
@@ -116,6 +90,7 @@ class PlannerPilot(Pilot):
         self.variant, self.config = variant, config
         self.name = variant.value
         self.needs_images = bool(dynamics.needs_images or depth is not None)
+        self.image_codec = config.image_codec and self.needs_images
         self.sees_depth = variant.obstacles == "sensor"  # only the sensor oracle reads the rendered depth
         self.dynamics, self.depth, self.camera = dynamics, depth, camera
         self.timings = timings or getattr(dynamics, "timings", None) or Timings()

@@ -44,7 +44,7 @@ from orbitmodel.probe.integrator import increments_of, integrate
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.runs import (PROBE, RunDir, RunError, check_image_size, local_run_folder, read_run_config, resolve_run,
                              run_config)
-from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device
+from orbitmodel.train.loop import FitResult, fit, resolve_device
 
 COLUMNS = {"latent": (S.IMAGE, S.STATE, S.ACTION), "state": (S.STATE, S.ACTION)}
 PARTS = ("pos", "vel", "rot", "w", "fuel")
@@ -167,7 +167,7 @@ def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, 
     windows = load_model_windows(dataset, frame_step, split="train", context=train.context, horizon=train.horizon,
                                  stride=train.window_stride, columns=[S.STATE], episodes=episodes,
                                  frame_states=per_frame)
-    g = torch.Generator().manual_seed(train.seed)
+    g = torch.Generator().manual_seed(train.loop.seed)
     chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
     states = collate_windows(windows.__getitems__(chosen))[FRAME_STATES if per_frame else S.STATE]  # (N, T, 16)
     inc = increments_of(states, config.dt, config.coasting)  # (N, T-1, 10)
@@ -193,10 +193,16 @@ def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, met
 
 
 def upgrade_probe_config(old: dict) -> dict:
-    """A probe run's config.json from before per-frame heads, thrust inputs and the increment loss,
-    as this version writes it (the defaults it trained with), so such a run resumes."""
+    """A probe run's config.json from before per-frame heads, thrust inputs, the increment loss and
+    the nested loop settings, as this version writes it (the defaults it trained with), so such a
+    run resumes. A config this version cannot read comes back unchanged: the comparison with the
+    new config then says what differs."""
     probe = {"substeps": 1, "action_dim": 0, **old.get("probe", {})}
     train = {"increment_weight": 0.0, **old.get("train", {})}
+    try:
+        train = ProbeTrainConfig.from_dict(train).to_dict()
+    except (TypeError, ValueError):
+        pass
     return {**old, "probe": probe, "train": train}
 
 
@@ -248,13 +254,13 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
                                  frame_states=config.substeps > 1)
     data = windows
     if t.cache_windows:
-        chosen = subset(len(windows), t.cache_windows, t.seed)
+        chosen = subset(len(windows), t.cache_windows, t.loop.seed)
         if latent:
             data = TensorWindows(imagined(world_model, windows, chosen, req, wm_print, meta, device, out,
                                           stage1.validation.episodes))
         else:
             data = TensorWindows(gather(windows, chosen, (S.STATE, S.ACTION)))
-    torch.manual_seed(t.seed)  # initialisation
+    torch.manual_seed(t.loop.seed)  # initialisation
     if latent:
         model = PhysicsProbe(config)
         module = LatentObjective(world_model, model, t)
@@ -267,5 +273,5 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         if latent and config.reads_thrust:
             model.set_thrust_stats(meta.action_mean, meta.action_std)
     job = ProbeJob(module, model, req.kind, t.context)
-    return fit(job, data, LoopSettings.of(t), run, device, resume=req.resume,
+    return fit(job, data, t.loop, run, device, resume=req.resume,
                label="probe" if latent else "state-only", on_log=on_log)

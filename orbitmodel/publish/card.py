@@ -13,6 +13,7 @@ from pathlib import Path
 from orbitdata.schema import DT
 from orbitdata.sim.config import SimConfig
 from orbitmodel.publish.files import GRID, RunFile, read_json
+from orbitmodel.publish.reproduce import policy_command, stage1_commands
 from orbitmodel.runs import POLICY, REPO_ID, TRAINING, RunDir
 
 TEMPLATE = Path(__file__).with_name("model_card.md")
@@ -98,16 +99,16 @@ def _policy_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_
         summary=(f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, {params / 1e6:.2f} M "
                  f"parameters, trained on {data_sentence}."),
         contents="`config.json` and `model.safetensors` (with the EMA weights), and its evaluations",
-        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --obstacles 1,3,5 --speeds 1,2 --episodes 20 "
-                   f"--image-codec --timestep-spacing trailing   # as the reported grids fly it\n"
-                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --pilot-option timestep_spacing=trailing "
-                   f"--image-codec --image-size {raw['dataset']['image_size']}"),
-        python_usage=(f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot\n"
+        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20"
+                   f"   # the flight preset the reported grids fly\n"
+                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --pilot-option preset=cpu "
+                   f"--image-size {raw['dataset']['image_size']}"),
+        python_usage=(f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot, policy_sampling\n"
                       f"policy = DiffusionPolicy.from_pretrained(\"{repo_id}\")\n"
-                      f"pilot = load_policy_pilot(\"{repo_id}\", timestep_spacing=\"trailing\")  "
+                      f"pilot = load_policy_pilot(\"{repo_id}\", policy_sampling(\"cpu\"), preset=\"cpu\")  "
                       f"# an orbitdata.fly pilot: reset(task), act(obs)"),
         training=_training(run, "policy"), results=_grids(files),
-        reproduce=f"orbitmodel train-policy DATA --preset {preset['name']} --out RUN")
+        reproduce=policy_command(raw))
 
 
 def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_sentence: str) -> dict:
@@ -127,8 +128,8 @@ def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], 
                  f"{model.latent_dim}-dimensional latent, {model.frame_step} frame(s) per prediction; trained on "
                  f"{data_sentence}. With it: its physics probe (Stage II){refit}, and the evaluations below."),
         contents=f"the Stage I run (`config.json`, `model.safetensors`) and its sub-runs ({', '.join(subs)}), with `eval/`",
-        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --planner cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
-                   f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option planner=cpu "
+        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
+                   f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option preset=cpu "
                    f"--image-size {size}"),
         python_usage=(f"from orbitmodel import PhysicsProbe, WorldModel\n"
                       f"model = WorldModel.from_pretrained(\"{repo_id}\")\n"
@@ -139,12 +140,12 @@ def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], 
         results=("### Table I: the physics probe (`eval/probe_table.json`)\n\n" + _table1(files)
                  + "\n### Stage I: latent rollout (`eval/rollout.json`)\n\n" + _rollout(files)
                  + "\n### Closed loop (`eval/grid/`)\n\n" + _grids(files)),
-        reproduce=(f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
-                   f"--seed {raw['dataset']['root_seed']}\n"
-                   f"orbitmodel train DATA --preset {preset['name']} --out RUN     # config.json records every setting\n"
-                   f"orbitmodel probe RUN DATA && orbitmodel depth RUN DATA\n"
-                   f"orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA\n"
-                   f"bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)"))
+        reproduce="\n".join([
+            f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
+            f"--seed {raw['dataset']['root_seed']}",
+            *stage1_commands(run, raw),  # with every setting that differs from the preset
+            "orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA",
+            "bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)"]))
 
 
 def model_card(run: Path, repo_id: str, stage: str, files: list[RunFile], dataset_repo: str | None = None):

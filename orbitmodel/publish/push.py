@@ -17,6 +17,7 @@ from typing import Callable
 
 from orbitmodel.publish.card import model_card
 from orbitmodel.publish.files import RunFile, check_complete, published_bytes, run_files, scrub_paths
+from orbitmodel.runs import RunError
 
 CARD = "README.md"
 
@@ -65,8 +66,26 @@ class RunPushResult:
     bytes: int = 0
 
 
+def check_model_repo_id(repo_id: str) -> str:
+    """``repo_id`` if it can name a model repo as ``owner/name`` (the form a run is loaded back
+    by, ``runs.resolve_run``), else RunError saying the form to give."""
+    from orbitdata.load.source import check_repo_id
+
+    try:
+        if repo_id.count("/") != 1:
+            raise ValueError(repo_id)
+        check_repo_id(repo_id)
+    except ValueError:
+        branch = "; a branch goes in --branch" if "@" in repo_id else ""
+        raise RunError(f"REPO_ID {repo_id!r} cannot name a Hub model repo: give it as owner/name, each part of "
+                       f"letters, digits, '-', '_' and '.' (e.g. user/orbit-wm-cpu-step5){branch}") from None
+    return repo_id
+
+
 def plan_push(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOptions()) -> PushPlan:
-    """Check ``run`` and gather what a push would upload, card included: no token, no network."""
+    """Check ``repo_id`` and ``run`` and gather what a push would upload, card included: no token,
+    no network."""
+    check_model_repo_id(repo_id)
     run = Path(run)
     stage = check_complete(run)
     files = run_files(run, options.grids)

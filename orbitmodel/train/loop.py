@@ -2,7 +2,8 @@
 resume, DDP, metrics and progress.
 
 A stage hands in a :class:`Job`: the module whose ``forward(**inputs)`` returns
-``(loss, parts)``, the module whose weights a checkpoint holds, and how a batch becomes inputs.
+``(loss, parts)``, the module whose weights a checkpoint holds, and how a batch becomes inputs;
+and its training config's ``loop`` (``loop_settings.LoopSettings``).
 
 Resuming is exact on CPU: the data order is a pure function of (seed, epoch) and the step
 (a resumed run skips the batches it already took, without reading them), every augmentation
@@ -26,6 +27,7 @@ from torch import nn
 from torch.utils.data import DataLoader
 
 from orbitdata.load import collate_windows
+from orbitmodel.loop_settings import LoopSettings
 from orbitmodel.runs import METRICS, TENSORBOARD, RunDir, RunError
 from orbitmodel.train.progress import Progress
 
@@ -38,29 +40,6 @@ class Job(Protocol):
 
     # Optional: ``after_step(step)`` is called after each optimiser step (1-based), e.g. to update
     # EMA weights kept inside ``saved`` (so that checkpoints and resume carry them).
-
-
-@dataclass(frozen=True)
-class LoopSettings:
-    """The loop's part of a stage's training config (every stage's TrainConfig has these)."""
-
-    batch_size: int
-    lr: float
-    min_lr: float
-    weight_decay: float
-    betas: tuple[float, float]
-    epochs: int
-    max_steps: int
-    warmup: float
-    grad_clip: float
-    num_workers: int
-    log_every: int
-    save_every: int
-    seed: int
-
-    @classmethod
-    def of(cls, train) -> "LoopSettings":
-        return cls(**{k: getattr(train, k) for k in cls.__dataclass_fields__})
 
 
 @dataclass

@@ -14,7 +14,7 @@ from orbitmodel.data import (DatasetMeta, load_model_windows, read_dataset_meta,
                              validation_split)
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config, upgrade_preset_config
-from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
+from orbitmodel.train.loop import FitResult, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
 STREAM_JITTER, STREAM_SIGREG = 0, 1
@@ -43,10 +43,10 @@ class Stage1Job:
         t = self.train
         images = batch[S.IMAGE].float().div_(255.0)  # (B, T, 3, H, W)
         if t.jitter_p > 0:
-            images = jitter(images, t.jitter_p, t.jitter, step_generator(t.seed, step, STREAM_JITTER, self.rank))
+            images = jitter(images, t.jitter_p, t.jitter, step_generator(t.loop.seed, step, STREAM_JITTER, self.rank))
         return {"images": images.to(device), "states": batch[S.STATE].to(device),
                 "actions": batch[S.ACTION].to(device), "depth_low": batch[S.DEPTH_LOW].to(device),
-                "generator": step_generator(t.seed, step, STREAM_SIGREG)}
+                "generator": step_generator(t.loop.seed, step, STREAM_SIGREG)}
 
 
 @dataclass(frozen=True)
@@ -95,8 +95,8 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
                                  horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
                                  episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out))
-    torch.manual_seed(t.seed)  # initialisation
+    torch.manual_seed(t.loop.seed)  # initialisation
     model = WorldModel(req.preset.model)
     model.set_normalisation(meta.state_mean, meta.state_std, meta.depth_max)
-    return fit(Stage1Job(model, req.preset, rank), windows, LoopSettings.of(t), run, device, resume=req.resume,
-               label="train", on_log=on_log)
+    return fit(Stage1Job(model, req.preset, rank), windows, t.loop, run, device, resume=req.resume, label="train",
+               on_log=on_log)

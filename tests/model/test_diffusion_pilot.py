@@ -14,6 +14,7 @@ import torch
 from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.pilot import DiffusionPilot, load_policy_pilot, make_diffusion_pilot
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.train import policy_run_config
 from orbitmodel.data import DatasetMeta
 from orbitmodel.runs import RunDir
@@ -168,7 +169,8 @@ def test_noise_scale_gathers_the_draws(policy):
     images, goal = images.expand(64, -1, -1, -1, -1), torch.tensor([[2.0, 1.0, 0.0]]).expand(64, -1)
 
     def draws(scale, seed):
-        return policy.sample_actions(images, states, goal, torch.Generator().manual_seed(seed), noise_scale=scale)
+        return policy.sample_actions(images, states, goal, torch.Generator().manual_seed(seed),
+                                     sampling=PolicySampling(noise_scale=scale))
 
     zero = draws(0.0, 1)
     torch.testing.assert_close(zero, draws(0.0, 2), rtol=0, atol=0)
@@ -212,15 +214,54 @@ def test_loads_from_a_run_folder(policy, tmp_path):
     config = GenerationConfig()  # renders 224 px by default
     with pytest.raises(ValueError, match="--image-size 64"):
         make_diffusion_pilot(config, run=str(run.path))
-    # --pilot-option values arrive as text
+    # --pilot-option values arrive as text; without a flight preset the pilot flies the reported one (cpu)
     assert make_diffusion_pilot(None, run=str(run.path), noise_scale="0.5", draws="2").metadata()["noise_scale"] == 0.5
     assert make_diffusion_pilot(None, run=str(run.path), draws="3", pick="central").metadata()["pick"] == "central"
-    trailing = make_diffusion_pilot(None, run=str(run.path), timestep_spacing="trailing")
-    assert trailing.metadata()["timestep_spacing"] == "trailing" and int(trailing.policy.sampler.timesteps[0]) == 99
+    flown = make_diffusion_pilot(None, run=str(run.path))
+    assert flown.metadata() == {"preset": "cpu", "action_steps": 8, "ensemble": None, "draws": 1, "pick": "mean",
+                                "noise_scale": 1.0, "timestep_spacing": "trailing",
+                                "inference_steps": PRESET.model.inference_steps, "image_codec": True}
+    assert flown.image_codec and int(flown.policy.sampler_for(flown.sampling).timesteps[0]) == 99
+    reference = make_diffusion_pilot(None, run=str(run.path), preset="reference")
+    assert reference.metadata()["timestep_spacing"] == "leading" and reference.metadata()["preset"] == "reference"
     with pytest.raises(ValueError, match="timestep_spacing"):
         make_diffusion_pilot(None, run=str(run.path), timestep_spacing="middle")
     with pytest.raises(ValueError, match="noise_scale=cold"):
         make_diffusion_pilot(None, run=str(run.path), noise_scale="cold")
+    with pytest.raises(ValueError, match="unknown policy flight preset 'fast'"):
+        make_diffusion_pilot(None, run=str(run.path), preset="fast")
+    with pytest.raises(ValueError, match="unknown policy setting 'samples'"):
+        make_diffusion_pilot(None, run=str(run.path), samples="8")
+
+
+def test_orbitdata_fly_hands_a_policy_its_camera_through_the_codec(policy, tmp_path):
+    """`orbitdata fly --pilot diffusion` flies the flight preset's codec without --image-codec
+    (the cpu preset sees the camera as the dataset stored it); `reference --set`-style options
+    that turn it off fly raw renders."""
+    from orbitdata.cli.app import app as orbitdata_app
+    from typer.testing import CliRunner
+
+    run = save_policy_run(policy, tmp_path / "run")
+    grid = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--image-size", "64", "--config"]
+    toml = tmp_path / "short.toml"
+    toml.write_text("[sim]\nmax_steps = 4\n")
+    for options, codec in (([], True), (["--pilot-option", "image_codec=false"], False)):
+        out = tmp_path / f"fly-{codec}.json"
+        res = CliRunner().invoke(orbitdata_app, ["fly", "--pilot", "diffusion", "--pilot-option", f"run={run.path}",
+                                                 *options, *grid, str(toml), "--json", str(out)])
+        assert res.exit_code == 0, res.output
+        assert json.loads(out.read_text())["flight"]["image_codec"] is codec
+
+
+def test_sampling_never_changes_the_policy(policy):
+    """Flying a flight preset leaves the policy as it was: its config and its own sampler stay the
+    run's, and a second pilot on the same policy samples its own way."""
+    config, own = policy.config, policy.sampler.timesteps.tolist()
+    trailing = DiffusionPilot(policy, PolicySampling(timestep_spacing="trailing"))
+    leading = DiffusionPilot(policy, PolicySampling(timestep_spacing="leading"))
+    assert policy.config == config and policy.sampler.timesteps.tolist() == own
+    assert int(policy.sampler_for(trailing.sampling).timesteps[0]) == config.train_timesteps - 1
+    assert policy.sampler_for(leading.sampling).timesteps.tolist() == own  # the tiny preset's run samples leading
 
 
 def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
@@ -240,45 +281,46 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert [e["frames"] for e in report["episodes"]] == [4]
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--pilot", "oracle-true", *grid])
     assert res.exit_code == 2 and "flies as itself" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--samples", "8", *grid])
-    assert res.exit_code == 2 and "takes no planner settings" in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--action-steps", "2", "--ensemble", "0.1",
-                                   *grid, "--json", str(out)])
+    assert report["preset"] == "cpu" and report["image_codec"] is True  # the reported flight by default
+    assert report["pilot_settings"]["timestep_spacing"] == "trailing"
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "samples=8", *grid])
+    assert res.exit_code == 2 and "unknown policy setting 'samples'" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--preset", "paper", *grid])
+    assert res.exit_code == 2 and "flight presets are cpu, reference" in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "action_steps=2", "--set",
+                                   "ensemble=0.1", *grid, "--json", str(out)])
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
-    assert report["pilot_settings"] == {"action_steps": 2, "ensemble": 0.1, "draws": 1, "noise_scale": 1.0,
-                                        "pick": "mean", "timestep_spacing": "leading"}
+    assert report["pilot_settings"] == {"preset": "cpu", "action_steps": 2, "ensemble": 0.1, "draws": 1,
+                                        "pick": "mean", "noise_scale": 1.0, "timestep_spacing": "trailing",
+                                        "inference_steps": PRESET.model.inference_steps, "image_codec": True}
     assert report["threads"] >= 1
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--draws", "2", "--pick", "central", *grid,
-                                   "--json", str(out)])
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "draws=2", "--set", "pick=central",
+                                   *grid, "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert json.loads(out.read_text())["pilot_settings"]["draws"] == 2
     assert json.loads(out.read_text())["episodes"][0]["pick"] == "central"
-    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--draws", "2", *grid])
-    assert res.exit_code == 2 and "--draws" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--pick", "central", *grid])
-    assert res.exit_code == 2 and "--pick" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--timestep-spacing", "trailing", *grid,
+    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--set", "draws=2", *grid])
+    assert res.exit_code == 2 and "unknown planner option 'draws'" in res.output and "Traceback" not in res.output
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--preset", "reference", *grid,
                                    "--json", str(out)])
-    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["timestep_spacing"] == "trailing"
-    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--timestep-spacing", "trailing",
-                                   *grid])
-    assert res.exit_code == 2 and "--timestep-spacing" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--noise-scale", "0", *grid, "--json", str(out)])
+    assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["timestep_spacing"] == "leading"
+    assert json.loads(out.read_text())["preset"] == "reference"
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "noise_scale=0", *grid,
+                                   "--json", str(out)])
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--noise-scale", "0", *grid])
-    assert res.exit_code == 2 and "--noise-scale" in res.output and "Traceback" not in res.output
-    # a policy without the camera flies without rendering, so the camera's codec is refused for it
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "noise_scale=-1", *grid])
+    assert res.exit_code == 2 and "noise_scale=-1" in res.output and "Traceback" not in res.output
+    # a policy without the camera flies without rendering: the flight preset's codec has nothing to encode
     from dataclasses import replace
 
     blind = replace(PRESET, model=replace(PRESET.model, images=False))
     torch.manual_seed(0)
     blind_run = save_policy_run(DiffusionPolicy(blind.model), tmp_path / "blind", blind)
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(blind_run.path), "--image-codec", *grid])
-    assert res.exit_code == 2 and "without the camera" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(blind_run.path), *grid])
+    res = CliRunner().invoke(app, ["eval", "closed-loop", str(blind_run.path), *grid, "--json", str(out)])
     assert res.exit_code == 0, res.output
+    assert json.loads(out.read_text())["image_codec"] is False
 
 
 class ChunkPolicy(torch.nn.Module):
@@ -290,9 +332,9 @@ class ChunkPolicy(torch.nn.Module):
         self.config, self.samples, self.noise_scales = PRESET.model, 0, []
         self.rows = rows  # the offset of each row of a batch (B,) or of each row and frame (B, H), when not 10 i
 
-    def sample_actions(self, images, states, goal, generator=None, use_ema=True, noise_scale=1.0):
+    def sample_actions(self, images, states, goal, generator=None, use_ema=True, sampling=None):
         c = self.config
-        self.noise_scales.append(noise_scale)
+        self.noise_scales.append(sampling.noise_scale)
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
         rows = (10 * torch.arange(len(states), dtype=torch.float32) if self.rows is None
@@ -308,36 +350,37 @@ def _fly_steps(pilot, steps: int) -> list[float]:
 
 
 def test_action_steps_and_temporal_ensembling_are_honoured():
-    chunked = DiffusionPilot(ChunkPolicy(), action_steps=3)
+    chunked = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=3))
     assert _fly_steps(chunked, 7) == [0, 1, 2, 100, 101, 102, 200] and chunked.policy.samples == 3
-    assert _fly_steps(DiffusionPilot(ChunkPolicy()), 9)[7:] == [7, 100]  # the config's 8 by default
-    ensembled = DiffusionPilot(ChunkPolicy(), action_steps=1, ensemble=0.5)
+    assert _fly_steps(DiffusionPilot(ChunkPolicy(), PolicySampling()), 9)[7:] == [7, 100]  # the config's 8 by default
+    ensembled = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=1, ensemble=0.5))
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"action_steps": 1, "ensemble": 0.5, "draws": 1, "noise_scale": 1.0, "pick": "mean",
-                                    "timestep_spacing": "leading"}
-    averaged = DiffusionPilot(ChunkPolicy(), action_steps=2, draws=3)  # rows 0, 10, 20 of one call: their mean
+    assert ensembled.metadata() == {"preset": None, "action_steps": 1, "ensemble": 0.5, "draws": 1, "pick": "mean",
+                                    "noise_scale": 1.0, "timestep_spacing": "leading",
+                                    "inference_steps": PRESET.model.inference_steps, "image_codec": False}
+    averaged = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=2, draws=3))  # rows 0, 10, 20 of one call: their mean
     assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
     assert averaged.metadata()["draws"] == 3
     with pytest.raises(ValueError, match="draws=0"):
-        DiffusionPilot(ChunkPolicy(), draws=0)
+        DiffusionPilot(ChunkPolicy(), PolicySampling(draws=0))
     # the central draw: the one nearest the draws' mean over the actions it executes (2 here: rows 0, 10 and
     # 40, mean 16.7, nearest 10), flown as drawn, though row 1 strays past them (1000 from frame t+2 on)
     rows = torch.tensor([0.0, 10.0, 40.0])[:, None].repeat(1, PRESET.model.horizon)
     rows[1, PRESET.model.action_start + 2:] = 1000.0
-    central = DiffusionPilot(ChunkPolicy(rows=rows), action_steps=2, draws=3, pick="central")
+    central = DiffusionPilot(ChunkPolicy(rows=rows), PolicySampling(action_steps=2, draws=3, pick="central"))
     assert _fly_steps(central, 3) == [10, 11, 110] and central.metadata()["pick"] == "central"
     with pytest.raises(ValueError, match="draws=N with N >= 2"):
-        DiffusionPilot(ChunkPolicy(), pick="central")
-    averaged = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), action_steps=2, draws=3)
+        DiffusionPilot(ChunkPolicy(), PolicySampling(pick="central"))
+    averaged = DiffusionPilot(ChunkPolicy(rows=(0.0, 10.0, 40.0)), PolicySampling(action_steps=2, draws=3))
     assert _fly_steps(averaged, 1)[0] == pytest.approx(50 / 3)
     with pytest.raises(ValueError, match="pick='median'"):
-        DiffusionPilot(ChunkPolicy(), draws=3, pick="median")
-    cooled = DiffusionPilot(ChunkPolicy(), action_steps=2, noise_scale=0.25)  # every chunk sampled at that scale
+        DiffusionPilot(ChunkPolicy(), PolicySampling(draws=3, pick="median"))
+    cooled = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=2, noise_scale=0.25))  # every chunk at that scale
     _fly_steps(cooled, 5)
     assert cooled.policy.noise_scales == [0.25] * 3 and cooled.metadata()["noise_scale"] == 0.25
     with pytest.raises(ValueError, match="noise_scale=-1"):
-        DiffusionPilot(ChunkPolicy(), noise_scale=-1)
+        DiffusionPilot(ChunkPolicy(), PolicySampling(noise_scale=-1))
     with pytest.raises(ValueError, match="action_steps=16"):
-        DiffusionPilot(ChunkPolicy(), action_steps=16)
+        DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=16))

@@ -10,6 +10,7 @@ import torch
 
 from orbitdata.state import make_state
 from orbitmodel.baselines.diffusion.config import PolicyConfig, get_policy_preset
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy, denoise, ema_decay, goal_in_body, make_schedulers
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
 
@@ -83,12 +84,17 @@ def test_timestep_spacing_decides_where_ddim_starts(config):
     images = torch.zeros(1, config.n_obs_steps, 3, config.image_size, config.image_size, dtype=torch.uint8)
     goal = torch.tensor([[3.0, 0.0, 0.0]])
     before = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0))
-    policy.set_sampler(timestep_spacing="trailing")
-    assert policy.config.timestep_spacing == "trailing" and int(policy.sampler.timesteps[0]) == config.train_timesteps - 1
-    after = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0))
+    trailing = PolicySampling(timestep_spacing="trailing")
+    assert int(policy.sampler_for(trailing).timesteps[0]) == config.train_timesteps - 1
+    after = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0), sampling=trailing)
     assert not torch.equal(before, after)
-    policy.set_sampler(inference_steps=2)
-    assert len(policy.sampler.timesteps) == 2 and policy.config.timestep_spacing == "trailing"
+    assert policy.config == config  # sampling another way never changes the policy
+    torch.testing.assert_close(policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0)), before,
+                               rtol=0, atol=0)
+    two = PolicySampling(timestep_spacing="trailing", inference_steps=2)
+    assert policy.sampler_for(two).timesteps.tolist() == [99, 49]
+    with pytest.raises(ValueError, match="inference_steps=101"):
+        policy.sample_actions(images, states, goal, sampling=PolicySampling(inference_steps=101))
 
 
 def test_ddpm_round_trip():

@@ -22,6 +22,7 @@ from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
 from orbitmodel.baselines.diffusion.expert_floor import expert_floor
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.sampling import PolicySampling, policy_sampling
 from orbitmodel.cli.app import app
 from orbitmodel.data import read_dataset_meta
 from orbitmodel.runs import RunError, load_weights
@@ -30,6 +31,7 @@ torch.set_num_threads(1)
 runner = CliRunner()
 STEPS = 4
 PRESET = get_policy_preset("tiny").with_train(max_steps=STEPS, save_every=2)
+REFERENCE = policy_sampling("reference")  # the reference's sampler: leading spacing, as the tiny run trained
 
 
 def request(dataset, out, **kw) -> T.PolicyRequest:
@@ -83,7 +85,7 @@ def test_resume_is_exact(trained, tiny_dataset_master, tmp_path):
            "--preset", "tiny", "--max-steps", str(STEPS), "--device", "cpu"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     # the CLI's tiny preset saves every 2 steps, as PRESET does
-    assert get_policy_preset("tiny").train.save_every == 2
+    assert get_policy_preset("tiny").train.loop.save_every == 2
     done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert done.returncode == -9, done.stderr[-2000:]
     assert not (out / "model.safetensors").exists()
@@ -99,7 +101,7 @@ def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny
     follows the longer schedule from there, and training.json records each segment's schedule."""
     import shutil
 
-    from orbitmodel.train.loop import LoopSettings, lr_at
+    from orbitmodel.train.loop import lr_at
 
     out = tmp_path / "run"
     shutil.copytree(trained[0], out)
@@ -108,10 +110,10 @@ def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny
     T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu",
                                    resume=True, extend=True), on_log=logs.append)
     assert [r["step"] for r in logs] == [STEPS + 1, STEPS + 2]
-    settings = LoopSettings.of(longer.train)
+    settings = longer.train.loop
     assert [r["lr"] for r in logs] == pytest.approx([lr_at(s, STEPS + 2, settings) for s in (STEPS, STEPS + 1)])
     config = json.loads((out / "config.json").read_text())
-    assert config["preset"]["train"]["max_steps"] == STEPS + 2
+    assert config["preset"]["train"]["loop"]["max_steps"] == STEPS + 2
     segments = json.loads((out / "training.json").read_text())["segments"]
     assert [(s["from_step"], s["to_step"], s["schedule_steps"]) for s in segments] == [
         (0, STEPS, STEPS), (STEPS, STEPS + 2, STEPS + 2)]
@@ -119,6 +121,28 @@ def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny
     assert any(not torch.equal(extended[k], ended[k]) for k in ended)  # trained on past the old end
     steps = [json.loads(l)["step"] for l in (out / "metrics.jsonl").read_text().splitlines()]
     assert steps == list(range(1, STEPS + 3))
+
+
+def test_a_policy_run_with_a_flat_training_config_reads_back_and_extends(trained, tiny_dataset_master, tmp_path):
+    """A config.json from before the loop settings were nested (runs on disk and on the Hub): the
+    same preset reads back, and --resume --extend trains it on and rewrites it nested."""
+    import shutil
+
+    from orbitmodel.baselines.diffusion.config import read_policy_run
+
+    out = tmp_path / "flat"
+    shutil.copytree(trained[0], out)
+    config = json.loads((out / "config.json").read_text())
+    train = config["preset"]["train"]
+    flat = {**{k: v for k, v in train.items() if k != "loop"}, **train["loop"]}
+    (out / "config.json").write_text(json.dumps({**config, "preset": {**config["preset"], "train": flat}}))
+    assert read_policy_run(out).preset == PRESET
+    longer = PRESET.with_train(max_steps=STEPS + 1)
+    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu",
+                                   resume=True, extend=True))
+    rewritten = json.loads((out / "config.json").read_text())["preset"]["train"]
+    assert rewritten == json.loads(json.dumps(longer.train.to_dict())) and rewritten["loop"]["max_steps"] == STEPS + 1
+    assert json.loads((out / "training.json").read_text())["segments"][-1]["to_step"] == STEPS + 1
 
 
 def test_extend_refuses_what_is_not_a_longer_run(trained, tiny_dataset_master, tmp_path):
@@ -232,10 +256,10 @@ def test_job_inputs(tiny_dataset_master):
 
 def test_evaluate(trained, tiny_dataset_master):
     out, _ = trained
-    result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    result = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=REFERENCE)
     assert result.windows > 0 and result.frames > 0
     assert np.isfinite(result.policy) and result.mean_action > 0
-    again = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    again = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=REFERENCE)
     assert again == result  # seeded sampling
     # the same frames, split by executed index and by distance to the goal: the parts add up to the whole
     for parts in (result.per_index, result.per_band):
@@ -246,56 +270,60 @@ def test_evaluate(trained, tiny_dataset_master):
     assert [(r["from_m"], r["to_m"]) for r in result.per_band] == [(0, 1), (1, 2), (2, 4), (4, 8), (8, None)]
     # several draws: the first is the one scored alone; over the draws, a draw's error is the error of
     # their mean plus (N-1)/N of their variance, in every band
-    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3)
-    assert three.policy == result.policy and three.per_band[0]["policy"] == result.per_band[0]["policy"]
+    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=replace(REFERENCE, draws=3))
+    assert three.samples == 3 and three.policy == result.policy and three.per_band[0]["policy"] == result.per_band[0]["policy"]
     for r in three.per_band + three.per_index:
         if r["frames"]:
             assert r["draws"] == pytest.approx(r["sample_mean"] + 2 / 3 * r["variance"], rel=1e-5)
             assert r["variance"] > 0
     assert three.draws == pytest.approx(three.sample_mean + 2 / 3 * three.variance, rel=1e-5)
     # draws started from zero noise are one deterministic chunk: no variance, whatever the seed
-    still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3, noise_scale=0.0)
+    still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8,
+                            sampling=replace(REFERENCE, draws=3, noise_scale=0.0))
     assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
     assert still.central == pytest.approx(still.policy, rel=1e-6)  # every draw is central when all are one chunk
-    # another DDIM spacing or step count than the run's: recorded, and sampled with
-    trailing = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, timestep_spacing="trailing")
-    assert (result.timestep_spacing, trailing.timestep_spacing) == ("leading", "trailing")
+    # the default is the reported flight preset (cpu: trailing spacing), recorded and sampled with
+    trailing = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
+    assert (result.timestep_spacing, trailing.timestep_spacing, trailing.preset) == ("leading", "trailing", "cpu")
     assert trailing.policy != result.policy and trailing.frames == result.frames
-    assert evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, inference_steps=2).inference_steps == 2
+    two = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=PolicySampling(inference_steps=2))
+    assert two.inference_steps == 2
     assert three.central is not None and all(r["central_ratio"] is not None for r in three.per_band if r["frames"])
     assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
-                                           noise_scale=0.0).policy
-    for bad in ("inf", "-1"):
-        cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--noise-scale", bad])
-        assert cli.exit_code == 2 and "Traceback" not in cli.output, cli.output
+                                           sampling=replace(REFERENCE, noise_scale=0.0)).policy
+    for bad in ("inf", "-1", "cold"):
+        cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--set", f"noise_scale={bad}"])
+        assert cli.exit_code == 2 and "noise_scale" in cli.output and "Traceback" not in cli.output, cli.output
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
-                              "--device", "cpu", "--max-windows", "3", "--noise-scale", "0.5"])
+                              "--device", "cpu", "--max-windows", "3", "--set", "noise_scale=0.5"])
     assert cli.exit_code == 0, cli.output
     reported = json.loads(cli.stdout.strip().splitlines()[-1])
-    assert reported["windows"] == 3 and reported["noise_scale"] == 0.5
+    assert reported["windows"] == 3 and reported["noise_scale"] == 0.5 and reported["preset"] == "cpu"
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
-                              "--device", "cpu", "--max-windows", "3", "--timestep-spacing", "trailing",
-                              "--inference-steps", "2"])
+                              "--device", "cpu", "--max-windows", "3", "--preset", "reference",
+                              "--set", "inference_steps=2", "--set", "draws=2"])
     assert cli.exit_code == 0, cli.output
     reported = json.loads(cli.stdout.strip().splitlines()[-1])
-    assert (reported["timestep_spacing"], reported["inference_steps"]) == ("trailing", 2)
+    assert (reported["timestep_spacing"], reported["inference_steps"], reported["samples"]) == ("leading", 2, 2)
+    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--preset", "paper"])
+    assert cli.exit_code == 2 and "unknown policy flight preset 'paper'" in cli.output
     cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--device", "cpu"])
     assert cli.exit_code == 0 and "by executed index" in cli.output and "t+7" in cli.output and ">= 8 m" in cli.output
 
 
 def test_the_central_draw_is_scored_as_drawn(trained, tiny_dataset_master, monkeypatch):
-    """--samples 3 with draws that are constant chunks 0, 0.3 and 1 (in that order, every window):
+    """--set draws=3 with draws that are constant chunks 0, 0.3 and 1 (in that order, every window):
     the central draw, nearest their mean 0.43, is the 0.3 chunk, scored as a policy that always says 0.3."""
     out, _ = trained
     values, calls = [], []
 
-    def constant(self, images, states, goal, generator=None, use_ema=True, obstacles=None, noise_scale=1.0):
+    def constant(self, images, states, goal, generator=None, use_ema=True, obstacles=None, sampling=None):
         calls.append(values[len(calls) % len(values)])
         return torch.full((len(states), self.config.horizon, self.config.action_dim), calls[-1])
 
     monkeypatch.setattr(DiffusionPolicy, "sample_actions", constant)
     values[:] = [0.0, 0.3, 1.0]
-    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, samples=3)
+    three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=PolicySampling(draws=3))
     values[:], calls[:] = [0.3], []
     fixed = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8)
     assert three.central == pytest.approx(fixed.policy, rel=1e-6) and three.central != three.policy
@@ -330,7 +358,7 @@ def test_expert_floor_scores_other_plans_where_the_policy_is_scored(trained, tin
     assert "tolerances" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master),
                                            "--position-m", "0"])
     assert "drop one" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master), "--no-policy",
-                                         "--timestep-spacing", "trailing"])
+                                         "--preset", "cpu"])
 
 
 def one_line_error(args) -> str:

@@ -1,7 +1,7 @@
 """orbitmodel's layers import one way (``shared/DESIGN.md``, "Layers of orbitmodel"):
 
-    config, data, extras, kinematics  <-  runs  <-  model  <-  train  <-  probe | baselines  <-  plan
-    <-  evaluate  <-  publish  <-  cli  <-  the package's lazy facade (orbitmodel/__init__.py)
+    loop_settings  <-  config, data, extras, kinematics  <-  runs  <-  model  <-  train  <-  probe | baselines
+    <-  plan  <-  evaluate  <-  publish  <-  cli  <-  the package's lazy facade (orbitmodel/__init__.py)
 
 A module may import its own unit and any unit below it, never one above or beside it (probe and
 baselines are siblings). Every import counts: top-level, inside functions (lazy), and module
@@ -18,8 +18,8 @@ import orbitdata
 import orbitmodel
 
 ROOT = Path(orbitmodel.__file__).parent
-RANK = {"config": 0, "data": 0, "extras": 0, "kinematics": 0, "runs": 1, "model": 2, "train": 3, "probe": 4,
-        "baselines": 4, "plan": 5, "evaluate": 6, "publish": 7, "cli": 8, "__init__": 9}
+RANK = {"loop_settings": 0, "config": 1, "data": 1, "extras": 1, "kinematics": 1, "runs": 2, "model": 3, "train": 4,
+        "probe": 5, "baselines": 5, "plan": 6, "evaluate": 7, "publish": 8, "cli": 9, "__init__": 10}
 MODULE_PATH = re.compile(r"^orbitmodel(\.\w+)+$")
 
 

@@ -49,7 +49,7 @@ def test_a_colliding_seed_is_refused():
 
 def test_a_tiny_closed_loop_episode_runs_end_to_end(probed_run, tmp_path):
     req = ClosedLoopRequest(variant=Variant.PLANNER, run=probed_run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            planner=planner_config(samples=8, horizon=5), max_steps=6, video_dir=tmp_path / "video",
+                            settings=planner_config("paper", samples=8, horizon=5), max_steps=6, video_dir=tmp_path / "video",
                             video_format=".gif")
     result = fly_closed_loop(req)
     report = closed_loop_report(req, result)
@@ -85,13 +85,15 @@ def test_the_planner_flies_through_orbitdatas_registry(probed_run):
 def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path):
     out = tmp_path / "planner.json"
     res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
-                              "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--samples", "8",
-                              "--horizon", "5", "--max-steps", "4", "--support", "3", "--set", "margin_per_speed=0.15",
-                              "--set", "temperature=0.5", "--json", str(out)])
+                              "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--set", "samples=8",
+                              "--set", "horizon=5", "--max-steps", "4", "--set", "support=3",
+                              "--set", "margin_per_speed=0.15", "--set", "temperature=0.5", "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
     report = json.loads(out.read_text())
+    assert report["preset"] == report["planner_preset"] == "cpu"  # the preset that suits a CPU, by default
     assert report["planner"]["support"] == 3 and report["planner"]["mppi"]["samples"] == 8
+    assert report["planner"]["history"] == 2 and report["image_codec"] is False  # the rest is the cpu preset's
     assert report["planner"]["cost"]["margin_per_speed"] == 0.15 and report["planner"]["mppi"]["temperature"] == 0.5
     assert [(s["obstacles"], s["speed"]) for s in report["settings"]] == [(1, 1.0), (1, 2.0)]
     # Each episode was streamed as it landed; a grid stopped early is read back from that stream.
@@ -125,7 +127,7 @@ def one_line_error(res) -> str:
 
 
 def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
-    base = ["eval", "closed-loop", "--episodes", "1", "--samples", "8", "--horizon", "5", "--max-steps", "3"]
+    base = ["eval", "closed-loop", "--episodes", "1", "--set", "samples=8", "--set", "horizon=5", "--max-steps", "3"]
     assert "no physics probe" in one_line_error(runner.invoke(app, base + [str(tiny_run)]))
     assert "give the run folder" in one_line_error(runner.invoke(app, base))
     assert "comma-separated" in one_line_error(runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", ","]))
@@ -135,15 +137,20 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert "64 px" in one_line_error(runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth",
                                                                "--config", str(toml)]))
     assert "not an orbitmodel run" in one_line_error(runner.invoke(app, base + [str(tmp_path)]))
+    # a run's config.json given for the run: named as a file, with the folder to give instead
+    line = one_line_error(runner.invoke(app, base + [str(tiny_run / "config.json")]))
+    assert "is a file, not a run folder" in line and f"({tiny_run})" in line
     rigid = base + ["--pilot", "oracle-true"]
     assert "KEY=VALUE" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency"]))
     assert "unknown planner option 'urgncy'" in one_line_error(runner.invoke(app, rigid + ["--set", "urgncy=1"]))
     assert "urgency='high': give a float" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency=high"]))
+    assert "true or false" in one_line_error(runner.invoke(app, rigid + ["--set", "image_codec=maybe"]))
+    assert "presets are paper, cpu" in one_line_error(runner.invoke(app, rigid + ["--preset", "reference"]))
 
 
 def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
     common = ["eval", "closed-loop", "--pilot", "oracle-true", "--obstacles", "1", "--episodes", "1",
-              "--samples", "8", "--horizon", "5", "--max-steps", "4"]
+              "--set", "samples=8", "--set", "horizon=5", "--max-steps", "4"]
     for name, speeds in (("whole", "1,2"), ("v1", "1"), ("v2", "2")):
         res = runner.invoke(app, [*common, "--speeds", speeds, "--json", str(tmp_path / f"{name}.json")])
         assert res.exit_code == 0, res.output
@@ -190,11 +197,24 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
     curves = json.loads((tmp_path / "rollout" / "rollout.json").read_text())
     assert curves["frame_step"] == 2 and len(curves["nmse"]) == 3  # 3 steps of 2 frames
     req = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            planner=planner_config(samples=8, horizon=6), max_steps=6)
+                            settings=planner_config("paper", samples=8, horizon=6), max_steps=6)
     report = closed_loop_report(req, fly_closed_loop(req))
     (episode,) = report["episodes"]
     assert episode["replans"] == episode["frames"] - 1 and episode["nonfinite_actions"] == 0
     bad = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            planner=planner_config(samples=8, horizon=5), max_steps=6)
+                            settings=planner_config("paper", samples=8, horizon=5), max_steps=6)
     with pytest.raises(RunError, match="multiple of 2"):
         fly_closed_loop(bad)
+
+
+def test_the_default_planner_preset_suits_the_machine(monkeypatch):
+    """Without --preset a CPU flies the cpu preset (K 32) and a CUDA machine the paper's (K 256)."""
+    from orbitmodel.evaluate.closed_loop import pilot_settings
+    from orbitmodel.plan.config import default_planner_preset
+
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+    settings, preset = pilot_settings(None)
+    assert (preset, settings.mppi.samples, default_planner_preset()) == ("cpu", 32, "cpu")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    settings, preset = pilot_settings(None, samples="64")
+    assert (preset, settings.mppi.samples) == ("paper", 64)

@@ -6,7 +6,8 @@ import json
 
 import pytest
 
-from orbitmodel.config import PRESETS, Preset, ProbeRecipe, get_preset
+from orbitmodel.baselines.diffusion.config import POLICY_PRESETS, PolicyPreset, PolicyTrainConfig, get_policy_preset
+from orbitmodel.config import PRESETS, Preset, ProbeRecipe, ProbeTrainConfig, TrainConfig, get_preset
 from orbitmodel.plan.config import PLANNER_PRESETS, planner_config
 
 
@@ -14,7 +15,8 @@ def test_each_preset_carries_its_probe_recipe():
     assert (get_preset("paper").probe.inputs, get_preset("paper").probe.integrator) == ("latent", "upstream")
     assert get_preset("paper").probe == ProbeRecipe()  # upstream's recipe, written once
     cpu = get_preset("cpu").probe
-    assert (cpu.inputs, cpu.integrator, cpu.train.weights[-1], cpu.train.epochs) == ("latent+change", "coasting", 100.0, 60)
+    assert (cpu.inputs, cpu.integrator, cpu.train.weights[-1], cpu.train.loop.epochs) == ("latent+change", "coasting",
+                                                                                          100.0, 60)
 
 
 def test_the_flown_preset_is_the_cpu_preset_stepping_five_frames():
@@ -31,7 +33,7 @@ def test_the_flown_preset_is_the_cpu_preset_stepping_five_frames():
 def test_a_custom_preset_keeps_its_recipe_through_the_run_config():
     mine = dataclasses.replace(get_preset("cpu"), name="mine", probe=get_preset("cpu").probe.with_changes(epochs=7))
     back = Preset.from_dict(json.loads(json.dumps(mine.to_dict())))
-    assert back == mine and back.probe.train.epochs == 7
+    assert back == mine and back.probe.train.loop.epochs == 7
 
 
 def test_a_run_config_from_before_recipes_gets_its_named_presets_recipe():
@@ -57,3 +59,55 @@ def test_planner_presets_and_their_overrides():
         planner_config("fast")
     with pytest.raises(ValueError, match="unknown planner option 'bogus'"):
         planner_config("cpu", bogus=1)
+
+
+def flat(train: dict) -> dict:
+    """A training config as config.json held it before the ``loop`` field: the loop's settings
+    beside the stage's own."""
+    return {**{k: v for k, v in train.items() if k != "loop"}, **train["loop"]}
+
+
+@pytest.mark.parametrize("name", list(PRESETS))
+def test_a_flat_stage1_config_from_before_the_loop_field_reads_as_the_nested_one(name):
+    nested = json.loads(json.dumps(get_preset(name).to_dict()))
+    assert set(nested["train"]["loop"]) >= {"lr", "epochs", "max_steps", "seed"}  # new runs write the nested shape
+    old = {**nested, "train": flat(nested["train"]),
+           "probe": {**nested["probe"], "train": flat(nested["probe"]["train"])}}
+    assert "loop" not in old["train"] and old["train"]["batch_size"] == nested["train"]["loop"]["batch_size"]
+    assert Preset.from_dict(old) == Preset.from_dict(nested) == get_preset(name)
+
+
+@pytest.mark.parametrize("name", list(POLICY_PRESETS))
+def test_a_flat_policy_config_from_before_the_loop_field_reads_as_the_nested_one(name):
+    nested = json.loads(json.dumps(get_policy_preset(name).to_dict()))
+    old = {**nested, "train": flat(nested["train"])}
+    assert PolicyPreset.from_dict(old) == PolicyPreset.from_dict(nested) == get_policy_preset(name)
+
+
+def test_a_config_with_the_loop_settings_in_both_places_is_refused():
+    train = get_preset("tiny").train.to_dict()
+    with pytest.raises(ValueError, match=r"both under 'loop' and beside it \(epochs\)"):
+        TrainConfig.from_dict({**train, "epochs": 3})
+
+
+@pytest.mark.parametrize("train", [TrainConfig(), ProbeTrainConfig(), PolicyTrainConfig()],
+                         ids=lambda t: type(t).__name__)
+def test_flat_names_route_into_the_loop_and_its_checks_hold_for_every_stage(train):
+    """``with_train(lr=...)``, ``--lr``: a loop setting by its own name lands in ``loop``, the
+    stage's own settings stay its own, and the loop's checks are the same in every stage."""
+    changed = train.with_changes(lr=0.5, max_steps=7, seed=None)  # None: an unset CLI option
+    assert (changed.loop.lr, changed.loop.max_steps, changed.loop.seed) == (0.5, 7, train.loop.seed)
+    assert changed.to_dict()["loop"]["lr"] == 0.5 and "lr" not in changed.to_dict() and not hasattr(changed, "lr")
+    assert type(changed).from_dict(json.loads(json.dumps(changed.to_dict()))) == changed
+    for bad, message in (({"epochs": 0}, "give epochs >= 1"), ({"max_steps": -1}, "max_steps >= 0"),
+                         ({"warmup": 1.0}, r"warmup=1.0 is a fraction"), ({"batch_size": 0}, "batch_size=0")):
+        with pytest.raises(ValueError, match=message):
+            train.with_changes(**bad)
+    with pytest.raises(TypeError):
+        train.with_changes(lrr=0.5)  # a misspelt setting is no silent no-op
+
+
+def test_stage1_keeps_its_own_batch_check():
+    with pytest.raises(ValueError, match="BatchNorm and SIGReg need at least 2 windows"):
+        get_preset("tiny").with_train(batch_size=1)
+    assert ProbeTrainConfig().with_changes(batch_size=1).loop.batch_size == 1  # the probe has no such need

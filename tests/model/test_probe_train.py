@@ -3,6 +3,7 @@ the Table I layout, and bad input gives one line and exit 2."""
 
 import json
 import shutil
+from dataclasses import replace
 
 import pytest
 import torch
@@ -18,8 +19,8 @@ from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.evaluate import PAPER, QUANTITIES, ROWS, TABLE_JSON, TABLE_MD
 from orbitmodel.probe.model import PhysicsProbe
 from orbitmodel.probe.train import LatentObjective, ProbeJob, ProbeRequest, load_stage1, train_probe
-from orbitmodel.runs import RunDir
-from orbitmodel.train.loop import LoopSettings, fit
+from orbitmodel.runs import RunDir, RunError
+from orbitmodel.train.loop import fit
 
 runner = CliRunner()
 
@@ -48,7 +49,7 @@ def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
                            columns=[S.IMAGE, S.STATE, S.ACTION])
     out = run / "probe"
     RunDir(out).start({"stage": "probe"}, resume=False, overwrite=False)
-    fit(ProbeJob(module, probe, "latent", t.context), windows, LoopSettings.of(t), RunDir(out), torch.device("cpu"))
+    fit(ProbeJob(module, probe, "latent", t.context), windows, t.loop, RunDir(out), torch.device("cpu"))
     assert not world_model.training and all(not p.requires_grad for p in world_model.parameters())
     after = world_model.state_dict()
     assert all(torch.equal(before[k], after[k]) for k in before)
@@ -147,6 +148,22 @@ def test_a_probe_run_from_before_per_frame_heads_resumes(run, tiny_dataset_maste
     train_probe(ProbeRequest(run=req.run, dataset=req.dataset, recipe=req.recipe, device="cpu", resume=True))
 
 
+def test_a_probe_run_with_a_flat_training_config_resumes_as_the_same_run(run, tiny_dataset_master):
+    """A probe config.json from before the loop settings were nested (its ``train`` flat) is the
+    same run: --resume continues it and rewrites it nested; another setting is still another run."""
+    train_probe(request(run, tiny_dataset_master, epochs=1))
+    path = run / "probe" / "config.json"
+    nested = json.loads(path.read_text())
+    train = nested["train"]
+    path.write_text(json.dumps({**nested, "train": {**{k: v for k, v in train.items() if k != "loop"},
+                                                    **train["loop"]}}))
+    (run / "probe" / "model.safetensors").unlink()
+    with pytest.raises(RunError, match=r"another config \(differs in: train\)"):
+        train_probe(replace(request(run, tiny_dataset_master, epochs=2), resume=True))
+    train_probe(replace(request(run, tiny_dataset_master, epochs=1), resume=True))
+    assert (run / "probe" / "model.safetensors").is_file() and json.loads(path.read_text()) == nested
+
+
 class Interrupt(Exception):
     pass
 
@@ -228,17 +245,18 @@ def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, ti
     config = json.loads((custom / "config.json").read_text())
     config["preset"]["name"] = "mine"
     config["preset"]["probe"].update(inputs="latent", integrator="upstream", hidden=24)
-    config["preset"]["probe"]["train"].update(epochs=1, weights=[1, 2, 3, 4, 5])
+    config["preset"]["probe"]["train"].update(weights=[1, 2, 3, 4, 5])
+    config["preset"]["probe"]["train"]["loop"].update(epochs=1)
     (custom / "config.json").write_text(json.dumps(config))
     res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu"])
     assert res.exit_code == 0, res.output
     probe = json.loads((custom / "probe" / "config.json").read_text())
     assert (probe["probe"]["inputs"], probe["probe"]["integrator"], probe["probe"]["hidden"]) == ("latent", "upstream", 24)
-    assert probe["train"]["epochs"] == 1 and probe["train"]["weights"] == [1, 2, 3, 4, 5]
+    assert probe["train"]["loop"]["epochs"] == 1 and probe["train"]["weights"] == [1, 2, 3, 4, 5]
     res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu", "--overwrite",
                               "--inputs", "latent+change", "--epochs", "2"])  # flags change single settings
     probe = json.loads((custom / "probe" / "config.json").read_text())
-    assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["epochs"] == 2
+    assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["loop"]["epochs"] == 2
 
 
 @pytest.mark.parametrize("frame_step", [1, 2])

@@ -18,8 +18,8 @@ from publish.hub_server import TOKEN
 
 runner = CliRunner()
 REPO = "tester/tiny-wm"
-GRID = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "4", "--samples", "8",
-        "--horizon", "5"]
+GRID = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "4", "--set", "samples=8",
+        "--set", "horizon=5"]
 
 
 @pytest.fixture(scope="module")
@@ -71,7 +71,7 @@ def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hu
     assert state_dicts_equal(local, hubbed) and hubbed.fingerprint == local.fingerprint
     assert state_dicts_equal(PhysicsProbe.from_pretrained(evaluated_run),
                              PhysicsProbe.from_pretrained(f"{REPO}@main", world_model=hubbed.fingerprint))
-    pilot = make_planner(_config(), run=REPO, planner="cpu", samples="8", horizon="5")
+    pilot = make_planner(_config(), run=REPO, preset="cpu", samples="8", horizon="5")
     assert pilot.name == "planner" and pilot.config.history == 2
 
     res = runner.invoke(app, ["eval", "closed-loop", REPO, *GRID])  # flown from the repo id
@@ -171,3 +171,84 @@ def test_a_policy_run_round_trips(hub_client, tmp_path):
     assert state_dicts_equal(DiffusionPolicy.from_pretrained("tester/tiny-dp"), policy)
     card = hub_client.files("tester/tiny-dp", kind="models")["README.md"].decode()
     assert "Diffusion Policy" in card and "No closed-loop results" in card
+
+
+@pytest.mark.parametrize("repo", ["not a repo id!", "a/b/c", "name-only", "tester/tiny@v1"])
+@pytest.mark.parametrize("dry_run", [True, False], ids=["dry-run", "push"])
+def test_a_repo_id_that_cannot_exist_is_refused_at_once(evaluated_run, hub_client, repo, dry_run):
+    res = runner.invoke(app, ["push", str(evaluated_run), repo, *(["--dry-run"] if dry_run else [])])
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert res.exit_code == 2 and len(lines) == 1, res.output
+    assert lines[0].startswith(f"error: REPO_ID {repo!r}") and "owner/name" in lines[0]
+    assert ("--branch" in lines[0]) == ("@" in repo)
+    assert not hub_client.state.requests  # refused before any token or network
+
+
+def test_a_dataset_id_that_cannot_exist_names_its_flag(evaluated_run, hub_client):
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO, "--dry-run", "--dataset", "a/b/c"])
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert res.exit_code == 2 and len(lines) == 1 and lines[0].startswith("error: --dataset: 'a/b/c'"), res.output
+
+
+def reproduce_lines(card: str) -> list[str]:
+    """The commands of the card's "Reproduce" block."""
+    block = card.split("## Reproduce", 1)[1].split("```bash\n", 1)[1].split("```", 1)[0]
+    return block.strip().splitlines()
+
+
+def test_the_cards_reproduce_commands_give_the_runs_config(evaluated_run, hub_client, tiny_dataset_master,
+                                                           tmp_path):
+    """The tiny run trained with --max-steps 2, which its preset does not: the card's train command
+    says so, and running it writes the run's config.json again."""
+    res = runner.invoke(app, ["push", str(evaluated_run), REPO, "--dry-run"])
+    assert res.exit_code == 0, res.output
+    lines = reproduce_lines(res.output)
+    train = next(line for line in lines if line.startswith("orbitmodel train "))
+    assert "--max-steps 2" in train and "#" not in train, train
+    assert "orbitmodel probe RUN DATA" in lines  # the probe trained with its run's recipe: no flags
+    out = tmp_path / "again"
+    args = train.replace("DATA", str(tiny_dataset_master)).replace("RUN", str(out)).split()[1:]
+    res = runner.invoke(app, [*args, "--device", "cpu"])
+    assert res.exit_code == 0, res.output
+    assert json.loads((out / "config.json").read_text()) == json.loads((evaluated_run / "config.json").read_text())
+
+
+def test_the_reproduce_commands_flag_each_changed_setting_and_name_the_rest(evaluated_run):
+    """A probe trained with other settings than its run's recipe, and a depth refit with others
+    than the defaults: each becomes its flag; one that no flag sets is named after the command."""
+    from dataclasses import asdict
+
+    from orbitmodel.plan.depth_refit import DepthRefitConfig
+    from orbitmodel.publish.reproduce import depth_command, probe_command
+
+    raw = json.loads((evaluated_run / "config.json").read_text())
+    probe = json.loads((evaluated_run / "probe" / "config.json").read_text())
+    probe["probe"]["integrator"] = "upstream"
+    probe["train"].update(cache_windows=16, weights=[1, 1, 1, 1, 0.5])
+    probe["train"]["loop"].update(epochs=5, lr=0.0025, warmup=0.3)
+    assert probe_command(raw, probe, "latent") == (
+        "orbitmodel probe RUN DATA --integrator upstream --epochs 5 --lr 0.0025 --loss-weights 1,1,1,1,0.5 "
+        "--cache-windows 16   # no flag sets train.loop.warmup=0.3 (config.json records every setting)")
+    refit = {**asdict(DepthRefitConfig()), "frames": 64, "near_weight": 10.0, "eval_split": "val", "batch_size": 32}
+    assert depth_command({"refit": refit}) == (
+        "orbitmodel depth RUN DATA --frames 64 --near-weight 10 --eval-split val   # no flag sets batch_size=32 "
+        "(config.json records every setting)")
+
+
+def test_a_policy_cards_reproduce_command_gives_the_runs_preset(hub_client, tiny_dataset_master, tmp_path):
+    from orbitmodel.baselines.diffusion import DiffusionPolicy
+    from test_diffusion_pilot import PRESET, save_policy_run
+
+    preset = PRESET.with_train(max_steps=3, lr=0.002, mask_padding=False, num_workers=0)
+    torch.manual_seed(0)
+    run = save_policy_run(DiffusionPolicy(preset.model).eval(), tmp_path / "dp", preset).path
+    res = runner.invoke(app, ["push", str(run), "tester/tiny-dp", "--dry-run"])
+    assert res.exit_code == 0, res.output
+    [command] = reproduce_lines(res.output)
+    assert command == "orbitmodel train-policy DATA --preset tiny --out RUN --max-steps 3 --lr 0.002 --no-mask-padding"
+    out = tmp_path / "again"
+    res = runner.invoke(app, [*command.replace("DATA", str(tiny_dataset_master)).replace("RUN", str(out)).split()[1:],
+                              "--device", "cpu"])
+    assert res.exit_code == 0, res.output
+    again, pushed = (json.loads((folder / "config.json").read_text())["preset"] for folder in (out, run))
+    assert again == pushed

@@ -89,12 +89,13 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
                        ([seeds[0], {**seeds[1], "seed": None}], "root seed"),
                        ([{**seeds[0], "pilot_settings": {"timestep_spacing": "leading"}},
                          {**seeds[1], "pilot_settings": {"timestep_spacing": "trailing"}}], "one way of flying"),
-                       ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec")):
+                       ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec"),
+                       ([{**seeds[0], "preset": "cpu"}, {**seeds[1], "preset": "reference"}], "preset")):
         with pytest.raises(ValueError, match=match):
             pool_seeds(bad)
-    flown = [{**s, "pilot_settings": {"draws": 1}, "image_codec": True} for s in seeds]
-    assert {k: pool_seeds(flown)[k] for k in ("pilot_settings", "image_codec")} == {
-        "pilot_settings": {"draws": 1}, "image_codec": True}  # how the seeds were flown, carried into the pool
+    flown = [{**s, "preset": "cpu", "pilot_settings": {"draws": 1}, "image_codec": True} for s in seeds]
+    assert {k: pool_seeds(flown)[k] for k in ("preset", "pilot_settings", "image_codec")} == {
+        "preset": "cpu", "pilot_settings": {"draws": 1}, "image_codec": True}  # how the seeds flew, carried along
     for s in seeds:
         (tmp_path / f"seed{s['seed']}.json").write_text(json.dumps(s))
     res = CliRunner().invoke(app, ["eval", "pool", *(str(tmp_path / f"seed{k}.json") for k in (3, 4, 5)),

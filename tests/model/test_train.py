@@ -225,3 +225,31 @@ def test_a_run_from_before_presets_carried_their_probe_recipe_resumes(tiny_datas
     assert (out / "model.safetensors").is_file()
     upgraded = json.loads((out / "config.json").read_text())["preset"]
     assert "probe" in upgraded and Preset.from_dict(upgraded).probe == get_preset("tiny").probe
+
+
+def flat(train: dict) -> dict:
+    """A training config as config.json held it before the ``loop`` field: the loop's settings
+    beside the stage's own."""
+    return {**{k: v for k, v in train.items() if k != "loop"}, **train["loop"]}
+
+
+def test_a_run_with_flat_training_configs_reads_back_and_resumes(tiny_dataset_master, tmp_path):
+    """A config.json written before the loop settings were nested (runs on disk and on the Hub):
+    it reads as the same run, --resume continues it, and it is rewritten in the nested shape."""
+    from orbitmodel.runs import read_run_config
+
+    out = tmp_path / "flat"
+    _train(tiny_dataset_master, out, steps=2, save_every=1)
+    nested = json.loads((out / "config.json").read_text())
+    old = json.loads(json.dumps(nested))
+    old["preset"]["train"] = flat(old["preset"]["train"])
+    old["preset"]["probe"]["train"] = flat(old["preset"]["probe"]["train"])
+    assert old["preset"]["train"]["max_steps"] == 2 and "loop" not in old["preset"]["probe"]["train"]
+    (out / "config.json").write_text(json.dumps(old))
+    preset = get_preset("tiny").with_train(max_steps=2, save_every=1)
+    assert read_run_config(out).preset == preset
+    (out / "model.safetensors").unlink()
+    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu",
+                                    resume=True))
+    assert (out / "model.safetensors").is_file()
+    assert json.loads((out / "config.json").read_text()) == nested

@@ -5,7 +5,8 @@
     orbitmodel eval expert-floor RUN DATASET    # other RRT* plans of the expert on the same windows
     pilot = load_policy_pilot(RUN)              # an orbitdata pilot: reset(task), act(obs)
 
-Modules: ``config`` (presets), ``unet`` (ConditionalUnet1D, FiLM), ``encoder`` (observations),
+Modules: ``config`` (presets), ``sampling`` (how a run is sampled and flown: PolicySampling and the
+flight presets), ``unet (ConditionalUnet1D, FiLM), ``encoder`` (observations),
 ``policy`` (DDPM training, DDIM sampling, EMA), ``train``, ``pilot``, ``evaluate``,
 ``expert_floor`` (the expert against itself).
 Heavy imports (torch, diffusers) happen when a name is first used.
@@ -19,6 +20,7 @@ _EXPORTS = {
     "ConditionalUnet1D": "unet", "DiffusionPolicy": "policy",
     "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "config",
     "DiffusionPilot": "pilot", "load_policy_pilot": "pilot",
+    "PolicySampling": "sampling", "POLICY_FLIGHTS": "sampling", "policy_sampling": "sampling",
     "evaluate_policy": "evaluate", "ActionMSE": "evaluate",
     "ExpertFloor": "expert_floor",  # and expert_floor.expert_floor(RUN, DATASET)
 }

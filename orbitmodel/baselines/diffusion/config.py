@@ -15,14 +15,14 @@ from pathlib import Path
 from typing import Callable
 
 from orbitdata.schema import ACTION_DIM, STATE_DIM
-from orbitmodel.config import replace_given
+from orbitmodel.baselines.diffusion.sampling import TIMESTEP_SPACINGS
 from orbitmodel.data import DatasetMeta
+from orbitmodel.loop_settings import LoopSettings, StageTrainConfig
 from orbitmodel.runs import CONFIG, POLICY, HeldOut, RunDir, RunError
 
 GOAL_DIM = 3  # the goal in the body frame, metres
 FAMILY = "diffusion"  # config.json's "policy": the policy family of a policy run
 PREDICTION_TYPES = ("epsilon", "sample")
-TIMESTEP_SPACINGS = ("leading", "trailing")  # DDIM timestep spacings (PolicyConfig.timestep_spacing)
 
 
 @dataclass(frozen=True)
@@ -42,11 +42,13 @@ class PolicyConfig:
         step_embed: width of the diffusion-step embedding [diffusion_step_embed_dim].
         kernel_size: temporal kernel of the U-Net's convolutions [kernel_size].
         train_timesteps: DDPM noise levels in training [num_train_timesteps].
-        inference_steps: DDIM denoising steps when acting [num_inference_steps].
+        inference_steps: DDIM denoising steps when acting [num_inference_steps], unless the
+            flight's ``PolicySampling`` gives its own.
         timestep_spacing: which of the training noise levels DDIM visits (``diffusers``' option):
             "leading" (the reference's, its default: 10 of 100 steps visit 90, 80, .., 0, so the
             unit starting noise enters at level 90) or "trailing" (99, 89, .., 9: it enters at
-            the top level, where unit noise belongs). Sampling only: any run samples either way.
+            the top level, where unit noise belongs). Sampling only, and the run's default: a
+            flight preset (``sampling.POLICY_FLIGHTS``) names its own, so any run samples either way.
         beta_schedule: the noise schedule's name in ``diffusers`` [beta_schedule].
         clip_sample: clip the predicted clean sample to [-1, 1] at each step [clip_sample].
         prediction_type: what the U-Net predicts [prediction_type]: "epsilon" (the noise, the
@@ -117,23 +119,15 @@ class PolicyConfig:
 
 
 @dataclass(frozen=True)
-class PolicyTrainConfig:
+class PolicyTrainConfig(StageTrainConfig):
     """How the policy trains (reference: AdamW 1e-4, betas (0.95, 0.999), wd 1e-6, cosine
     with 500 warm-up steps, batch 64 for images, EMA power 0.75 up to 0.9999).
 
     Args:
         window_stride: frames between the starts of two training windows of an episode.
-        batch_size: windows per step (per process under DDP).
-        lr, min_lr, weight_decay, betas: AdamW; cosine decay from lr to min_lr.
-        epochs, max_steps: the run ends at whichever comes first (max_steps 0 = no bound).
-        warmup: linear warm-up, as a fraction of the run's steps.
-        grad_clip: global gradient-norm clip.
         ema_power, ema_max: EMA decay after k optimiser steps is min(ema_max, 1 - k^-power).
         shift: random-shift augmentation, pixels (pad by replication, crop back); 0 = none.
             The reference crops randomly (84 -> 76); at 64 px a +-4 px shift plays that role.
-        num_workers: DataLoader worker processes.
-        log_every, save_every: steps between metric lines and between checkpoints.
-        seed: data order, noise draws, augmentation and initialisation.
         val_fraction, val_seed: hold this seeded fraction of the train split's episodes (per
             level) out of training, for choices (``eval policy --split val``; 0: none).
         pad_before: per episode, this many extra windows that start before its first frame
@@ -141,29 +135,21 @@ class PolicyTrainConfig:
             reference's ``n_obs_steps - 1``; 0: none).
         mask_padding: the terminal frame and the padding past an episode's end add no loss
             (False: they are targets like any frame, as in runs made before this option).
+        loop: the training loop's settings (``loop_settings.LoopSettings``); its seed also draws
+            the noise and the augmentation.
     """
 
     window_stride: int = 1
-    batch_size: int = 64
-    lr: float = 1e-4
-    min_lr: float = 0.0
-    weight_decay: float = 1e-6
-    betas: tuple[float, float] = (0.95, 0.999)
-    epochs: int = 100
-    max_steps: int = 0
-    warmup: float = 0.05
-    grad_clip: float = 10.0
     ema_power: float = 0.75
     ema_max: float = 0.9999
     shift: int = 4
-    num_workers: int = 4
-    log_every: int = 10
-    save_every: int = 500
-    seed: int = 42
     val_fraction: float = 0.0
     val_seed: int = 0
     pad_before: int = 1
     mask_padding: bool = True
+    loop: LoopSettings = LoopSettings(batch_size=64, lr=1e-4, min_lr=0.0, weight_decay=1e-6, betas=(0.95, 0.999),
+                                      epochs=100, max_steps=0, warmup=0.05, grad_clip=10.0, num_workers=4,
+                                      log_every=10, save_every=500, seed=42)
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:
@@ -172,17 +158,10 @@ class PolicyTrainConfig:
             raise ValueError(f"pad_before={self.pad_before}: give 0 or more frames")
         if self.window_stride < 1:
             raise ValueError(f"window_stride={self.window_stride}: use 1 or more frames")
-        if self.batch_size < 1:
-            raise ValueError(f"batch_size={self.batch_size}: use at least 1 window per step")
-        if self.epochs < 1 or self.max_steps < 0:
-            raise ValueError(f"epochs={self.epochs}, max_steps={self.max_steps}: give epochs >= 1 and max_steps >= 0")
-        if not 0 <= self.warmup < 1:
-            raise ValueError(f"warmup={self.warmup} is a fraction of the run in [0, 1)")
         if not 0 <= self.ema_max < 1 or self.ema_power <= 0:
             raise ValueError(f"ema_max={self.ema_max}, ema_power={self.ema_power}: need 0 <= ema_max < 1, power > 0")
         if self.shift < 0:
             raise ValueError(f"shift={self.shift}: give a non-negative number of pixels")
-        object.__setattr__(self, "betas", tuple(self.betas))
 
 
 @dataclass(frozen=True)
@@ -199,14 +178,16 @@ class PolicyPreset:
 
     @classmethod
     def from_dict(cls, d: dict) -> "PolicyPreset":
+        """A preset as a run's config.json holds it (its training config nested or flat, see
+        ``StageTrainConfig.from_dict``)."""
         model = {k: tuple(v) if isinstance(v, list) else v for k, v in d["model"].items()}
-        train = {k: tuple(v) if isinstance(v, list) else v for k, v in d["train"].items()}
         return cls(name=d["name"], description=d["description"], model=PolicyConfig(**model),
-                   train=PolicyTrainConfig(**train))
+                   train=PolicyTrainConfig.from_dict(d["train"]))
 
     def with_train(self, **changes) -> "PolicyPreset":
-        """The preset with some training settings replaced (None values are ignored)."""
-        return replace(self, train=replace_given(self.train, **changes))
+        """The preset with some training settings replaced, the loop's by their own names
+        (``StageTrainConfig.with_changes``; None values are ignored)."""
+        return replace(self, train=self.train.with_changes(**changes))
 
 
 def _cpu() -> PolicyPreset:
@@ -215,8 +196,8 @@ def _cpu() -> PolicyPreset:
     # samples far from the data, biased by the clipped x0 estimates of the noisiest steps), so the
     # preset predicts the clean sample (the reference's other prediction_type) at a 3x higher
     # learning rate.
-    train = PolicyTrainConfig(batch_size=64, lr=3e-4, epochs=100, max_steps=16000, warmup=0.05, num_workers=0,
-                              log_every=20, save_every=250)
+    train = PolicyTrainConfig().with_changes(batch_size=64, lr=3e-4, epochs=100, max_steps=16000, warmup=0.05,
+                                             num_workers=0, log_every=20, save_every=250)
     return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
                         "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction",
                         PolicyConfig(prediction_type="sample"), train)
@@ -241,8 +222,8 @@ def _cpu_state_obstacles() -> PolicyPreset:
 def _tiny() -> PolicyPreset:
     model = PolicyConfig(cnn_channels=(8, 8, 8, 8), image_features=8, n_groups=4, down_dims=(8, 16),
                          step_embed=8, kernel_size=3, inference_steps=4)
-    train = PolicyTrainConfig(window_stride=4, batch_size=4, lr=1e-3, epochs=2, warmup=0.1, shift=2,
-                              num_workers=0, log_every=1, save_every=2, seed=0)
+    train = PolicyTrainConfig().with_changes(window_stride=4, batch_size=4, lr=1e-3, epochs=2, warmup=0.1, shift=2,
+                                             num_workers=0, log_every=1, save_every=2, seed=0)
     return PolicyPreset("tiny", "a tiny policy for tests", model, train)
 
 

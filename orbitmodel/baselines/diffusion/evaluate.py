@@ -9,7 +9,7 @@ Both are also given per executed index (t .. t+7) and per band of the distance t
 frame t. A policy that learnt something sits well below the baseline everywhere; flying it
 (``orbitmodel eval closed-loop``) is the real test.
 
-With ``samples`` N > 1 the policy samples each window N times (the first draw is the one scored
+With ``draws`` N > 1 (``--set draws=N``) the policy samples each window N times (the first draw is the one scored
 above, what a flight executes) and the error splits in two: a sample's MSE is the squared error
 of the policy's mean action plus the variance of its samples (``variance``, unbiased over the N
 draws), and the mean of the N samples (``sample_mean``) carries the first part and 1/N of the
@@ -37,6 +37,7 @@ from orbitdata.load.select import select_episodes
 from orbitdata.load.tables import load_episode_table, load_steps
 from orbitmodel.baselines.diffusion.config import read_policy_run
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.baselines.diffusion.sampling import DEFAULT_FLIGHT, PolicySampling, policy_sampling
 from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, episode_goals, episode_obstacles, policy_columns
 from orbitmodel.data import ValidationSplit, episode_filter, read_dataset_meta, split_selection, training_episodes
 from orbitmodel.kinematics import P
@@ -93,6 +94,7 @@ class ActionMSE:
     noise_scale: float = 1.0  # of the noise each draw starts from (1: as trained)
     inference_steps: int | None = None  # the DDIM steps it sampled with
     timestep_spacing: str | None = None  # ... and their spacing
+    preset: str | None = None  # the flight preset the sampling settings came from (None: given some other way)
     without_obstacles: bool = False  # a privileged policy told no obstacle (the knock-out)
     draws: float | None = None  # the MSE of a draw, averaged over the N draws (``policy`` is the first's)
     variance: float | None = None  # the policy's own variance: mean over frames of the N draws' unbiased variance
@@ -139,24 +141,26 @@ def scored_windows(dataset, config, held_out: ValidationSplit, split: str, level
 @torch.no_grad()
 def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
                     stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
-                    device: str = "cpu", use_ema: bool = True, samples: int = 1,
-                    without_obstacles: bool = False, noise_scale: float = 1.0, indices=None,
-                    inference_steps: int | None = None, timestep_spacing: str | None = None) -> ActionMSE:
+                    device: str = "cpu", use_ema: bool = True, sampling: PolicySampling | None = None,
+                    without_obstacles: bool = False, indices=None, preset: str | None = None) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
-    start; the first ``max_windows`` when > 0), against predicting the mean training action;
-    ``samples`` > 1 draws each window that many times and splits the error (module docstring).
-    ``without_obstacles``: a privileged policy is told no obstacle (every slot empty), a knock-out
-    of how much it relies on them. ``noise_scale``: the scale of the noise each draw starts from, as
-    the pilot's (:meth:`DiffusionPolicy.sample_actions`). ``indices``: score only these of the
+    start; the first ``max_windows`` when > 0), against predicting the mean training action.
+    ``sampling`` (default: the ``cpu`` flight preset; ``preset`` names it for the record) sets
+    the DDIM steps and spacing, the noise scale and the executed actions scored, as the pilot
+    flies them; with ``draws`` > 1 each window is drawn that many times and the error split
+    (module docstring). ``without_obstacles``: a privileged policy is told no obstacle (every
+    slot empty), a knock-out of how much it relies on them. ``indices``: score only these of the
     split's windows (positions in its window list, as ``expert_floor`` reports them) instead of
-    the first ``max_windows``. ``inference_steps``, ``timestep_spacing``: sample with these DDIM
-    settings instead of the run's (:meth:`DiffusionPolicy.set_sampler`)."""
-    if stride < 1 or batch_size < 1 or max_windows < 0 or samples < 1:
-        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}, samples={samples}: "
-                         "give stride, batch size and samples >= 1 and max_windows >= 0")
+    the first ``max_windows``."""
+    if sampling is None:
+        sampling, preset = policy_sampling(DEFAULT_FLIGHT), preset or DEFAULT_FLIGHT
+    samples = sampling.draws
+    if stride < 1 or batch_size < 1 or max_windows < 0:
+        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}: "
+                         "give stride and batch size >= 1 and max_windows >= 0")
     policy = DiffusionPolicy.from_pretrained(run, device)
-    policy.set_sampler(inference_steps, timestep_spacing)
     c = policy.config
+    sampling = sampling.resolved(c)
     if without_obstacles and not c.obstacles:
         raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
                          "privileged policy's (preset cpu-state-obstacles)")
@@ -179,9 +183,10 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
     seeds = [seed] + [int(np.random.SeedSequence([seed, k]).generate_state(1)[0]) for k in range(1, samples)]
     generators = [torch.Generator().manual_seed(k) for k in seeds]
-    executed = slice(c.action_start, c.action_start + c.n_action_steps)
+    steps = sampling.action_steps
+    executed = slice(c.action_start, c.action_start + steps)
     names = ("policy", "mean_action") + (("draws", "variance", "sample_mean", "central") if samples > 1 else ())
-    by_index, by_band = Errors(c.n_action_steps, names), Errors(len(GOAL_BANDS_M) + 1, names)
+    by_index, by_band = Errors(steps, names), Errors(len(GOAL_BANDS_M) + 1, names)
     To = c.n_obs_steps
     batches = [order[first:first + batch_size] for first in range(0, n, batch_size)]
     for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
@@ -189,7 +194,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         images = batch[S.IMAGE][:, :To] if c.images else None
         told = obstacles[batch[S.EPISODE_INDEX][:, 0]] if obstacles is not None else None
         draws = torch.stack([policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema, told,
-                                                   noise_scale).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
+                                                   sampling).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
         truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
         real = (~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])).numpy()  # (B, 8 steps)
         errors = {"policy": ((draws[0] - truth) ** 2).mean(-1), "mean_action": ((baseline - truth) ** 2).mean(-1)}
@@ -204,7 +209,7 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         errors = {k: v.numpy()[real] for k, v in errors.items()}  # (B, 8 steps) -> the real frames
         distance = (goal - batch[S.STATE][:, c.action_start, P]).norm(dim=-1).numpy()  # (B,) metres at frame t
         band = np.searchsorted(GOAL_BANDS_M, distance, side="right")  # (B,)
-        index = np.broadcast_to(np.arange(c.n_action_steps), real.shape)
+        index = np.broadcast_to(np.arange(steps), real.shape)
         by_index.add(index[real], **errors)
         by_band.add(np.broadcast_to(band[:, None], real.shape)[real], **errors)
     frames = int(by_index.frames.sum())
@@ -214,10 +219,11 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     several = samples > 1
     return ActionMSE(split=split, levels=tuple(levels), windows=n, frames=frames,
                      policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
-                     per_index=tuple(by_index.rows([{"index": k} for k in range(c.n_action_steps)])),
+                     per_index=tuple(by_index.rows([{"index": k} for k in range(steps)])),
                      per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
-                     samples=samples, noise_scale=noise_scale, without_obstacles=without_obstacles,
-                     inference_steps=c.inference_steps, timestep_spacing=c.timestep_spacing,
+                     samples=samples, noise_scale=sampling.noise_scale, without_obstacles=without_obstacles,
+                     inference_steps=sampling.inference_steps, timestep_spacing=sampling.timestep_spacing,
+                     preset=preset,
                      draws=by_index.total("draws") if several else None,
                      variance=by_index.total("variance") if several else None,
                      sample_mean=by_index.total("sample_mean") if several else None,

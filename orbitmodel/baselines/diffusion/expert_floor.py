@@ -35,6 +35,7 @@ from orbitdata.load.source import read_meta
 from orbitdata.load.tables import load_episode_table
 from orbitmodel.baselines.diffusion.config import read_policy_run
 from orbitmodel.baselines.diffusion.evaluate import GOAL_BANDS_M, Errors, mean_action, scored_windows
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS
 from orbitmodel.kinematics import P
 from orbitmodel.runs import resolve_run
@@ -111,19 +112,19 @@ def _chunk_errors(pilot, states: np.ndarray, truth: np.ndarray) -> np.ndarray:
 def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stride: int = 4, max_windows: int = 0,
                  plans: int = 64, position_m: float = 0.1, speed_mps: float = 0.1, angle_deg: float = 27.0,
                  with_policy: bool = True, seed: int = 0, device: str = "cpu",
-                 timestep_spacing: str | None = None) -> ExpertFloor:
+                 sampling: PolicySampling | None = None, preset: str | None = None) -> ExpertFloor:
     """Other experts' error on the windows ``eval policy`` scores for the policy in ``run`` (its
     window geometry, validation episodes and mean action; expert episodes only), with ``plans``
     other RRT* draws per episode and the tolerances of ``ExpertPilot.could_be_at`` (the defaults
     are about how far the expert strays from its own plan: docs/results.md); ``with_policy``: the
-    policy scored on the same windows beside them (its sampling noise from ``seed``, its DDIM
-    ``timestep_spacing`` the run's unless given)."""
+    policy scored on the same windows beside them (its sampling noise from ``seed``, sampled as
+    ``sampling`` says, by default the ``cpu`` flight preset; ``preset`` names it)."""
     if stride < 1 or max_windows < 0 or plans < 1:
         raise ValueError(f"stride={stride}, max_windows={max_windows}, plans={plans}: give stride and plans >= 1 and "
                          "max_windows >= 0")
-    if timestep_spacing is not None and not with_policy:
-        raise ValueError(f"timestep_spacing={timestep_spacing!r} samples the policy, which with_policy=False (--no-policy) "
-                         "does not score; drop one of them")
+    if sampling is not None and not with_policy:
+        raise ValueError("sampling settings sample the policy, which with_policy=False (--no-policy) does not score; "
+                         "drop one of them")
     if not (position_m > 0 and speed_mps > 0 and angle_deg > 0):
         raise ValueError(f"tolerances {position_m} m, {speed_mps} m/s, {angle_deg} deg: give positive ones")
     from orbitdata.sim.env import CubeSatEnv
@@ -184,7 +185,7 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
         from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
 
         policy = evaluate_policy(run, dataset, split=split, levels=levels, stride=stride, seed=seed, device=device,
-                                 indices=scored, timestep_spacing=timestep_spacing).to_dict()
+                                 indices=scored, sampling=sampling, preset=preset).to_dict()
     edges = (0.0, *GOAL_BANDS_M, None)
     quantiles = np.percentile(np.asarray(own_deviation).reshape(-1, 3), [50, 90], axis=0) if own_deviation else None
     spread = {name: ([float(q) for q in quantiles[:, k]] if quantiles is not None else None)

@@ -30,8 +30,8 @@ from torch import nn
 
 from orbitmodel.baselines.diffusion.config import PolicyConfig, read_policy_run
 from orbitmodel.baselines.diffusion.encoder import ObservationEncoder
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
-from orbitmodel.config import replace_given
 from orbitmodel.kinematics import P, body_to_world
 from orbitmodel.model.normalise import NormalisedStates
 from orbitmodel.runs import RunError, load_weights, resolve_run
@@ -43,17 +43,19 @@ def goal_in_body(states: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
     return (R.transpose(-1, -2) @ (goal - states[..., P])[..., None]).squeeze(-1)
 
 
-def make_schedulers(config: PolicyConfig):
-    """(DDPMScheduler for training, DDIMScheduler set to ``inference_steps`` for acting)."""
+def make_schedulers(config: PolicyConfig, sampling: PolicySampling | None = None):
+    """(DDPMScheduler for training, DDIMScheduler for acting with ``sampling``'s DDIM steps and
+    spacing, the run's own where it gives None)."""
     from diffusers import DDIMScheduler, DDPMScheduler
 
+    s = (sampling or PolicySampling()).resolved(config)
     ddpm = DDPMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
                          variance_type="fixed_small", clip_sample=config.clip_sample,
                          prediction_type=config.prediction_type)
     ddim = DDIMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
                          clip_sample=config.clip_sample, set_alpha_to_one=True, steps_offset=0,
-                         prediction_type=config.prediction_type, timestep_spacing=config.timestep_spacing)
-    ddim.set_timesteps(config.inference_steps)
+                         prediction_type=config.prediction_type, timestep_spacing=s.timestep_spacing)
+    ddim.set_timesteps(s.inference_steps)
     return ddpm, ddim
 
 
@@ -65,13 +67,6 @@ def denoise(scheduler, predict: Callable[[torch.Tensor, torch.Tensor], torch.Ten
         out = predict(sample, k.expand(len(sample)).to(sample.device))
         sample = scheduler.step(out, k, sample, generator=generator).prev_sample
     return sample
-
-
-def check_noise_scale(noise_scale: float) -> float:
-    """``noise_scale`` as a float, if it is a finite scale >= 0 (see :meth:`DiffusionPolicy.sample_actions`)."""
-    if not 0 <= float(noise_scale) < float("inf"):
-        raise ValueError(f"noise_scale={noise_scale}: give a finite scale >= 0 (1: sample as trained)")
-    return float(noise_scale)
 
 
 def ema_decay(step: int, power: float, max_decay: float) -> float:
@@ -103,12 +98,16 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         self.register_buffer("action_high", torch.ones(config.action_dim))
         self.register_buffer("goal_scale", torch.tensor(1.0))  # metres per unit of the goal input
         self.noise_scheduler, self.sampler = make_schedulers(config)
+        self._samplers: dict[tuple[str, int], object] = {}  # DDIM schedulers by (spacing, steps), built once
 
-    def set_sampler(self, inference_steps: int | None = None, timestep_spacing: str | None = None) -> None:
-        """Sample with other DDIM settings than the run's config (None: keep its own); training
-        does not depend on them, so any run samples either way."""
-        self.config = replace_given(self.config, inference_steps=inference_steps, timestep_spacing=timestep_spacing)
-        self.noise_scheduler, self.sampler = make_schedulers(self.config)
+    def sampler_for(self, sampling: PolicySampling | None = None):
+        """The DDIM scheduler that ``sampling`` asks for (None: the run's own). Training does not
+        depend on it, so any run samples either way; the policy itself is never changed."""
+        s = (sampling or PolicySampling()).resolved(self.config)
+        key = (s.timestep_spacing, s.inference_steps)
+        if key not in self._samplers:
+            self._samplers[key] = make_schedulers(self.config, s)[1]
+        return self._samplers[key]
 
     def set_normalisation(self, state_mean, state_std, action_low, action_high, goal_scale: float) -> None:
         """Take the dataset's statistics (meta/stats.json): state mean/std (16,), action min/max (8,),
@@ -190,24 +189,27 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
     @torch.no_grad()
     def sample_actions(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
                        generator: torch.Generator | None = None, use_ema: bool = True,
-                       obstacles: torch.Tensor | None = None, noise_scale: float = 1.0) -> torch.Tensor:
+                       obstacles: torch.Tensor | None = None, sampling: PolicySampling | None = None
+                       ) -> torch.Tensor:
         """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
         observations of frames t-To+1 .. t (see :meth:`condition`). Execute
-        ``[:, config.action_start : config.action_start + config.n_action_steps]``.
+        ``[:, config.action_start : config.action_start + action_steps]``.
 
-        ``noise_scale`` scales the initial noise that DDIM's deterministic reverse process starts
-        from: 1 samples as trained; below 1 the samples gather towards the chunk that the zero
-        noise gives (0: that one chunk for every draw). The generator advances alike whatever
-        the scale."""
-        noise_scale = check_noise_scale(noise_scale)
+        ``sampling`` (None: the run's own DDIM settings, noise as trained) chooses the DDIM steps
+        and spacing, and ``noise_scale``, which scales the initial noise that DDIM's deterministic
+        reverse process starts from: 1 samples as trained; below 1 the samples gather towards the
+        chunk that the zero noise gives (0: that one chunk for every draw). The generator
+        advances alike whatever the scale."""
+        sampling = sampling or PolicySampling()
+        sampler = self.sampler_for(sampling)
         net = self.ema if use_ema else self.net
         device = self.state_mean.device
         images = images.to(device) if images is not None else None
         obstacles = obstacles.to(device).float() if obstacles is not None else None
         cond = self.condition(net, images, states.to(device).float(), goal.to(device).float(), obstacles)
         c = self.config
-        x = noise_scale * torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
-        x = denoise(self.sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)
+        x = sampling.noise_scale * torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
+        x = denoise(sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)
         return self.unnormalise_actions(x)
 
     # ---- persistence ------------------------------------------------------------------------

@@ -34,7 +34,7 @@ from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.data import DatasetMeta, ValidationSplit, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.kinematics import P
 from orbitmodel.runs import POLICY, RunDir, RunError, check_image_size, run_config, upgrade_preset_config
-from orbitmodel.train.loop import FitResult, LoopSettings, fit, resolve_device, step_generator
+from orbitmodel.train.loop import FitResult, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad, always loaded; the goal comes
 # from the episodes table
@@ -117,10 +117,11 @@ class PolicyJob:
         images = None
         if self.preset.model.images:
             images = random_shift(batch[S.IMAGE][:, :To], t.shift,
-                                  step_generator(t.seed, step, STREAM_SHIFT, self.rank)).to(device)
+                                  step_generator(t.loop.seed, step, STREAM_SHIFT, self.rank)).to(device)
         goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
         inputs = {"images": images, "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
-                  "actions": batch[S.ACTION].to(device), "generator": step_generator(t.seed, step, STREAM_NOISE, self.rank)}
+                  "actions": batch[S.ACTION].to(device),
+                  "generator": step_generator(t.loop.seed, step, STREAM_NOISE, self.rank)}
         if self.preset.model.obstacles:
             inputs["obstacles"] = self.obstacles[batch[S.EPISODE_INDEX][:, 0]].to(device)
         if t.mask_padding:  # the terminal frame's and the padding's zero thrust are no action anyone took; they
@@ -229,7 +230,7 @@ def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
     """A fresh policy (initialised from the preset's seed) with the dataset's normalisation."""
     if preset.model.images:
         check_image_size(meta, preset.model.image_size, f"policy preset {preset.name!r}")
-    torch.manual_seed(preset.train.seed)  # initialisation
+    torch.manual_seed(preset.train.loop.seed)  # initialisation
     policy = DiffusionPolicy(preset.model)
     low, high = action_range(meta.source)
     policy.set_normalisation(meta.state_mean, meta.state_std, low, high, goal_scale(meta))
@@ -248,18 +249,19 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     windows = policy_windows(req.dataset, "train", req.preset,
                              training_episodes(req.dataset, req.levels, req.outcomes, held_out),
                              pad_before=t.pad_before)
-    if req.extend and t.max_steps:  # the loop stops at the run's epochs too: an extension must fit in them
+    loop = t.loop
+    if req.extend and loop.max_steps:  # the loop stops at the run's epochs too: an extension must fit in them
         world = int(os.environ.get("WORLD_SIZE", 1))
-        per_epoch = len(windows.sampler(seed=t.seed, drop_last=True, rank=0, world_size=world)) // t.batch_size
-        if per_epoch * t.epochs < t.max_steps:
-            raise RunError(f"--extend --max-steps {t.max_steps}: the run's {t.epochs} epochs end at step "
-                           f"{per_epoch * t.epochs}, and an extension changes only --max-steps; extend it to at most "
-                           f"{per_epoch * t.epochs}")
+        per_epoch = len(windows.sampler(seed=loop.seed, drop_last=True, rank=0, world_size=world)) // loop.batch_size
+        if per_epoch * loop.epochs < loop.max_steps:
+            raise RunError(f"--extend --max-steps {loop.max_steps}: the run's {loop.epochs} epochs end at step "
+                           f"{per_epoch * loop.epochs}, and an extension changes only --max-steps; extend it to at "
+                           f"most {per_epoch * loop.epochs}")
     if rank == 0:
         run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
                   overwrite=req.overwrite, upgrade=upgrade_config, extend=req.extend)
     goals = episode_goals(req.dataset, "train")
     slots = req.preset.model.obstacles
     obstacles = episode_obstacles(req.dataset, "train", slots) if slots else None
-    return fit(PolicyJob(policy, req.preset, goals, rank, obstacles), windows, LoopSettings.of(req.preset.train), run, device,
-               resume=req.resume, label="train-policy", on_log=on_log)
+    return fit(PolicyJob(policy, req.preset, goals, rank, obstacles), windows, loop, run, device, resume=req.resume,
+               label="train-policy", on_log=on_log)

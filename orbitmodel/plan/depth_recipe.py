@@ -1,0 +1,45 @@
+"""The depth-head refit's recipe (``orbitmodel depth``), and the planner's range, free of torch:
+the CLI shows the defaults without loading the model code (``plan.depth_refit`` fits it)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from orbitmodel.data import EVAL_SPLITS
+
+MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to plan around
+
+
+@dataclass(frozen=True)
+class DepthRefitConfig:
+    """The refit's recipe (``docs/planner.md`` gives the comparison it was chosen from; the fit
+    holds ``frames`` x patches x width float16 tokens in memory).
+
+    Args:
+        frames: random training frames whose patch tokens are encoded once (a dataset with fewer
+            training frames needs ``--frames``; the 3000-episode 64 px dataset has ~330,000).
+        test_frames: random frames of ``eval_split`` for the before/after comparison.
+        eval_split: "test" (to report) or "val": the run's validation episodes (to choose a recipe).
+        epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
+        near_weight: extra weight of a cell whose true depth is below ``near_m``.
+        near_m: metres; the planner's range (``plan.config.MAX_RANGE``).
+        seed: frame choice and data order.
+    """
+
+    frames: int = 120000
+    test_frames: int = 4000
+    epochs: int = 30
+    batch_size: int = 256
+    lr: float = 1e-3
+    near_weight: float = 25.0
+    near_m: float = MAX_RANGE
+    seed: int = 0
+    eval_split: str = "test"
+
+    def __post_init__(self):
+        if min(self.frames, self.test_frames, self.epochs, self.batch_size) < 1:
+            raise ValueError("frames, test_frames, epochs and batch_size must be >= 1")
+        if self.eval_split not in EVAL_SPLITS:
+            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
+        if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
+            raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
