@@ -26,12 +26,12 @@ from pathlib import Path
 
 os.environ.setdefault("LP_NUM_THREADS", "1")  # one core, like one worker
 
-from orbitdata.config import GenerationConfig  # noqa: E402
-from orbitdata.viz import overview_figure  # noqa: E402
-from orbitdata.write.generate import generate  # noqa: E402
 import numpy as np  # noqa: E402
 
+from orbitdata.config import GenerationConfig  # noqa: E402
 from orbitdata.sim import CubeSatEnv  # noqa: E402
+from orbitdata.viz import overview_figure  # noqa: E402
+from orbitdata.write.generate import generate  # noqa: E402
 
 MEM_SCRIPT = """
 import resource, sys, os
@@ -65,8 +65,12 @@ def render_bound(cfg: GenerationConfig, dataset: Path) -> float:
     frames, busy = 0, 0.0
     for path in sorted(dataset.glob("episodes/*.parquet")):
         for ep in pq.read_table(path).to_pylist():
-            states = pq.read_table(dataset / ep[S.DATA_FILE], columns=[S.STATE]).slice(
-                ep[S.ROW_START], ep[S.LENGTH]).column(S.STATE).to_pylist()
+            states = (
+                pq.read_table(dataset / ep[S.DATA_FILE], columns=[S.STATE])
+                .slice(ep[S.ROW_START], ep[S.LENGTH])
+                .column(S.STATE)
+                .to_pylist()
+            )
             env.reset(seed=ep[S.SEED])
             quat = np.zeros(4)
             for s in np.array(states, dtype=np.float64):
@@ -83,8 +87,9 @@ def render_bound(cfg: GenerationConfig, dataset: Path) -> float:
 def peak_rss_mb(episodes: int, image_size: int) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         cfg = json.dumps(config(episodes, image_size).to_dict())
-        out = subprocess.run([sys.executable, "-c", MEM_SCRIPT, str(Path(tmp) / "ds"), cfg],
-                             capture_output=True, text=True, check=True).stdout.split()
+        out = subprocess.run(
+            [sys.executable, "-c", MEM_SCRIPT, str(Path(tmp) / "ds"), cfg], capture_output=True, text=True, check=True
+        ).stdout.split()
         return int(out[-1]) / 1024
 
 
@@ -102,14 +107,18 @@ def main() -> None:
         size = info.bytes
         bound = render_bound(cfg, Path(tmp) / "ds")
     fps = frames / wall
-    print(f"generate, 1 worker: {args.episodes} episodes, {frames} frames in {wall:.1f} s = {fps:,.0f} frames/s per core")
+    print(
+        f"generate, 1 worker: {args.episodes} episodes, {frames} frames in {wall:.1f} s = {fps:,.0f} frames/s per core"
+    )
     print(f"render-only bound on the same frames ({args.image_size} px, 1 core): {bound:,.0f} frames/s")
     print(f"ratio to the render bound: {fps / bound:.2f} (goal >= 0.8)")
     print(f"bytes per frame: {size / frames:,.0f} B ({size / 1e6:.1f} MB for {frames} frames; goal <= 12,000)")
     small, large = max(2, args.episodes // 4), max(6, 3 * (args.episodes // 4))
     m_small, m_large = peak_rss_mb(small, args.image_size), peak_rss_mb(large, args.image_size)
-    print(f"peak RSS, 1 worker: {m_small:.0f} MB for {small} episodes, {m_large:.0f} MB for {large} "
-          f"(ratio {m_large / m_small:.2f}; flat = 1.0)")
+    print(
+        f"peak RSS, 1 worker: {m_small:.0f} MB for {small} episodes, {m_large:.0f} MB for {large} "
+        f"(ratio {m_large / m_small:.2f}; flat = 1.0)"
+    )
 
 
 if __name__ == "__main__":

@@ -58,8 +58,10 @@ def ensure_dataset(out: Path, episodes: int, size: int) -> Path:
     from orbitdata.write.generate import generate
 
     cfg = GenerationConfig()
-    cfg = cfg.replace(dataset={"episodes": episodes, "seed": 0, "test_fraction": 0.2},
-                      sim={"camera": cfg.sim.camera.__class__(image_size=size)})
+    cfg = cfg.replace(
+        dataset={"episodes": episodes, "seed": 0, "test_fraction": 0.2},
+        sim={"camera": cfg.sim.camera.__class__(image_size=size)},
+    )
     if not (out / S.INFO_PATH).exists():
         print(f"generating {episodes} episodes at {size} px into {out} ...", flush=True)
     generate(out, cfg, workers=0)
@@ -80,8 +82,9 @@ def windows(args):
     """The loader's dataset and the windows every configuration reads, in sampler order."""
     from orbitdata.load import load_windows
 
-    ds = load_windows(args.dataset, context=args.context, horizon=args.horizon, columns=COLUMNS,
-                      cache_dir=args.cache_dir)
+    ds = load_windows(
+        args.dataset, context=args.context, horizon=args.horizon, columns=COLUMNS, cache_dir=args.cache_dir
+    )
     order = list(ds.sampler(seed=0))[: args.batch_size * (args.warmup + args.batches)]
     return ds, order
 
@@ -107,8 +110,10 @@ def measure_loader(args) -> dict:
     from orbitdata.load import collate_windows
 
     ds, order = windows(args)
-    return timed(DataLoader(ds, batch_size=args.batch_size, sampler=order, num_workers=args.workers,
-                            collate_fn=collate_windows), args.warmup)
+    return timed(
+        DataLoader(ds, batch_size=args.batch_size, sampler=order, num_workers=args.workers, collate_fn=collate_windows),
+        args.warmup,
+    )
 
 
 def measure_decode(args) -> dict:
@@ -118,7 +123,7 @@ def measure_decode(args) -> dict:
     ds, order = windows(args)
     table = ds.steps.data.table
     blobs = []
-    for i in order[args.batch_size * args.warmup:]:  # the loader's timed windows
+    for i in order[args.batch_size * args.warmup :]:  # the loader's timed windows
         col = table.column(S.IMAGE).slice(int(ds.index.row[i]), int(ds.index.n_real[i]))
         blobs.append([np.frombuffer(b, np.uint8) for b in col.combine_chunks().field("bytes").to_pylist()])
     t0 = time.perf_counter()
@@ -138,7 +143,7 @@ class NaiveWindows:
         return len(self.rows)
 
     def __getitem__(self, i: int) -> dict:
-        return self.steps[self.rows[i]:self.rows[i] + self.length]
+        return self.steps[self.rows[i] : self.rows[i] + self.length]
 
 
 def measure_naive(args, all_columns: bool = False) -> dict:
@@ -157,10 +162,29 @@ def measure_naive(args, all_columns: bool = False) -> dict:
 
 
 def run_once(args, mode: str, workers: int) -> dict:
-    cmd = [sys.executable, __file__, str(args.dataset), "--measure", mode, "--workers", str(workers),
-           "--batch-size", str(args.batch_size), "--batches", str(args.batches), "--warmup", str(args.warmup),
-           "--context", str(args.context),
-           "--horizon", str(args.horizon), "--cache-dir", args.cache_dir, "--naive-batches", str(args.naive_batches)]
+    cmd = [
+        sys.executable,
+        __file__,
+        str(args.dataset),
+        "--measure",
+        mode,
+        "--workers",
+        str(workers),
+        "--batch-size",
+        str(args.batch_size),
+        "--batches",
+        str(args.batches),
+        "--warmup",
+        str(args.warmup),
+        "--context",
+        str(args.context),
+        "--horizon",
+        str(args.horizon),
+        "--cache-dir",
+        args.cache_dir,
+        "--naive-batches",
+        str(args.naive_batches),
+    ]
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode:
         raise RuntimeError(f"{mode} with {workers} workers failed:\n{out.stderr[-3000:]}")
@@ -199,8 +223,12 @@ def main() -> None:
     args = p.parse_args()
 
     if args.measure:
-        measure = {"loader": measure_loader, "decode": measure_decode, "naive": measure_naive,
-                   "naive-all": lambda a: measure_naive(a, all_columns=True)}[args.measure]
+        measure = {
+            "loader": measure_loader,
+            "decode": measure_decode,
+            "naive": measure_naive,
+            "naive-all": lambda a: measure_naive(a, all_columns=True),
+        }[args.measure]
         result = measure(args)
         print(json.dumps({"peak_worker_rss_mb": 0.0} | result | {"peak_rss_mb": vm_hwm_mb()}))
         return

@@ -55,8 +55,10 @@ def main() -> None:
     args = ap.parse_args()
     for label, kw in (("5 obstacles, 2 m/s", {"n_obstacles": 5, "speed": 2.0}), ("dataset mix", {})):
         t = planning_times(args.episodes, **kw)
-        print(f"expert planning ({label}, {len(t)} episodes): median {1e3 * np.median(t):.0f} ms, "
-              f"p95 {1e3 * np.percentile(t, 95):.0f} ms, max {1e3 * t.max():.0f} ms")
+        print(
+            f"expert planning ({label}, {len(t)} episodes): median {1e3 * np.median(t):.0f} ms, "
+            f"p95 {1e3 * np.percentile(t, 95):.0f} ms, max {1e3 * t.max():.0f} ms"
+        )
 
     env = CubeSatEnv(SimConfig(render=False))
     costs = {}

@@ -59,8 +59,15 @@ def make_pilot(args, samples: int | None, horizon: int | None, replan_every: int
     if args.compile:
         model.compile_rollout()
     dynamics = LearnedDynamics(model, probe.eval(), timings, history=config.history or None)
-    pilot = PlannerPilot(Variant.PLANNER, dynamics, PredictedDepth(model, timings, frames=dynamics.frames),
-                         Camera.from_sim(sim), config, sim, timings)
+    pilot = PlannerPilot(
+        Variant.PLANNER,
+        dynamics,
+        PredictedDepth(model, timings, frames=dynamics.frames),
+        Camera.from_sim(sim),
+        config,
+        sim,
+        timings,
+    )
     return pilot, timings
 
 
@@ -91,19 +98,27 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
     wall = time.perf_counter() - start
     steps, replans = 1e3 * np.array(pilot.step_seconds), 1e3 * np.array(pilot.replan_seconds)
     phases = timings.snapshot()
-    return {"samples": pilot.config.mppi.samples, "horizon": pilot.config.mppi.horizon, "replan_every": replan_every,
-            "history": pilot.dynamics.history,
-            "step_median": np.median(steps), "step_p95": np.percentile(steps, 95),
-            "replan_median": np.median(replans) if len(replans) else float("nan"),
-            "replan_p95": np.percentile(replans, 95) if len(replans) else float("nan"),
-            "share": {k: v / wall for k, v in sorted(phases.items())}, "wall": wall}
+    return {
+        "samples": pilot.config.mppi.samples,
+        "horizon": pilot.config.mppi.horizon,
+        "replan_every": replan_every,
+        "history": pilot.dynamics.history,
+        "step_median": np.median(steps),
+        "step_p95": np.percentile(steps, 95),
+        "replan_median": np.median(replans) if len(replans) else float("nan"),
+        "replan_p95": np.percentile(replans, 95) if len(replans) else float("nan"),
+        "share": {k: v / wall for k, v in sorted(phases.items())},
+        "wall": wall,
+    }
 
 
 def report(m: dict) -> str:
     shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in m["share"].items())
-    return (f"K={m['samples']:4d} H={m['horizon']:3d} history {m['history']} replan every {m['replan_every']}: per control step "
-            f"{m['step_median']:7.1f} ms median {m['step_p95']:7.1f} p95; per replan {m['replan_median']:7.1f} / "
-            f"{m['replan_p95']:7.1f} ms   [{shares}]")
+    return (
+        f"K={m['samples']:4d} H={m['horizon']:3d} history {m['history']} replan every {m['replan_every']}: per control step "
+        f"{m['step_median']:7.1f} ms median {m['step_p95']:7.1f} p95; per replan {m['replan_median']:7.1f} / "
+        f"{m['replan_p95']:7.1f} ms   [{shares}]"
+    )
 
 
 def sequential_floor(args, horizon: int | None) -> str:
@@ -140,8 +155,10 @@ def sequential_floor(args, horizon: int | None) -> str:
     eager = median_ms(lambda: rollout(step))
     compiled_step = torch.compile(step, dynamic=False)
     compiled = median_ms(lambda: rollout(compiled_step))
-    return (f"sequential floor, K=1 H={horizon} ({steps} predictor calls) history {history}: {eager:.1f} ms eager, "
-            f"{compiled:.1f} ms with torch.compile ({compiled / steps:.2f} ms per imagined step)")
+    return (
+        f"sequential floor, K=1 H={horizon} ({steps} predictor calls) history {history}: {eager:.1f} ms eager, "
+        f"{compiled:.1f} ms with torch.compile ({compiled / steps:.2f} ms per imagined step)"
+    )
 
 
 def main() -> None:
@@ -157,20 +174,31 @@ def main() -> None:
     parser.add_argument("--preset", choices=list(PRESETS), default="cpu-step5", help="world-model sizes without --run")
     parser.add_argument("--sweep", action="store_true", help="a table over K, H and the replan interval")
     parser.add_argument("--floor", action="store_true", help="also time one candidate's H sequential steps")
-    parser.add_argument("--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)")
+    parser.add_argument(
+        "--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)"
+    )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     model = args.run or f"untrained {args.preset} preset"
-    print(f"{model}, planner {args.planner}, {args.threads} torch thread(s), {os.cpu_count()} cores visible, "
-          f"torch {torch.__version__}")
+    print(
+        f"{model}, planner {args.planner}, {args.threads} torch thread(s), {os.cpu_count()} cores visible, "
+        f"torch {torch.__version__}"
+    )
     with torch.inference_mode():
         if not args.sweep:
             print(report(measure(args, args.samples, args.horizon, args.replan_every)), flush=True)
             if args.floor:
                 print(sequential_floor(args, args.horizon))
             return
-        for samples, horizon, every in [(256, 50, 1), (128, 50, 1), (64, 50, 1), (64, 25, 1), (32, 25, 1),
-                                        (256, 50, 5), (64, 25, 5)]:
+        for samples, horizon, every in [
+            (256, 50, 1),
+            (128, 50, 1),
+            (64, 50, 1),
+            (64, 25, 1),
+            (32, 25, 1),
+            (256, 50, 5),
+            (64, 25, 5),
+        ]:
             print(report(measure(args, samples, horizon, every)), flush=True)
 
 

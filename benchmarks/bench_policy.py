@@ -57,20 +57,26 @@ def main() -> None:
         times.append(time.perf_counter() - start)
         cpu.append(time.process_time() - start_cpu)
     t = np.array(times) * 1e3
-    print(f"Diffusion Policy ({preset_name}: {policy.num_parameters() / 1e6:.2f}M params, "
-          f"{c.inference_steps} DDIM steps) on {args.threads} threads: one {c.horizon}-action chunk "
-          f"median {np.median(t):.1f} ms, p95 {np.percentile(t, 95):.1f} ms over {len(t)} calls; "
-          f"{np.median(t) / c.n_action_steps:.1f} ms per control step amortised over {c.n_action_steps} "
-          f"(the control period is 40 ms); CPU time per chunk {np.median(cpu) * 1e3:.1f} ms, all threads "
-          f"(wall far above CPU / threads means the cores were shared)")
+    print(
+        f"Diffusion Policy ({preset_name}: {policy.num_parameters() / 1e6:.2f}M params, "
+        f"{c.inference_steps} DDIM steps) on {args.threads} threads: one {c.horizon}-action chunk "
+        f"median {np.median(t):.1f} ms, p95 {np.percentile(t, 95):.1f} ms over {len(t)} calls; "
+        f"{np.median(t) / c.n_action_steps:.1f} ms per control step amortised over {c.n_action_steps} "
+        f"(the control period is 40 ms); CPU time per chunk {np.median(cpu) * 1e3:.1f} ms, all threads "
+        f"(wall far above CPU / threads means the cores were shared)"
+    )
 
     if args.train_steps and train is not None:
         policy.train()
         B = train.loop.batch_size
-        batch = {"images": torch.randint(0, 256, (B, c.n_obs_steps, 3, c.image_size, c.image_size), generator=g,
-                                         dtype=torch.uint8),
-                 "states": states.expand(B, -1, -1).clone(), "goal": goal.expand(B, -1).clone(),
-                 "actions": torch.rand(B, c.horizon, 8, generator=g)}
+        batch = {
+            "images": torch.randint(
+                0, 256, (B, c.n_obs_steps, 3, c.image_size, c.image_size), generator=g, dtype=torch.uint8
+            ),
+            "states": states.expand(B, -1, -1).clone(),
+            "goal": goal.expand(B, -1).clone(),
+            "actions": torch.rand(B, c.horizon, 8, generator=g),
+        }
         optimizer = torch.optim.AdamW(policy.net.parameters(), lr=train.loop.lr, betas=train.loop.betas)
         steps = []
         for step in range(1, args.train_steps + 2):
@@ -82,8 +88,10 @@ def main() -> None:
             policy.ema_update(step, train.ema_power, train.ema_max)
             steps.append(time.perf_counter() - start)
         s = np.median(steps[1:])
-        print(f"training step (batch {B}, compute only): median {s * 1e3:.0f} ms = {1 / s:.2f} steps/s "
-              f"over {args.train_steps} steps")
+        print(
+            f"training step (batch {B}, compute only): median {s * 1e3:.0f} ms = {1 / s:.2f} steps/s "
+            f"over {args.train_steps} steps"
+        )
 
 
 if __name__ == "__main__":

@@ -79,6 +79,7 @@ def main() -> None:
             fn()
             if device.type == "cuda":
                 torch.cuda.synchronize()
+
         return run
 
     cases = {
@@ -87,13 +88,14 @@ def main() -> None:
         "  integration only": lambda: integrate(state0, inc, coasting=True),
         "state-only MLP rollout (reference)": lambda: state_mlp(state0, actions),
     }
-    print(f"K = {K} rollouts x H = {H} steps, latent {D}, device {device}, {torch.get_num_threads()} threads, "
-          f"{args.repeats} repeats")
+    print(
+        f"K = {K} rollouts x H = {H} steps, latent {D}, device {device}, {torch.get_num_threads()} threads, "
+        f"{args.repeats} repeats"
+    )
     with torch.no_grad():
         for name, fn in cases.items():
             med, p95 = timed(sync(fn), args.repeats, args.warmup)
-            print(f"{name:38s} median {med:8.2f} ms   p95 {p95:8.2f} ms   "
-                  f"{K * H / med * 1e3 / 1e6:6.2f} M states/s")
+            print(f"{name:38s} median {med:8.2f} ms   p95 {p95:8.2f} ms   {K * H / med * 1e3 / 1e6:6.2f} M states/s")
 
 
 if __name__ == "__main__":

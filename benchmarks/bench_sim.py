@@ -92,5 +92,6 @@ def main() -> None:
     print(f"step()+render 224 px: {e2e:,.0f} frames/s; render-only on the same frames: {render_only:,.0f} frames/s")
     print(f"ratio end-to-end / render-only at 224 px: {e2e / render_only:.2f} (goal >= 0.8)")
 
+
 if __name__ == "__main__":
     main()

@@ -31,17 +31,25 @@ def measure(dataset: str, preset: str, steps: int, warmup: int, workers: int) ->
     p = get_preset(preset).with_train(max_steps=steps, num_workers=workers, log_every=1, save_every=10**9)
     records = []
     with tempfile.TemporaryDirectory() as tmp:
-        result = train_world_model(Stage1Request(dataset=dataset, preset=p, out=f"{tmp}/run", device="cpu"),
-                                   on_log=records.append)
+        result = train_world_model(
+            Stage1Request(dataset=dataset, preset=p, out=f"{tmp}/run", device="cpu"), on_log=records.append
+        )
     steady = [r for r in records if r["step"] > warmup]
     seconds = steady[-1]["elapsed_s"] - records[warmup - 1]["elapsed_s"]
     children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
-    return {"preset": preset, "workers": workers, "steps": result.steps, "batch": p.train.loop.batch_size,
-            "window": p.train.window, "windows_per_s": len(steady) * p.train.loop.batch_size / seconds,
-            "frames_per_s": len(steady) * p.train.loop.batch_size * p.train.window / seconds,
-            "seconds_per_step": seconds / len(steady), "data_wait": result.data_wait,
-            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-            "peak_worker_rss_mb": children if workers else 0.0}
+    return {
+        "preset": preset,
+        "workers": workers,
+        "steps": result.steps,
+        "batch": p.train.loop.batch_size,
+        "window": p.train.window,
+        "windows_per_s": len(steady) * p.train.loop.batch_size / seconds,
+        "frames_per_s": len(steady) * p.train.loop.batch_size * p.train.window / seconds,
+        "seconds_per_step": seconds / len(steady),
+        "data_wait": result.data_wait,
+        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        "peak_worker_rss_mb": children if workers else 0.0,
+    }
 
 
 def main() -> None:
@@ -56,17 +64,36 @@ def main() -> None:
     if args.one is not None:
         print(json.dumps(measure(args.dataset, args.preset, args.steps, args.warmup, args.one)))
         return
-    print(f"Stage I training, preset {args.preset}, {args.steps} steps ({args.warmup} warm-up) on {args.dataset}, "
-          f"torch threads {os.environ.get('OMP_NUM_THREADS', 'default')}")
+    print(
+        f"Stage I training, preset {args.preset}, {args.steps} steps ({args.warmup} warm-up) on {args.dataset}, "
+        f"torch threads {os.environ.get('OMP_NUM_THREADS', 'default')}"
+    )
     for workers in args.workers:
-        out = subprocess.run([sys.executable, __file__, args.dataset, "--preset", args.preset, "--steps",
-                              str(args.steps), "--warmup", str(args.warmup), "--one", str(workers)],
-                             capture_output=True, text=True, check=True)
+        out = subprocess.run(
+            [
+                sys.executable,
+                __file__,
+                args.dataset,
+                "--preset",
+                args.preset,
+                "--steps",
+                str(args.steps),
+                "--warmup",
+                str(args.warmup),
+                "--one",
+                str(workers),
+            ],
+            capture_output=True,
+            text=True,
+            check=True,
+        )
         r = json.loads(out.stdout.strip().splitlines()[-1])
-        print(f"  workers {workers}: {r['windows_per_s']:6.1f} windows/s ({r['frames_per_s']:6.0f} frames/s, "
-              f"{r['seconds_per_step']:.2f} s/step at batch {r['batch']} x {r['window']} frames), "
-              f"data wait {100 * r['data_wait']:.1f} % of step time (goal < 10 %), peak RSS {r['peak_rss_mb']:.0f} MB"
-              + (f", worker {r['peak_worker_rss_mb']:.0f} MB" if workers else ""))
+        print(
+            f"  workers {workers}: {r['windows_per_s']:6.1f} windows/s ({r['frames_per_s']:6.0f} frames/s, "
+            f"{r['seconds_per_step']:.2f} s/step at batch {r['batch']} x {r['window']} frames), "
+            f"data wait {100 * r['data_wait']:.1f} % of step time (goal < 10 %), peak RSS {r['peak_rss_mb']:.0f} MB"
+            + (f", worker {r['peak_worker_rss_mb']:.0f} MB" if workers else "")
+        )
 
 
 if __name__ == "__main__":

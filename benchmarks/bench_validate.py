@@ -73,8 +73,9 @@ def generate(out: Path, episodes: int, image_size: int, workers: int, config: di
 
 
 def measure(root: Path, mode: str, workers: int) -> dict:
-    out = subprocess.run([sys.executable, "-c", CHILD, str(root), mode, str(workers)], capture_output=True,
-                         text=True, check=True)
+    out = subprocess.run(
+        [sys.executable, "-c", CHILD, str(root), mode, str(workers)], capture_output=True, text=True, check=True
+    )
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -84,10 +85,18 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=80, help="episodes to generate when no DIR is given")
     parser.add_argument("--image-size", type=int, default=64)
     parser.add_argument("--workers", type=int, default=0, help="0 = all cores (generation and validation)")
-    parser.add_argument("--sample-episodes", type=int, default=48,
-                        help="episodes generated (with DIR's config) to rate generation; startup is amortised")
-    parser.add_argument("--generation-fps", type=float, default=None,
-                        help="known generation rate (frames/s) for DIR, e.g. from `orbitdata generate`'s bar")
+    parser.add_argument(
+        "--sample-episodes",
+        type=int,
+        default=48,
+        help="episodes generated (with DIR's config) to rate generation; startup is amortised",
+    )
+    parser.add_argument(
+        "--generation-fps",
+        type=float,
+        default=None,
+        help="known generation rate (frames/s) for DIR, e.g. from `orbitdata generate`'s bar",
+    )
     args = parser.parse_args()
     os.environ.setdefault("MUJOCO_GL", "egl")
     cores = os.cpu_count() or 1
@@ -110,19 +119,23 @@ def main() -> None:
         gen_fps = generate(Path(tmp.name) / "sample", args.sample_episodes, 0, workers, config)
 
     print(f"\ngeneration: {gen_fps:,.0f} frames/s with {workers} workers on {cores} cores\n")
-    header = f"{'dataset':<28} {'mode':<6} {'MB':>8} {'frames':>9} {'s':>7} {'MB/s':>8} {'frames/s':>10} " \
-             f"{'x gen':>6} {'driver MB':>9} {'worker MB':>9}  result"
+    header = (
+        f"{'dataset':<28} {'mode':<6} {'MB':>8} {'frames':>9} {'s':>7} {'MB/s':>8} {'frames/s':>10} "
+        f"{'x gen':>6} {'driver MB':>9} {'worker MB':>9}  result"
+    )
     print(header)
     print("-" * len(header))
     for root in datasets:
         for mode in ("quick", "full"):
             r = measure(root, mode, args.workers)
             fps = r["frames"] / r["seconds"]
-            print(f"{root.name[:28]:<28} {mode:<6} {r['bytes'] / 1e6:>8.1f} {r['frames']:>9,} {r['seconds']:>7.2f} "
-                  f"{r['bytes'] / 1e6 / r['seconds']:>8.1f} {fps:>10,.0f} {fps / gen_fps:>6.1f} "
-                  f"{r['driver_rss_mb']:>9.0f} {r['worker_rss_mb']:>9.0f}  "
-                  f"{'valid' if r['ok'] else 'INVALID: ' + ','.join(r['failed'])} ({r['workers']} workers)",
-                  flush=True)
+            print(
+                f"{root.name[:28]:<28} {mode:<6} {r['bytes'] / 1e6:>8.1f} {r['frames']:>9,} {r['seconds']:>7.2f} "
+                f"{r['bytes'] / 1e6 / r['seconds']:>8.1f} {fps:>10,.0f} {fps / gen_fps:>6.1f} "
+                f"{r['driver_rss_mb']:>9.0f} {r['worker_rss_mb']:>9.0f}  "
+                f"{'valid' if r['ok'] else 'INVALID: ' + ','.join(r['failed'])} ({r['workers']} workers)",
+                flush=True,
+            )
     print("\nx gen: validation frames/s over generation frames/s (goal for full: >= 10).")
     tmp.cleanup()
 

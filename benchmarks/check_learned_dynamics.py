@@ -54,23 +54,33 @@ def main() -> None:
         errors = []
         for i in chosen:
             w = windows[int(i)]
-            pred = observed(model, probe, w, history, c).rollout(w[S.STATE][c - 1], w[S.ACTION][c - 1:c + 49][None])[0]
-            errors.append((pred[:, :3] - w[S.STATE][c:c + 50, :3]).norm(dim=-1))
+            pred = observed(model, probe, w, history, c).rollout(w[S.STATE][c - 1], w[S.ACTION][c - 1 : c + 49][None])[
+                0
+            ]
+            errors.append((pred[:, :3] - w[S.STATE][c : c + 50, :3]).norm(dim=-1))
         e = torch.stack(errors)
-        print(f"recorded actions, history {history}: position error (m) at h = "
-              + ", ".join(f"{h}: {float(e[:, h - 1].mean()):.3f}" for h in horizons) + f" ({len(chosen)} test windows)")
+        print(
+            f"recorded actions, history {history}: position error (m) at h = "
+            + ", ".join(f"{h}: {float(e[:, h - 1].mean()):.3f}" for h in horizons)
+            + f" ({len(chosen)} test windows)"
+        )
     w = windows[int(chosen[0])]
     dyn, rigid = observed(model, probe, w, args.history[-1], c), RigidBodyDynamics()
     g = torch.Generator().manual_seed(args.seed)
     pair = torch.zeros(8)
     pair[:2] = 1.0
-    for name, actions in (("coasting (all zero)", torch.zeros(4, 50, 8)),
-                          ("N(0, 0.15) around coasting", (0.15 * torch.randn(4, 50, 8, generator=g)).clamp(0, 1)),
-                          ("one thruster pair at full", pair.expand(4, 50, 8).clone())):
-        gap = (dyn.rollout(w[S.STATE][c - 1], actions)[..., :3]
-               - rigid.rollout(w[S.STATE][c - 1], actions)[..., :3]).norm(dim=-1)
-        print(f"{name}: learned vs rigid-body position gap (m) at h = 25: {float(gap[:, 24].mean()):.3f}, "
-              f"h = 50: {float(gap[:, 49].mean()):.3f}")
+    for name, actions in (
+        ("coasting (all zero)", torch.zeros(4, 50, 8)),
+        ("N(0, 0.15) around coasting", (0.15 * torch.randn(4, 50, 8, generator=g)).clamp(0, 1)),
+        ("one thruster pair at full", pair.expand(4, 50, 8).clone()),
+    ):
+        gap = (
+            dyn.rollout(w[S.STATE][c - 1], actions)[..., :3] - rigid.rollout(w[S.STATE][c - 1], actions)[..., :3]
+        ).norm(dim=-1)
+        print(
+            f"{name}: learned vs rigid-body position gap (m) at h = 25: {float(gap[:, 24].mean()):.3f}, "
+            f"h = 50: {float(gap[:, 49].mean()):.3f}"
+        )
 
 
 if __name__ == "__main__":

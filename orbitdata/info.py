@@ -73,17 +73,20 @@ class Info:
         if not S.readable_schema(version):
             from orbitdata.version import __version__
 
-            raise ValueError(f"{where}: the dataset has schema version {version!r}, but orbitdata {__version__} reads "
-                             f"schema {S.SCHEMA_VERSION.split('.')[0]}.x; install the orbitdata release that matches "
-                             "the dataset")
+            raise ValueError(
+                f"{where}: the dataset has schema version {version!r}, but orbitdata {__version__} reads "
+                f"schema {S.SCHEMA_VERSION.split('.')[0]}.x; install the orbitdata release that matches "
+                "the dataset"
+            )
         missing = [f.name for f in fields(cls) if f.name not in data]
         if missing:
             raise ValueError(f"{where} lacks {', '.join(missing)}; run `orbitdata validate` on the dataset")
         try:
             files = {rel: FileEntry(str(e["sha256"]), int(e["bytes"])) for rel, e in data["files"].items()}
         except (AttributeError, KeyError, TypeError, ValueError):
-            raise ValueError(f"{where}: 'files' must map each path to its sha256 and bytes; run `orbitdata validate` "
-                             "on the dataset") from None
+            raise ValueError(
+                f"{where}: 'files' must map each path to its sha256 and bytes; run `orbitdata validate` on the dataset"
+            ) from None
         return cls(**{f.name: data[f.name] for f in fields(cls) if f.name != "files"}, files=files)
 
     def to_dict(self) -> dict:
@@ -132,6 +135,10 @@ def counts(rows: Iterable[tuple[str, str, str, int]]) -> dict:
         for level in S.LEVELS:
             lv = [r for r in mine if r[1] == level]
             levels[level] = {"episodes": len(lv), "frames": sum(r[3] for r in lv), "outcomes": tally(lv)}
-        out["splits"][split] = {"episodes": len(mine), "frames": sum(r[3] for r in mine), "levels": levels,
-                                "outcomes": tally(mine)}
+        out["splits"][split] = {
+            "episodes": len(mine),
+            "frames": sum(r[3] for r in mine),
+            "levels": levels,
+            "outcomes": tally(mine),
+        }
     return out

@@ -27,6 +27,10 @@ import functools
 import json
 import re
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pyarrow loads where a schema is built, not with the column names
+    import pyarrow as pa
 
 SCHEMA_VERSION = "1.0"
 FPS = 25
@@ -100,7 +104,7 @@ class Field:
     """One column: its Arrow type, unit ("" when it has none) and meaning (the card's column table)."""
 
     name: str
-    type: "pyarrow.DataType"
+    type: pa.DataType
     unit: str
     description: str
 
@@ -108,8 +112,19 @@ class Field:
 # ---- the Arrow half: types, fields with unit and meaning, schemas ----------------------
 # Built on first use: pyarrow takes ~0.2 s to import, and `orbitdata --help` or a config needs none
 # of it. ``schema.STEP_SCHEMA`` etc. read as plain module attributes (see ``__getattr__``).
-ARROW_NAMES = ("IMAGE_STRUCT", "VEC3", "QUAT", "OBSTACLE_STRUCT", "LIGHTING_STRUCT", "PLANNER_STRUCT", "STEP_FIELDS",
-               "EPISODE_FIELDS", "STEP_SCHEMA", "EPISODE_SCHEMA", "FIELDS")
+ARROW_NAMES = (
+    "IMAGE_STRUCT",
+    "VEC3",
+    "QUAT",
+    "OBSTACLE_STRUCT",
+    "LIGHTING_STRUCT",
+    "PLANNER_STRUCT",
+    "STEP_FIELDS",
+    "EPISODE_FIELDS",
+    "STEP_SCHEMA",
+    "EPISODE_SCHEMA",
+    "FIELDS",
+)
 
 
 @functools.cache
@@ -149,15 +164,31 @@ def _arrow() -> dict:
         Field(FRAME_INDEX, pa.int32(), "", "0..L-1 within the episode"),
         Field(TIMESTAMP, pa.float32(), "s", f"frame_index x {DT:g} s"),
         Field(IMAGE, IMAGE_STRUCT, "", "onboard RGB camera, JPEG, H x W x 3"),
-        Field(DEPTH, IMAGE_STRUCT, "mm", "z-depth along the optical axis, 16-bit PNG; 0 = no return within the "
-              "camera's [near, far]"),
-        Field(DEPTH_LOW, pa.list_(pa.float32(), DEPTH_LOW_DIM), "m", f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} area-pooled "
-              "depth, row-major (no return counts as the far plane)"),
-        Field(STATE, pa.list_(pa.float32(), STATE_DIM), "m, m/s, 1, rad/s, 1",
-              "[p(3) world position relative to the start, v(3) body-frame velocity, r(6) rot6d = first two columns "
-              "of R (body->world) row-major [R00,R01,R10,R11,R20,R21], w(3) body-frame angular velocity, fuel ratio]"),
-        Field(ACTION, pa.list_(pa.float32(), ACTION_DIM), "1", "normalised thrust of thrusters 0..7 in [0, 1], "
-              "applied from t to t+1; zeros on the last (terminal) frame"),
+        Field(
+            DEPTH,
+            IMAGE_STRUCT,
+            "mm",
+            "z-depth along the optical axis, 16-bit PNG; 0 = no return within the camera's [near, far]",
+        ),
+        Field(
+            DEPTH_LOW,
+            pa.list_(pa.float32(), DEPTH_LOW_DIM),
+            "m",
+            f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} area-pooled depth, row-major (no return counts as the far plane)",
+        ),
+        Field(
+            STATE,
+            pa.list_(pa.float32(), STATE_DIM),
+            "m, m/s, 1, rad/s, 1",
+            "[p(3) world position relative to the start, v(3) body-frame velocity, r(6) rot6d = first two columns "
+            "of R (body->world) row-major [R00,R01,R10,R11,R20,R21], w(3) body-frame angular velocity, fuel ratio]",
+        ),
+        Field(
+            ACTION,
+            pa.list_(pa.float32(), ACTION_DIM),
+            "1",
+            "normalised thrust of thrusters 0..7 in [0, 1], applied from t to t+1; zeros on the last (terminal) frame",
+        ),
         Field(COLLISION, pa.bool_(), "", "a contact happened during the step that ended at this frame"),
         Field(SUCCESS, pa.bool_(), "", "this frame is inside the goal region"),
         Field(IS_LAST, pa.bool_(), "", "last frame of the episode"),
@@ -172,15 +203,23 @@ def _arrow() -> dict:
         Field(LENGTH, pa.int32(), "frames", "rows of the episode in the steps table"),
         Field(OUTCOME, pa.string(), "", f"how it ended: {', '.join(OUTCOMES)}"),
         Field(N_OBSTACLES, pa.int32(), "", "number of obstacles"),
-        Field(OBSTACLES, pa.list_(OBSTACLE_STRUCT), "m", "shape, center (world), size (MuJoCo geom size), "
-              "quat (w, x, y, z) and rgba of each obstacle"),
+        Field(
+            OBSTACLES,
+            pa.list_(OBSTACLE_STRUCT),
+            "m",
+            "shape, center (world), size (MuJoCo geom size), quat (w, x, y, z) and rgba of each obstacle",
+        ),
         Field(GOAL, VEC3, "m", "centre of the goal region, world frame relative to the start"),
         Field(GOAL_RADIUS, pa.float32(), "m", "radius of the goal region"),
         Field(INITIAL_VELOCITY, VEC3, "m/s", "velocity at frame 0, world frame"),
         Field(INITIAL_QUAT, QUAT, "", "attitude at frame 0, (w, x, y, z) body->world"),
         Field(LIGHTING, LIGHTING_STRUCT, "", "sun_direction (unit, world), sun_intensity and ambient"),
-        Field(PLANNER, PLANNER_STRUCT, "", "the expert's RRT* result: solved, iterations, path_length (m); "
-              "zeros for other levels"),
+        Field(
+            PLANNER,
+            PLANNER_STRUCT,
+            "",
+            "the expert's RRT* result: solved, iterations, path_length (m); zeros for other levels",
+        ),
         Field(DATA_FILE, pa.string(), "", "the data shard that holds the episode's rows"),
         Field(ROW_START, pa.int64(), "", "first row of the episode in data_file"),
         Field(ROW_END, pa.int64(), "", "one past its last row"),

@@ -31,10 +31,21 @@ STATE_SLICES = {"p": POSITION, "v": VELOCITY, "r": ROT6D, "w": ANGULAR_VELOCITY,
 
 # Names of the 16 state entries, in order (recorded in meta/info.json).
 STATE_NAMES = (
-    "p_x", "p_y", "p_z",
-    "v_x", "v_y", "v_z",
-    "r_00", "r_01", "r_10", "r_11", "r_20", "r_21",
-    "w_x", "w_y", "w_z",
+    "p_x",
+    "p_y",
+    "p_z",
+    "v_x",
+    "v_y",
+    "v_z",
+    "r_00",
+    "r_01",
+    "r_10",
+    "r_11",
+    "r_20",
+    "r_21",
+    "w_x",
+    "w_y",
+    "w_z",
     "fuel",
 )
 assert len(STATE_NAMES) == STATE_DIM == FUEL.stop

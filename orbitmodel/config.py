@@ -80,9 +80,11 @@ class ModelConfig:
         if self.image_size % self.patch_size:
             raise ValueError(f"image_size={self.image_size} is not a multiple of patch_size={self.patch_size}")
         if DEPTH_LOW_SIDE % self.grid and self.grid % DEPTH_LOW_SIDE:
-            raise ValueError(f"the {self.grid}x{self.grid} patch grid cannot give the "
-                             f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} depth map; choose image_size / patch_size "
-                             f"dividing or divisible by {DEPTH_LOW_SIDE}")
+            raise ValueError(
+                f"the {self.grid}x{self.grid} patch grid cannot give the "
+                f"{DEPTH_LOW_SIDE}x{DEPTH_LOW_SIDE} depth map; choose image_size / patch_size "
+                f"dividing or divisible by {DEPTH_LOW_SIDE}"
+            )
         for name in ("width", "latent_dim"):
             heads = self.heads if name == "width" else self.pred_heads
             if getattr(self, name) % heads:
@@ -127,9 +129,21 @@ class TrainConfig(StageTrainConfig):
     jitter: float = 0.2
     val_fraction: float = 0.0
     val_seed: int = 0
-    loop: LoopSettings = LoopSettings(batch_size=128, lr=1e-5, min_lr=0.0, weight_decay=0.05, betas=(0.9, 0.999),
-                                      epochs=50, max_steps=0, warmup=0.06, grad_clip=1.0, num_workers=4, log_every=10,
-                                      save_every=500, seed=42)
+    loop: LoopSettings = LoopSettings(
+        batch_size=128,
+        lr=1e-5,
+        min_lr=0.0,
+        weight_decay=0.05,
+        betas=(0.9, 0.999),
+        epochs=50,
+        max_steps=0,
+        warmup=0.06,
+        grad_clip=1.0,
+        num_workers=4,
+        log_every=10,
+        save_every=500,
+        seed=42,
+    )
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:
@@ -179,9 +193,21 @@ class ProbeTrainConfig(StageTrainConfig):
     increment_weight: float = 0.0
     cache_windows: int = 0
     scale_windows: int = 2048
-    loop: LoopSettings = LoopSettings(batch_size=256, lr=3e-4, min_lr=0.0, weight_decay=0.01, betas=(0.9, 0.999),
-                                      epochs=25, max_steps=0, warmup=0.12,  # 3 of 25 epochs
-                                      grad_clip=1.0, num_workers=4, log_every=10, save_every=500, seed=42)
+    loop: LoopSettings = LoopSettings(
+        batch_size=256,
+        lr=3e-4,
+        min_lr=0.0,
+        weight_decay=0.01,
+        betas=(0.9, 0.999),
+        epochs=25,
+        max_steps=0,
+        warmup=0.12,  # 3 of 25 epochs
+        grad_clip=1.0,
+        num_workers=4,
+        log_every=10,
+        save_every=500,
+        seed=42,
+    )
 
     def __post_init__(self):
         if self.context < 1 or self.horizon < 1:
@@ -233,12 +259,15 @@ class ProbeRecipe:
     def from_dict(cls, d: dict) -> "ProbeRecipe":
         return cls(**{**d, "train": ProbeTrainConfig.from_dict(d["train"])})
 
-    def with_changes(self, inputs: str | None = None, integrator: str | None = None, per_frame: bool | None = None,
-                     **train) -> "ProbeRecipe":
+    def with_changes(
+        self, inputs: str | None = None, integrator: str | None = None, per_frame: bool | None = None, **train
+    ) -> "ProbeRecipe":
         """The recipe with some settings replaced (None values are ignored); ``train`` names
         :class:`ProbeTrainConfig` settings, the loop's by their own names (``epochs=``)."""
-        return replace(replace_given(self, inputs=inputs, integrator=integrator, per_frame=per_frame),
-                       train=self.train.with_changes(**train))
+        return replace(
+            replace_given(self, inputs=inputs, integrator=integrator, per_frame=per_frame),
+            train=self.train.with_changes(**train),
+        )
 
 
 @dataclass(frozen=True)
@@ -263,8 +292,13 @@ class Preset:
             probe = ProbeRecipe.from_dict(d["probe"])
         else:
             probe = PRESETS[d["name"]]().probe if d["name"] in PRESETS else ProbeRecipe()
-        return cls(name=d["name"], description=d["description"], model=ModelConfig(**d["model"]),
-                   train=TrainConfig.from_dict(d["train"]), probe=probe)
+        return cls(
+            name=d["name"],
+            description=d["description"],
+            model=ModelConfig(**d["model"]),
+            train=TrainConfig.from_dict(d["train"]),
+            probe=probe,
+        )
 
     def with_model(self, **changes) -> "Preset":
         """The preset with some model settings replaced (None values are ignored)."""
@@ -277,28 +311,80 @@ class Preset:
 
 
 def _paper() -> Preset:
-    return Preset("paper", "upstream Stage I: ViT-tiny/14 at 224 px, latent 256, 6-block predictor (a GPU)",
-                  ModelConfig(), TrainConfig(), ProbeRecipe())
+    return Preset(
+        "paper",
+        "upstream Stage I: ViT-tiny/14 at 224 px, latent 256, 6-block predictor (a GPU)",
+        ModelConfig(),
+        TrainConfig(),
+        ProbeRecipe(),
+    )
 
 
 def _cpu() -> Preset:
     # SIGReg pooled over the batch's 32 x 16 frames at weight 0.2, not upstream's per frame at
     # 0.1: at 32 windows per step the per-frame statistic barely sees anisotropy and the latents
     # lose rank (docs/model.md). Upstream's choice: --no-sigreg-pool --lambda-sigreg 0.1.
-    model = ModelConfig(image_size=64, patch_size=8, width=128, depth=4, heads=4, mlp=512, state_hidden=128,
-                        state_embed=64, latent_dim=128, action_hidden=128, pred_depth=4, pred_heads=4, pred_mlp=512,
-                        depth_hidden=64, sigreg_projections=256, sigreg_pool=True, lambda_sigreg=0.2)
-    train = TrainConfig().with_changes(window=16, window_stride=5, batch_size=32, lr=1e-3, min_lr=1e-5,
-                                       weight_decay=0.05, epochs=100, max_steps=1000, warmup=0.05, num_workers=0,
-                                       log_every=10, save_every=100)
+    model = ModelConfig(
+        image_size=64,
+        patch_size=8,
+        width=128,
+        depth=4,
+        heads=4,
+        mlp=512,
+        state_hidden=128,
+        state_embed=64,
+        latent_dim=128,
+        action_hidden=128,
+        pred_depth=4,
+        pred_heads=4,
+        pred_mlp=512,
+        depth_hidden=64,
+        sigreg_projections=256,
+        sigreg_pool=True,
+        lambda_sigreg=0.2,
+    )
+    train = TrainConfig().with_changes(
+        window=16,
+        window_stride=5,
+        batch_size=32,
+        lr=1e-3,
+        min_lr=1e-5,
+        weight_decay=0.05,
+        epochs=100,
+        max_steps=1000,
+        warmup=0.05,
+        num_workers=0,
+        log_every=10,
+        save_every=100,
+    )
     # The probe reads latent changes and integrates by coasting; fuel weighs 100, not 0.1 (fuel
     # moves ~1e-4 per step, so at 0.1 its MSE gets no gradient to speak of); it trains 60 epochs
     # on a cache of 10,240 imagined windows (docs/model.md gives the ablation behind each).
-    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", train=ProbeTrainConfig().with_changes(
-        window_stride=3, weights=(1.0, 1.0, 1.0, 1.0, 100.0), cache_windows=10240, batch_size=128, lr=1e-3,
-        min_lr=1e-5, epochs=60, warmup=0.05, num_workers=0, log_every=20, save_every=200))
-    return Preset("cpu", "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
-                  "4-block predictor, SIGReg pooled over the batch", model, train, probe)
+    probe = ProbeRecipe(
+        inputs="latent+change",
+        integrator="coasting",
+        train=ProbeTrainConfig().with_changes(
+            window_stride=3,
+            weights=(1.0, 1.0, 1.0, 1.0, 100.0),
+            cache_windows=10240,
+            batch_size=128,
+            lr=1e-3,
+            min_lr=1e-5,
+            epochs=60,
+            warmup=0.05,
+            num_workers=0,
+            log_every=20,
+            save_every=200,
+        ),
+    )
+    return Preset(
+        "cpu",
+        "the same family at 64 px for a 2-core CPU: ViT 4x128 on 8 px patches, latent 128, "
+        "4-block predictor, SIGReg pooled over the batch",
+        model,
+        train,
+        probe,
+    )
 
 
 def _cpu_step5() -> Preset:
@@ -308,22 +394,72 @@ def _cpu_step5() -> Preset:
     # rank above D/2; a probe that predicts every frame of a step from its latents and (a branch of
     # its own) its thrusts, with the loss on each frame's increments weighted 100.
     cpu = _cpu()
-    probe = replace(cpu.probe, inputs="latent+change+thrust", per_frame=True,
-                    train=replace(cpu.probe.train, increment_weight=100.0))
-    return replace(cpu.with_model(frame_step=5, lambda_sigreg=0.4).with_train(val_fraction=0.05), name="cpu-step5",
-                   probe=probe,
-                   description="the cpu preset stepping 5 frames per prediction: the run the planner flies")
+    probe = replace(
+        cpu.probe, inputs="latent+change+thrust", per_frame=True, train=replace(cpu.probe.train, increment_weight=100.0)
+    )
+    return replace(
+        cpu.with_model(frame_step=5, lambda_sigreg=0.4).with_train(val_fraction=0.05),
+        name="cpu-step5",
+        probe=probe,
+        description="the cpu preset stepping 5 frames per prediction: the run the planner flies",
+    )
 
 
 def _tiny() -> Preset:
-    model = ModelConfig(image_size=64, patch_size=16, width=32, depth=1, heads=2, mlp=64, state_hidden=32,
-                        state_embed=16, latent_dim=32, action_hidden=32, pred_depth=1, pred_heads=2, pred_mlp=64,
-                        pred_dropout=0.1, max_seq_len=16, history=4, depth_hidden=16, sigreg_projections=32)
-    train = TrainConfig().with_changes(window=6, window_stride=3, batch_size=4, lr=3e-3, min_lr=1e-4, epochs=2,
-                                       max_steps=0, warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0)
-    probe = ProbeRecipe(inputs="latent+change", integrator="coasting", hidden=32, train=ProbeTrainConfig().with_changes(
-        context=4, horizon=4, window_stride=2, cache_windows=32, scale_windows=64, batch_size=4, lr=3e-3, epochs=2,
-        warmup=0.1, num_workers=0, log_every=1, save_every=2, seed=0))
+    model = ModelConfig(
+        image_size=64,
+        patch_size=16,
+        width=32,
+        depth=1,
+        heads=2,
+        mlp=64,
+        state_hidden=32,
+        state_embed=16,
+        latent_dim=32,
+        action_hidden=32,
+        pred_depth=1,
+        pred_heads=2,
+        pred_mlp=64,
+        pred_dropout=0.1,
+        max_seq_len=16,
+        history=4,
+        depth_hidden=16,
+        sigreg_projections=32,
+    )
+    train = TrainConfig().with_changes(
+        window=6,
+        window_stride=3,
+        batch_size=4,
+        lr=3e-3,
+        min_lr=1e-4,
+        epochs=2,
+        max_steps=0,
+        warmup=0.1,
+        num_workers=0,
+        log_every=1,
+        save_every=2,
+        seed=0,
+    )
+    probe = ProbeRecipe(
+        inputs="latent+change",
+        integrator="coasting",
+        hidden=32,
+        train=ProbeTrainConfig().with_changes(
+            context=4,
+            horizon=4,
+            window_stride=2,
+            cache_windows=32,
+            scale_windows=64,
+            batch_size=4,
+            lr=3e-3,
+            epochs=2,
+            warmup=0.1,
+            num_workers=0,
+            log_every=1,
+            save_every=2,
+            seed=0,
+        ),
+    )
     return Preset("tiny", "a tiny model for tests", model, train, probe)
 
 

@@ -96,8 +96,9 @@ def skip_frames(window: dict, frame_step: int, time_dim: int = 0) -> dict:
             out[key] = group_actions(value, frame_step)
         elif key in FLAG_KEYS:
             shape = value.shape
-            out[key] = value.reshape(*shape[:time_dim], shape[time_dim] // frame_step, frame_step,
-                                     *shape[time_dim + 1:]).any(time_dim + 1)
+            out[key] = value.reshape(
+                *shape[:time_dim], shape[time_dim] // frame_step, frame_step, *shape[time_dim + 1 :]
+            ).any(time_dim + 1)
         else:
             out[key] = value[(slice(None),) * time_dim + (slice(None, None, frame_step),)]
     return out
@@ -139,16 +140,22 @@ class ModelStepWindows:
         return getattr(self.frames, name)
 
 
-def load_model_windows(source, frame_step: int = 1, context: int = 1, horizon: int = 0, stride: int = 1,
-                       frame_states: bool = False, **kwargs):
+def load_model_windows(
+    source,
+    frame_step: int = 1,
+    context: int = 1,
+    horizon: int = 0,
+    stride: int = 1,
+    frame_states: bool = False,
+    **kwargs,
+):
     """``orbitdata.load_windows`` counted in model steps: windows of ``context + horizon`` steps of
     ``frame_step`` frames each (``stride`` stays in frames); ``frame_states`` keeps every frame's
     state too (:class:`ModelStepWindows`). At ``frame_step`` 1 it is the loader's own dataset,
     unchanged."""
     from orbitdata.load import load_windows
 
-    frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride,
-                          **kwargs)
+    frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride, **kwargs)
     return frames if frame_step == 1 else ModelStepWindows(frames, frame_step, frame_states)
 
 
@@ -220,6 +227,8 @@ def split_selection(split: str, held_out: ValidationSplit) -> tuple[str, list[in
     if split == "test":
         return "test", None
     if not held_out.episodes:
-        raise ValueError("this run holds out no validation episodes; train it with --val-fraction (e.g. 0.1) to "
-                         "make choices on a validation split")
+        raise ValueError(
+            "this run holds out no validation episodes; train it with --val-fraction (e.g. 0.1) to "
+            "make choices on a validation split"
+        )
     return "train", list(held_out.episodes)

@@ -19,8 +19,23 @@ P, V, ROT, W, FUEL = (STATE_SLICES[k] for k in ("p", "v", "r", "w", "fuel"))
 HULL_RADIUS = CubeSatConfig().bounding_radius  # metres: the bounding sphere of the 1U hull
 SMALL_ANGLE = 1e-4  # rad^2: below this, Rodrigues' coefficients come from their Taylor series
 
-__all__ = ["P", "V", "ROT", "W", "FUEL", "G0", "HULL_RADIUS", "rot6d_to_matrix", "matrix_to_rot6d", "hat",
-           "so3_exp", "geodesic_angle", "rotate", "body_to_world", "interpolate_frames"]
+__all__ = [
+    "P",
+    "V",
+    "ROT",
+    "W",
+    "FUEL",
+    "G0",
+    "HULL_RADIUS",
+    "rot6d_to_matrix",
+    "matrix_to_rot6d",
+    "hat",
+    "so3_exp",
+    "geodesic_angle",
+    "rotate",
+    "body_to_world",
+    "interpolate_frames",
+]
 
 
 def rot6d_to_matrix(rot6d: torch.Tensor) -> torch.Tensor:
@@ -89,4 +104,4 @@ def interpolate_frames(state0: torch.Tensor, states: torch.Tensor, step: int) ->
     frac = torch.arange(1, step + 1, dtype=states.dtype, device=states.device) / step  # (step,)
     a, b = knots[:, :-1, None], knots[:, 1:, None]  # (K, n, 1, 16)
     out = (a + (b - a) * frac[:, None]).flatten(1, 2)  # (K, n step, 16)
-    return torch.cat([out[..., :ROT.start], matrix_to_rot6d(rot6d_to_matrix(out[..., ROT])), out[..., ROT.stop:]], -1)
+    return torch.cat([out[..., : ROT.start], matrix_to_rot6d(rot6d_to_matrix(out[..., ROT])), out[..., ROT.stop :]], -1)

@@ -83,6 +83,8 @@ class StageTrainConfig:
         flat = {k: d.pop(k) for k in list(d) if k in LOOP_FIELDS}
         nested = d.pop("loop", {})
         if flat and nested:
-            raise ValueError(f"the loop's settings are both under 'loop' and beside it ({', '.join(sorted(flat))}); "
-                             "give them in one place")
+            raise ValueError(
+                f"the loop's settings are both under 'loop' and beside it ({', '.join(sorted(flat))}); "
+                "give them in one place"
+            )
         return cls(**d, loop=LoopSettings(**{**asdict(cls().loop), **flat, **nested}))

@@ -28,9 +28,7 @@ import re
 import shutil
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable, Mapping
-
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable, Mapping
 
 from orbitmodel.config import Preset
 from orbitmodel.data import DatasetMeta, ValidationSplit
@@ -50,8 +48,12 @@ OWNED = (CONFIG, WEIGHTS, CHECKPOINTS, METRICS, TRAINING, TENSORBOARD)  # what -
 KEEP = 2  # checkpoints kept on disk
 # The ``stage`` of a config.json, and the command that makes each.
 WORLD_MODEL, PROBE, DEPTH_REFIT, POLICY = "world_model", "probe", "depth_refit", "policy"
-MAKES = {WORLD_MODEL: "orbitmodel train DATASET --out RUN", PROBE: "orbitmodel probe RUN DATASET",
-         DEPTH_REFIT: "orbitmodel depth RUN DATASET", POLICY: "orbitmodel train-policy DATASET --out RUN"}
+MAKES = {
+    WORLD_MODEL: "orbitmodel train DATASET --out RUN",
+    PROBE: "orbitmodel probe RUN DATASET",
+    DEPTH_REFIT: "orbitmodel depth RUN DATASET",
+    POLICY: "orbitmodel train-policy DATASET --out RUN",
+}
 
 
 REPO_ID = re.compile(r"^(?P<repo>[A-Za-z0-9][\w.-]*/[\w.-]+)(?:@(?P<revision>[\w./-]+))?$")  # owner/name[@rev]
@@ -65,6 +67,7 @@ def max_steps_of(config: dict) -> int:
 def extends(old: dict, new: dict) -> bool:
     """Whether ``new`` is ``old`` with a larger ``preset.train.loop.max_steps`` and nothing else
     changed (a run trained further, ``--resume --extend``); both as this version writes them."""
+
     def without_steps(config: dict) -> dict:
         preset = config.get("preset", {})
         train = preset.get("train", {})
@@ -103,8 +106,12 @@ def resolve_run(run: str | Path, revision: str | None = None) -> Path:
             raise RunError(f"revision={revision!r} is for a Hub repo id; {run} is a local path")
         return Path(run)
     from huggingface_hub import constants, snapshot_download
-    from huggingface_hub.errors import (HfHubHTTPError, LocalEntryNotFoundError, RepositoryNotFoundError,
-                                        RevisionNotFoundError)
+    from huggingface_hub.errors import (
+        HfHubHTTPError,
+        LocalEntryNotFoundError,
+        RepositoryNotFoundError,
+        RevisionNotFoundError,
+    )
 
     match = REPO_ID.match(str(run))
     repo = match["repo"]
@@ -115,14 +122,19 @@ def resolve_run(run: str | Path, revision: str | None = None) -> Path:
     try:
         return Path(snapshot_download(repo, revision=rev, repo_type="model"))
     except RevisionNotFoundError:
-        raise RunError(f"{where}: the model repo has no revision {rev!r}; give a branch, tag or commit it has") \
-            from None
+        raise RunError(
+            f"{where}: the model repo has no revision {rev!r}; give a branch, tag or commit it has"
+        ) from None
     except RepositoryNotFoundError:
-        raise RunError(f"{run} is neither a run folder here (no such path) nor a model repo on "
-                       f"{constants.ENDPOINT} (not found, or private without a token that may read it)") from None
+        raise RunError(
+            f"{run} is neither a run folder here (no such path) nor a model repo on "
+            f"{constants.ENDPOINT} (not found, or private without a token that may read it)"
+        ) from None
     except LocalEntryNotFoundError:
-        raise RunError(f"{run} is no run folder here (no such path), and as a Hub repo id it is not in the local "
-                       "Hugging Face cache while the Hub cannot be reached (offline mode, or no network)") from None
+        raise RunError(
+            f"{run} is no run folder here (no such path), and as a Hub repo id it is not in the local "
+            "Hugging Face cache while the Hub cannot be reached (offline mode, or no network)"
+        ) from None
     except HfHubHTTPError as err:
         status = err.response.status_code if err.response is not None else "?"
         raise RunError(f"the Hub refused {where} (HTTP {status}); check the repo id and your token") from None
@@ -158,8 +170,10 @@ class RunDir:
     def read_config(self) -> dict:
         path = self.path / CONFIG
         if self.path.is_file():
-            raise RunError(f"{self.path} is a file, not a run folder; give the folder that holds it"
-                           + (f" ({self.path.parent})" if self.path.name == CONFIG else ""))
+            raise RunError(
+                f"{self.path} is a file, not a run folder; give the folder that holds it"
+                + (f" ({self.path.parent})" if self.path.name == CONFIG else "")
+            )
         if not self.path.exists():
             raise RunError(f"{self.path} is not an orbitmodel run: no such folder")
         if not path.is_file():
@@ -194,16 +208,23 @@ class RunDir:
             if old != config and not (extend and extends(old, config)):
                 changed = sorted(k for k in set(old) | set(config) if old.get(k) != config.get(k))
                 if extend:
-                    raise RunError(f"--extend: {self.path} may differ from this run in a larger --max-steps only "
-                                   f"(differs in: {', '.join(changed)}); give the run's other settings")
-                raise RunError(f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
-                               "pass --overwrite to replace it, or choose another --out")
+                    raise RunError(
+                        f"--extend: {self.path} may differ from this run in a larger --max-steps only "
+                        f"(differs in: {', '.join(changed)}); give the run's other settings"
+                    )
+                raise RunError(
+                    f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
+                    "pass --overwrite to replace it, or choose another --out"
+                )
             if not resume:
-                raise RunError(f"{self.path} already holds this run; pass --resume to continue it, "
-                               "or --overwrite to start again")
+                raise RunError(
+                    f"{self.path} already holds this run; pass --resume to continue it, or --overwrite to start again"
+                )
             if extend and old == config and (self.path / WEIGHTS).exists():
-                raise RunError(f"--extend: {self.path} is already trained to its --max-steps {max_steps_of(config)}; "
-                               "give a larger --max-steps to train it on")
+                raise RunError(
+                    f"--extend: {self.path} is already trained to its --max-steps {max_steps_of(config)}; "
+                    "give a larger --max-steps to train it on"
+                )
         elif resume:
             raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
         elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):
@@ -225,15 +246,16 @@ class RunDir:
         tmp = root / f".{name}.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         tmp.mkdir()
-        save_file({k: v.detach().contiguous().cpu() for k, v in weights.items()}, tmp / WEIGHTS,
-                  metadata={"step": str(step)})
+        save_file(
+            {k: v.detach().contiguous().cpu() for k, v in weights.items()}, tmp / WEIGHTS, metadata={"step": str(step)}
+        )
         torch.save(state, tmp / STATE)
         shutil.rmtree(root / name, ignore_errors=True)
         os.replace(tmp, root / name)
         latest = root / LATEST
         (root / f".{LATEST}.tmp").write_text(name + "\n")
         os.replace(root / f".{LATEST}.tmp", latest)
-        for old in sorted(p for p in root.glob("step-*") if p.name != name)[:-(KEEP - 1) or None]:
+        for old in sorted(p for p in root.glob("step-*") if p.name != name)[: -(KEEP - 1) or None]:
             shutil.rmtree(old, ignore_errors=True)
 
     def latest_checkpoint(self) -> Checkpoint:
@@ -250,8 +272,10 @@ class RunDir:
             weights = load_file(folder / WEIGHTS)
             state = torch.load(folder / STATE, map_location="cpu", weights_only=True)
         except (OSError, SafetensorError, RuntimeError, EOFError) as err:
-            raise RunError(f"checkpoint {folder} is corrupt ({type(err).__name__}); delete it and "
-                           f"point {pointer} at an older one, or start again with --overwrite") from None
+            raise RunError(
+                f"checkpoint {folder} is corrupt ({type(err).__name__}); delete it and "
+                f"point {pointer} at an older one, or start again with --overwrite"
+            ) from None
         return Checkpoint(int(state["step"]), weights, state)
 
     def add_training_segment(self, segment: dict) -> None:
@@ -315,8 +339,11 @@ def upgrade_preset_config(old: dict, parse: Callable[[dict], object], builtins: 
         preset = parse(old["preset"])
         if preset.name in builtins:
             preset = replace(preset, description=builtins[preset.name]().description)
-        return {**old, "preset": preset.to_dict(),
-                "validation": ValidationSplit.from_dict(old.get("validation")).to_dict()}
+        return {
+            **old,
+            "preset": preset.to_dict(),
+            "validation": ValidationSplit.from_dict(old.get("validation")).to_dict(),
+        }
     except (KeyError, TypeError, ValueError):
         return old
 
@@ -356,8 +383,9 @@ def read_run_config(path: str | Path) -> RunConfig:
     raw = RunDir(path).read_config()
     stage = raw.get("stage", WORLD_MODEL)
     if stage != WORLD_MODEL:
-        raise RunError(f"{path} holds a {stage!r} run, not a Stage I world model; "
-                       f"give the folder of `{MAKES[WORLD_MODEL]}`")
+        raise RunError(
+            f"{path} holds a {stage!r} run, not a Stage I world model; give the folder of `{MAKES[WORLD_MODEL]}`"
+        )
     try:
         return RunConfig(Preset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
     except (KeyError, TypeError, ValueError) as err:
@@ -375,8 +403,10 @@ def local_run_folder(run: str | Path, what: str) -> Path:
     """``run`` as a local folder that ``what`` may write into; RunError for a Hub repo id (its
     downloaded copy in the cache is not ours to write to)."""
     if is_hub_run(run):
-        raise RunError(f"{run} is a Hub repo id and {what} writes into the run folder: download it first "
-                       f"(`hf download {str(run).split('@')[0]} --local-dir DIR`) and give DIR")
+        raise RunError(
+            f"{run} is a Hub repo id and {what} writes into the run folder: download it first "
+            f"(`hf download {str(run).split('@')[0]} --local-dir DIR`) and give DIR"
+        )
     return Path(run)
 
 
@@ -384,6 +414,7 @@ def check_image_size(meta: DatasetMeta, size: int, user: str, resize: bool = Fal
     """RunError unless the dataset ``meta`` holds the ``size`` px images that ``user`` (a run or a
     preset, named in the message) takes; ``resize`` names the --resize way out too."""
     if meta.image_size != size:
-        raise RunError(f"{user} takes {size} px images but {meta.source} holds {meta.image_size} px; use a dataset "
-                       f"generated with `orbitdata generate DIR --image-size {size}`"
-                       + (", or pass --resize" if resize else ""))
+        raise RunError(
+            f"{user} takes {size} px images but {meta.source} holds {meta.image_size} px; use a dataset "
+            f"generated with `orbitdata generate DIR --image-size {size}`" + (", or pass --resize" if resize else "")
+        )

@@ -31,14 +31,26 @@ def read_points(folder: Path) -> list[dict]:
         ev, fly = snap / "eval_val.json", snap / "fly.json"
         if ev.is_file() and ev.stat().st_size:
             e = json.loads(ev.read_text())
-            point.update(split=e["split"], mse=e["policy"], mean_action_mse=e["mean_action"], ratio=e["ratio"],
-                         bands={(f"> {b['from_m']:g}" if b["to_m"] is None else f"{b['from_m']:g}-{b['to_m']:g}"): b["ratio"]
-                                for b in e["per_band"]})
+            point.update(
+                split=e["split"],
+                mse=e["policy"],
+                mean_action_mse=e["mean_action"],
+                ratio=e["ratio"],
+                bands={
+                    (f"> {b['from_m']:g}" if b["to_m"] is None else f"{b['from_m']:g}-{b['to_m']:g}"): b["ratio"]
+                    for b in e["per_band"]
+                },
+            )
         if fly.is_file():
             f = json.loads(fly.read_text())
             k, n = report_totals(f)
-            point.update(success=k, episodes=n, success_ci=list(wilson(k, n)), flight_seed=f["seed"],
-                         settings=[(s["obstacles"], s["speed"]) for s in f["settings"]])
+            point.update(
+                success=k,
+                episodes=n,
+                success_ci=list(wilson(k, n)),
+                flight_seed=f["seed"],
+                settings=[(s["obstacles"], s["speed"]) for s in f["settings"]],
+            )
         if len(point) > 1:
             points.append(point)
     return points
@@ -49,13 +61,19 @@ def main(argv=None) -> int:
     parser.add_argument("snapshots", type=Path, help="folder of step-N snapshot runs")
     parser.add_argument("--out", type=Path, required=True, help="PNG to write")
     parser.add_argument("--json", type=Path, help="write the points here too")
-    parser.add_argument("--mark", type=int, action="append", default=[],
-                        help="a dotted line at this step, e.g. where the run was trained on (--resume --extend)")
+    parser.add_argument(
+        "--mark",
+        type=int,
+        action="append",
+        default=[],
+        help="a dotted line at this step, e.g. where the run was trained on (--resume --extend)",
+    )
     args = parser.parse_args(argv)
     points = read_points(args.snapshots)
     if not points:
-        print(f"error: no step-N folder in {args.snapshots} holds eval_val.json or fly.json; see --help",
-              file=sys.stderr)
+        print(
+            f"error: no step-N folder in {args.snapshots} holds eval_val.json or fly.json; see --help", file=sys.stderr
+        )
         return 2
     from orbitmodel.extras import pyplot
 
@@ -76,9 +94,13 @@ def main(argv=None) -> int:
         low = [r - 100 * p["success_ci"][0] for r, p in zip(rate, fly)]
         high = [100 * p["success_ci"][1] - r for r, p in zip(rate, fly)]
         b.errorbar(steps, rate, yerr=[low, high], fmt="o-", color="C3", capsize=3)
-        b.set(xlabel="training step", ylabel="success %, 95 % CI", ylim=(0, 100),
-              title=f"closed loop: {'/'.join(sorted({str(n) for n, _ in fly[0]['settings']}))} obstacle(s), "
-                    f"{fly[0]['episodes']} episodes, seed {fly[0]['flight_seed']}")
+        b.set(
+            xlabel="training step",
+            ylabel="success %, 95 % CI",
+            ylim=(0, 100),
+            title=f"closed loop: {'/'.join(sorted({str(n) for n, _ in fly[0]['settings']}))} obstacle(s), "
+            f"{fly[0]['episodes']} episodes, seed {fly[0]['flight_seed']}",
+        )
     for axis in (a, b):
         for step in args.mark:
             axis.axvline(step, color="grey", ls=":", lw=1)
@@ -88,8 +110,11 @@ def main(argv=None) -> int:
     if args.json:
         args.json.write_text(json.dumps(points, indent=2) + "\n")
     for p in points:
-        print(p["step"], *(f"{k}={p[k]:.3f}" for k in ("ratio",) if k in p),
-              *(f"success={p['success']}/{p['episodes']}",) if "success" in p else ())
+        print(
+            p["step"],
+            *(f"{k}={p[k]:.3f}" for k in ("ratio",) if k in p),
+            *(f"success={p['success']}/{p['episodes']}",) if "success" in p else (),
+        )
     return 0
 
 

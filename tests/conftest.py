@@ -60,4 +60,3 @@ def hub_client(hub, monkeypatch, tmp_path):
     monkeypatch.setattr(constants, "HF_HUB_CACHE", str(tmp_path / "hf-cache"))
     monkeypatch.setenv("HF_TOKEN", TOKEN)
     return hub
-

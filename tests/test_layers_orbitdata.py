@@ -24,9 +24,30 @@ from pathlib import Path
 import orbitdata
 
 ROOT = Path(orbitdata.__file__).parent
-RANK = {"version": 0, "lazy": 0, "schema": 0, "seeding": 0, "cards": 0, "state": 1, "codecs": 1, "scenario": 2,
-        "sim": 3, "fly": 4, "config": 5, "info": 6, "load.source": 7, "load.rows": 7, "write": 8, "validate": 9,
-        "publish": 10, "load": 11, "viz": 12, "cli": 13, "__main__": 14, "__init__": 14}
+RANK = {
+    "version": 0,
+    "lazy": 0,
+    "schema": 0,
+    "seeding": 0,
+    "cards": 0,
+    "state": 1,
+    "codecs": 1,
+    "scenario": 2,
+    "sim": 3,
+    "fly": 4,
+    "config": 5,
+    "info": 6,
+    "load.source": 7,
+    "load.rows": 7,
+    "write": 8,
+    "validate": 9,
+    "publish": 10,
+    "load": 11,
+    "viz": 12,
+    "cli": 13,
+    "__main__": 14,
+    "__init__": 14,
+}
 MODULE_PATH = re.compile(r"^orbitdata(\.\w+)+$")
 
 
@@ -65,8 +86,12 @@ def imported(path: Path, name: str | None = None) -> list[tuple[int, str]]:
                 base = ".".join(anchor + ([base] if base else []))
             # from orbitdata.write import parts: the module parts; from orbitdata.load import read_info: the package
             out += [(node.lineno, f"{base}.{a.name}" if is_module(f"{base}.{a.name}") else base) for a in node.names]
-        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and MODULE_PATH.match(node.value) \
-                and is_module(node.value):  # an entry point group such as "orbitdata.pilots" is no module
+        elif (
+            isinstance(node, ast.Constant)
+            and isinstance(node.value, str)
+            and MODULE_PATH.match(node.value)
+            and is_module(node.value)
+        ):  # an entry point group such as "orbitdata.pilots" is no module
             out.append((node.lineno, node.value))
     return sorted({(line, m) for line, m in out if m == "orbitdata" or m.startswith("orbitdata.")})
 
@@ -145,7 +170,8 @@ def test_no_import_cycle():
     # Every module of a group that a cycle goes through, so that one report shows the whole tangle.
     within = [sorted(m for m in graph if _reaches(graph, m, c[0]) and _reaches(graph, c[0], m)) for c in cycles]
     assert not cycles, "import cycles:\n" + "\n".join(
-        f"{' -> '.join(c)} (the circle holds {', '.join(group)})" for c, group in zip(cycles, within))
+        f"{' -> '.join(c)} (the circle holds {', '.join(group)})" for c, group in zip(cycles, within)
+    )
 
 
 def _reaches(graph: dict[str, set[str]], a: str, b: str) -> bool:
@@ -165,12 +191,18 @@ def test_the_check_sees_lazy_relative_and_string_imports(tmp_path):
     ``from`` import and an importlib path in a table all count (a file standing in for a module of
     the fly package); a dotted string that names no module does not."""
     example = tmp_path / "example.py"
-    example.write_text('def f():\n    from orbitdata.write.generate import generate\n\n'
-                       'from ..load import source\nfrom orbitdata import schema as S\n'
-                       'TABLE = {"x": "orbitdata.viz.overview", "group": "orbitdata.pilots"}\n')
+    example.write_text(
+        "def f():\n    from orbitdata.write.generate import generate\n\n"
+        "from ..load import source\nfrom orbitdata import schema as S\n"
+        'TABLE = {"x": "orbitdata.viz.overview", "group": "orbitdata.pilots"}\n'
+    )
     found = [m for _, m in imported(example, "orbitdata.fly.example")]
-    assert sorted(found) == ["orbitdata.load.source", "orbitdata.schema", "orbitdata.viz.overview",
-                             "orbitdata.write.generate"]
+    assert sorted(found) == [
+        "orbitdata.load.source",
+        "orbitdata.schema",
+        "orbitdata.viz.overview",
+        "orbitdata.write.generate",
+    ]
     assert unit_of("orbitdata.load.source") == "load.source" and unit_of("orbitdata.load.windows") == "load"
 
 

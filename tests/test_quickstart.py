@@ -27,17 +27,24 @@ def quickstart_block(readme: str) -> str:
 def test_the_readme_names_the_six_steps():
     commands = [line.split("#")[0].split() for line in quickstart_block((ROOT / "README.md").read_text()).splitlines()]
     steps = [c[:3] if c[:2] == ["orbitmodel", "eval"] else c[:2] for c in commands if c]
-    assert steps == [["source", ".venv/bin/activate"], ["orbitdata", "generate"], ["orbitmodel", "train"],
-                     ["orbitmodel", "probe"], ["orbitmodel", "depth"], ["orbitmodel", "eval", "closed-loop"],
-                     ["orbitmodel", "eval", "table"]]
+    assert steps == [
+        ["source", ".venv/bin/activate"],
+        ["orbitdata", "generate"],
+        ["orbitmodel", "train"],
+        ["orbitmodel", "probe"],
+        ["orbitmodel", "depth"],
+        ["orbitmodel", "eval", "closed-loop"],
+        ["orbitmodel", "eval", "table"],
+    ]
 
 
 def test_the_quick_start_runs_as_written(tmp_path):
     block = quickstart_block((ROOT / "README.md").read_text())
     (tmp_path / ".venv").symlink_to(Path(sys.prefix))  # the README activates ./.venv: this one
     env = {k: v for k, v in os.environ.items() if not k.startswith("HF_")} | {"HF_HUB_OFFLINE": "1"}
-    res = subprocess.run(["bash", "-euo", "pipefail", "-c", block], cwd=tmp_path, env=env, capture_output=True,
-                         text=True, timeout=900)
+    res = subprocess.run(
+        ["bash", "-euo", "pipefail", "-c", block], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=900
+    )
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
     assert (tmp_path / "toy" / "meta" / "info.json").is_file()
     for part in ("model.safetensors", "probe/model.safetensors", "depth/model.safetensors"):

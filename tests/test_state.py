@@ -4,8 +4,20 @@ import numpy as np
 import pytest
 
 from orbitdata import schema as S
-from orbitdata.state import (ANGULAR_VELOCITY, FUEL, POSITION, ROT6D, STATE_NAMES, STATE_SLICES, VELOCITY,
-                             matrix_to_rot6d, quat_to_matrix, rot6d_to_matrix, so3_exp, so3_log)
+from orbitdata.state import (
+    ANGULAR_VELOCITY,
+    FUEL,
+    POSITION,
+    ROT6D,
+    STATE_NAMES,
+    STATE_SLICES,
+    VELOCITY,
+    matrix_to_rot6d,
+    quat_to_matrix,
+    rot6d_to_matrix,
+    so3_exp,
+    so3_log,
+)
 
 
 def random_rotvecs(n: int, seed: int = 0, max_angle: float = np.pi) -> np.ndarray:

@@ -8,7 +8,13 @@ def tiny_config(episodes: int = 6, seed: int = 0, **dataset):
 
     cfg = GenerationConfig()
     return cfg.replace(
-        dataset={"episodes": episodes, "seed": seed, "test_fraction": 0.34, "episodes_per_unit": 2,
-                 "row_group_rows": 64, **dataset},
+        dataset={
+            "episodes": episodes,
+            "seed": seed,
+            "test_fraction": 0.34,
+            "episodes_per_unit": 2,
+            "row_group_rows": 64,
+            **dataset,
+        },
         sim={"camera": cfg.sim.camera.__class__(image_size=64)},
     )

@@ -32,8 +32,7 @@ def _numbers(kind, flag: str):
         try:
             values = [kind(x) for x in text.split(",") if x.strip()]
         except ValueError:
-            raise typer.BadParameter(f"{text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5") \
-                from None
+            raise typer.BadParameter(f"{text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5") from None
         if not values:
             raise typer.BadParameter(f"empty: the grid needs at least one value, e.g. {flag} 1,3,5")
         return values
@@ -45,29 +44,50 @@ def register(app: typer.Typer) -> None:
     @app.command()
     @friendly
     def fly(
-        pilot: str = typer.Option("expert", parser=_pilot, help=f"Who flies: {', '.join(list_pilots())}, or any "
-                                  f"pilot an installed package registers (entry points '{ENTRY_POINT_GROUP}')."),
-        obstacles: str = typer.Option("1,3,5", parser=_numbers(int, "--obstacles"),
-                                      help="Obstacle counts, comma-separated."),
-        speeds: str = typer.Option("1,2", parser=_numbers(float, "--speeds"),
-                                   help="Initial speeds in m/s, comma-separated."),
+        pilot: str = typer.Option(
+            "expert",
+            parser=_pilot,
+            help=f"Who flies: {', '.join(list_pilots())}, or any "
+            f"pilot an installed package registers (entry points '{ENTRY_POINT_GROUP}').",
+        ),
+        obstacles: str = typer.Option(
+            "1,3,5", parser=_numbers(int, "--obstacles"), help="Obstacle counts, comma-separated."
+        ),
+        speeds: str = typer.Option(
+            "1,2", parser=_numbers(float, "--speeds"), help="Initial speeds in m/s, comma-separated."
+        ),
         episodes: int = typer.Option(20, min=1, help="Episodes per setting."),
         seed: int = typer.Option(0, min=0, help="Root seed of the grid."),
         json_out: Path = typer.Option(None, "--json", help="Write the table as JSON here."),
         video: Path = typer.Option(None, help="Write a video of each episode to this folder."),
         video_format: VideoFormat = typer.Option(VideoFormat.mp4, help="Video format."),
-        render: bool = typer.Option(None, "--render/--no-render", show_default=False,
-                                    help="Render the camera [default: when the pilot needs images or --video]."),
-        image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
-                                       help="Camera image size in pixels, a multiple of 16."),
-        thrust_noise: float = typer.Option(0.0, min=0.0, help="Add Gaussian noise of this sigma (normalised "
-                                           "thrust) to every action the pilot takes."),
-        noise_hold: int = typer.Option(1, min=1, help="Redraw the thrust noise every N control steps (8: held per "
-                                       "action chunk) [default: every step]."),
-        image_codec: bool = typer.Option(False, "--image-codec/--raw-images",
-                                         help="Hand the pilot its camera through the dataset's JPEG codec (the "
-                                              "config's quality), as the dataset stores it [default: raw renders, unless the pilot asks "
-                                              "for the codec, as a policy's flight preset does]."),
+        render: bool = typer.Option(
+            None,
+            "--render/--no-render",
+            show_default=False,
+            help="Render the camera [default: when the pilot needs images or --video].",
+        ),
+        image_size: int = typer.Option(
+            None,
+            min=16,
+            show_default=str(CameraConfig.image_size),
+            help="Camera image size in pixels, a multiple of 16.",
+        ),
+        thrust_noise: float = typer.Option(
+            0.0, min=0.0, help="Add Gaussian noise of this sigma (normalised thrust) to every action the pilot takes."
+        ),
+        noise_hold: int = typer.Option(
+            1,
+            min=1,
+            help="Redraw the thrust noise every N control steps (8: held per action chunk) [default: every step].",
+        ),
+        image_codec: bool = typer.Option(
+            False,
+            "--image-codec/--raw-images",
+            help="Hand the pilot its camera through the dataset's JPEG codec (the "
+            "config's quality), as the dataset stores it [default: raw renders, unless the pilot asks "
+            "for the codec, as a policy's flight preset does].",
+        ),
         config: Path = typer.Option(None, help="TOML config (scenario/sim/pilots settings)."),
         pilot_option: list[str] = typer.Option([], help="KEY=VALUE passed to the pilot's factory (repeatable)."),
     ):
@@ -104,8 +124,9 @@ def register(app: typer.Typer) -> None:
             recorder = FlightVideos(video, f".{video_format.value}")
         total = len(obstacles) * len(speeds) * episodes
         console = Console(stderr=True)
-        with Progress(TextColumn(f"[bold]fly {pilot}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                      console=console) as bar:
+        with Progress(
+            TextColumn(f"[bold]fly {pilot}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(), console=console
+        ) as bar:
             task = bar.add_task("fly", total=total)
 
             def on_episode(cell, k, result):
@@ -113,20 +134,41 @@ def register(app: typer.Typer) -> None:
                     recorder.episode(cell, k, result)
                 bar.advance(task)
 
-            cells = fly_grid(lambda _config: built, obstacles, speeds, episodes, seed, cfg.flight, render=render,
-                             frame_sink=None if recorder is None else recorder.frame, on_episode=on_episode,
-                             image_quality=cfg.dataset.jpeg_quality if image_codec else None,
-                             thrust_noise=thrust_noise, noise_hold=noise_hold)
+            cells = fly_grid(
+                lambda _config: built,
+                obstacles,
+                speeds,
+                episodes,
+                seed,
+                cfg.flight,
+                render=render,
+                frame_sink=None if recorder is None else recorder.frame,
+                on_episode=on_episode,
+                image_quality=cfg.dataset.jpeg_quality if image_codec else None,
+                thrust_noise=thrust_noise,
+                noise_hold=noise_hold,
+            )
         table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
         for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
             table.add_column(col, justify="right")
         for c in cells:
-            table.add_row(str(c.obstacles), f"{c.speed:g}", str(c.success), str(c.collision), str(c.timeout),
-                          str(c.out_of_fuel), f"{100 * c.success_rate:.0f}")
+            table.add_row(
+                str(c.obstacles),
+                f"{c.speed:g}",
+                str(c.success),
+                str(c.collision),
+                str(c.timeout),
+                str(c.out_of_fuel),
+                f"{100 * c.success_rate:.0f}",
+            )
         Console().print(table)
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             name = f"{pilot}+noise{thrust_noise:g}x{noise_hold}" if thrust_noise else pilot  # ThrustNoise's name
-            flight = {"pilot_options": options, "image_codec": image_codec, "thrust_noise": thrust_noise,
-                      "noise_hold": noise_hold}
+            flight = {
+                "pilot_options": options,
+                "image_codec": image_codec,
+                "thrust_noise": thrust_noise,
+                "noise_hold": noise_hold,
+            }
             json_out.write_text(json.dumps(grid_report(name, seed, cells, flight), indent=2) + "\n")

@@ -43,18 +43,27 @@ def register(app: typer.Typer) -> None:
     @friendly
     def generate(
         out: Path = typer.Argument(..., help="Output folder (a Hugging Face dataset layout)."),
-        episodes: int = typer.Option(None, min=1, show_default=str(DatasetConfig.episodes),
-                                     help="Number of episodes."),
-        test_fraction: float = typer.Option(None, min=0.0, max=1.0, show_default=str(DatasetConfig.test_fraction),
-                                            help="Share of each level in the test split, below 1."),
-        image_size: int = typer.Option(None, min=16, show_default=str(CameraConfig.image_size),
-                                       help="Square image size in pixels, a multiple of 16."),
+        episodes: int = typer.Option(None, min=1, show_default=str(DatasetConfig.episodes), help="Number of episodes."),
+        test_fraction: float = typer.Option(
+            None,
+            min=0.0,
+            max=1.0,
+            show_default=str(DatasetConfig.test_fraction),
+            help="Share of each level in the test split, below 1.",
+        ),
+        image_size: int = typer.Option(
+            None,
+            min=16,
+            show_default=str(CameraConfig.image_size),
+            help="Square image size in pixels, a multiple of 16.",
+        ),
         seed: int = typer.Option(None, min=0, show_default=str(DatasetConfig.seed), help="Root seed."),
         workers: int = typer.Option(0, min=0, help="Worker processes; 0 = all cores."),
         executor: Executor = typer.Option(Executor.local, help="Process pool here, or Ray tasks."),
         ray_address: str = typer.Option(None, help="Ray cluster address (with --executor ray)."),
-        max_shard_mb: int = typer.Option(None, min=1, show_default=str(DatasetConfig.max_shard_bytes // MB),
-                                         help="Max data shard size in MB."),
+        max_shard_mb: int = typer.Option(
+            None, min=1, show_default=str(DatasetConfig.max_shard_bytes // MB), help="Max data shard size in MB."
+        ),
         config: Path = typer.Option(None, help="TOML file with any scenario/sim/pilots/dataset setting."),
         overwrite: bool = typer.Option(False, help="Replace a dataset generated with a different config."),
         repo_id: str = typer.Option(None, help="Repo id to show in the card's loading snippet."),
@@ -72,8 +81,12 @@ def register(app: typer.Typer) -> None:
 
         with usage_errors():
             cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
-            flags = {"episodes": episodes, "test_fraction": test_fraction, "seed": seed,
-                     "max_shard_bytes": None if max_shard_mb is None else max_shard_mb * MB}
+            flags = {
+                "episodes": episodes,
+                "test_fraction": test_fraction,
+                "seed": seed,
+                "max_shard_bytes": None if max_shard_mb is None else max_shard_mb * MB,
+            }
             dataset = {key: value for key, value in flags.items() if value is not None}
             if dataset:
                 cfg = cfg.replace(dataset=dataset)
@@ -97,17 +110,30 @@ def register(app: typer.Typer) -> None:
             if not console.is_terminal and step > last_logged[0]:
                 last_logged[0] = step
                 eta = (p.episodes_total - p.episodes_done) / max(eps, 1e-9)
-                console.print(f"generate: {p.episodes_done}/{p.episodes_total} episodes, {eps:.2f} ep/s, "
-                              f"{fps:.0f} frames/s, ETA {eta:.0f} s", highlight=False)
+                console.print(
+                    f"generate: {p.episodes_done}/{p.episodes_total} episodes, {eps:.2f} ep/s, "
+                    f"{fps:.0f} frames/s, ETA {eta:.0f} s",
+                    highlight=False,
+                )
 
         with bar, usage_errors(UnusableOutput):  # OUT is a file, holds something else, or is read-only
-            info = run(out, cfg, workers=workers, executor=executor.value, ray_address=ray_address,
-                       overwrite=overwrite, progress=report, repo_id=repo_id, figure=overview_figure)
+            info = run(
+                out,
+                cfg,
+                workers=workers,
+                executor=executor.value,
+                ray_address=ray_address,
+                overwrite=overwrite,
+                progress=report,
+                repo_id=repo_id,
+                figure=overview_figure,
+            )
             bar.update(task, completed=cfg.dataset.episodes)
         typer.echo(f"wrote {info.counts['episodes']} episodes ({info.counts['frames']} frames) to {out}")
         if "test" not in info.counts["splits"] and cfg.dataset.test_fraction > 0:
-            typer.echo("note: no test split: one episode is all train; pass --episodes 2 or more for a test split",
-                       err=True)
+            typer.echo(
+                "note: no test split: one episode is all train; pass --episodes 2 or more for a test split", err=True
+            )
 
     @app.command()
     @friendly
@@ -124,7 +150,8 @@ def register(app: typer.Typer) -> None:
         with usage_errors(FileNotFoundError, NotADirectoryError):
             folder = local_folder(folder, repo_ok=False)
         with usage_errors(NoDataset):
-            info = finalize(folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
-                            figure=overview_figure)
+            info = finalize(
+                folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB, figure=overview_figure
+            )
         shards = [rel for rel in info.files if S.SHARD_RE.match(rel)]
         typer.echo(f"sharded {info.counts['episodes']} episodes into {len(shards)} files in {folder}")

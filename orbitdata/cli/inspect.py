@@ -43,8 +43,9 @@ def _counts_table(s: dict) -> Table:
     def row(split, level, c, style=None):
         n = c["episodes"]
         rate = f"{100 * c['outcomes'].get('success', 0) / n:.1f}" if n else "-"
-        t.add_row(split, level, str(n), str(c["frames"]), *(str(c["outcomes"].get(o, 0)) for o in OUTCOMES), rate,
-                  style=style)
+        t.add_row(
+            split, level, str(n), str(c["frames"]), *(str(c["outcomes"].get(o, 0)) for o in OUTCOMES), rate, style=style
+        )
 
     totals = {"episodes": 0, "frames": 0, "outcomes": {o: 0 for o in OUTCOMES}}
     splits = s["counts"].get("splits", {})
@@ -73,8 +74,13 @@ def _lengths_table(s: dict) -> Table:
     groups += [(f"outcome {k}", v, lengths["histogram"]["by_outcome"].get(k)) for k, v in lengths["by_outcome"].items()]
     groups.append(("all", lengths["all"], [sum(x) for x in zip(*lengths["histogram"]["by_level"].values())]))
     for name, st, hist in groups:
-        t.add_row(name, str(st["episodes"]), *(_value(st[k]) for k in ("min", "p10", "median", "mean", "p90", "max")),
-                  f"[cyan]{_spark(hist)}[/cyan]" if hist else "", style="bold" if name == "all" else None)
+        t.add_row(
+            name,
+            str(st["episodes"]),
+            *(_value(st[k]) for k in ("min", "p10", "median", "mean", "p90", "max")),
+            f"[cyan]{_spark(hist)}[/cyan]" if hist else "",
+            style="bold" if name == "all" else None,
+        )
     return t
 
 
@@ -110,8 +116,10 @@ def _params_table(s: dict) -> Table:
 
 def print_summary(s: dict, console: Console) -> None:
     console.print(f"[bold]{escape(s['source'])}[/bold]")
-    console.print(f"schema {s['schema_version']} · {s['codebase_version']} · {s['fps']} fps (dt {s['dt']} s) · "
-                  f"{s['image_size']} px camera · root seed {s['root_seed']}")
+    console.print(
+        f"schema {s['schema_version']} · {s['codebase_version']} · {s['fps']} fps (dt {s['dt']} s) · "
+        f"{s['image_size']} px camera · root seed {s['root_seed']}"
+    )
     console.print(f"{s['episodes']} episodes · {s['steps']} steps · {_bytes(s['sizes']['total'])}\n")
     for table in (_counts_table(s), _lengths_table(s), _sizes_table(s), _params_table(s)):
         console.print(table)
@@ -145,8 +153,12 @@ def register(app: typer.Typer) -> None:
     @friendly
     def show(
         folder: Path = typer.Argument(..., help="A dataset folder made by `orbitdata generate`."),
-        episode: int = typer.Option(None, "--episode", "-e", help="Episode index (episode_index, unique across splits)."),
-        out: Path = typer.Option(..., "--out", "-o", help="FILE.mp4 or FILE.gif (a video) or FILE.png (a contact sheet)."),
+        episode: int = typer.Option(
+            None, "--episode", "-e", help="Episode index (episode_index, unique across splits)."
+        ),
+        out: Path = typer.Option(
+            ..., "--out", "-o", help="FILE.mp4 or FILE.gif (a video) or FILE.png (a contact sheet)."
+        ),
         fps: float = typer.Option(float(FPS), help=f"Video frame rate; the data is {FPS} fps (real time)."),
     ):
         """Render one episode: camera and depth, top and side views of the path, speed, clearance, thrust, fuel.

@@ -30,7 +30,8 @@ def register(app: typer.Typer) -> None:
         command again to resume an interrupted push: files already on the Hub are skipped.
         """
         from orbitdata.load.source import check_repo_id, dataset_folder
-        from orbitdata.publish import PushRefused, preview, push as run
+        from orbitdata.publish import PushRefused, preview
+        from orbitdata.publish import push as run
         from orbitdata.validate import ValidateOptions, validate
 
         with usage_errors(ValueError, FileNotFoundError, NotADirectoryError):
@@ -40,8 +41,10 @@ def register(app: typer.Typer) -> None:
 
         report = validate(folder, ValidateOptions(quick=True))
         verdict = "valid" if report.ok else f"INVALID ({', '.join(report.failed())})"
-        typer.echo(f"validate --quick: {verdict} [{report.files} files, {report.episodes} episodes, "
-                   f"{report.frames} frames, {report.seconds:.1f} s]")
+        typer.echo(
+            f"validate --quick: {verdict} [{report.files} files, {report.episodes} episodes, "
+            f"{report.frames} frames, {report.seconds:.1f} s]"
+        )
         if not report.ok:
             typer.echo(report.render())
             if not force:
@@ -51,8 +54,10 @@ def register(app: typer.Typer) -> None:
 
         if dry_run:
             plan = preview(folder)
-            typer.echo(f"\ndry run: would push {len(plan.files)} files ({_size(plan.bytes)}) to dataset "
-                       f"{repo_id} (revision {revision or 'main'}{', private' if private else ''}):")
+            typer.echo(
+                f"\ndry run: would push {len(plan.files)} files ({_size(plan.bytes)}) to dataset "
+                f"{repo_id} (revision {revision or 'main'}{', private' if private else ''}):"
+            )
             width = max(len(f.rel) for f in plan.files)
             for f in plan.files:
                 typer.echo(f"  {f.rel:<{width}}  {_size(f.bytes):>10}")
@@ -65,9 +70,11 @@ def register(app: typer.Typer) -> None:
         except PushRefused as exc:  # validated above already; kept for API parity
             fail(str(exc))
         n = len(result.uploaded)
-        typer.echo(f"pushed {n} file(s) ({_size(result.bytes)}) in {len(result.commits)} commit(s) to "
-                   f"{result.repo_url} (revision {result.revision}); {len(result.unchanged)} unchanged, "
-                   f"{len(result.deleted)} stale file(s) deleted")
+        typer.echo(
+            f"pushed {n} file(s) ({_size(result.bytes)}) in {len(result.commits)} commit(s) to "
+            f"{result.repo_url} (revision {result.revision}); {len(result.unchanged)} unchanged, "
+            f"{len(result.deleted)} stale file(s) deleted"
+        )
         rev = "" if result.revision == "main" else f", revision={result.revision!r}"
         repo = result.repo_id
         typer.echo(f'load it with: load_dataset("{repo}"{rev}) and load_dataset("{repo}", "episodes"{rev})')

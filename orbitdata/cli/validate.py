@@ -18,8 +18,14 @@ def _progress():
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    bar = Progress(TextColumn("[bold]validate {task.fields[phase]}"), BarColumn(), MofNCompleteColumn(),
-                   TimeElapsedColumn(), console=Console(stderr=True), transient=True)
+    bar = Progress(
+        TextColumn("[bold]validate {task.fields[phase]}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=Console(stderr=True),
+        transient=True,
+    )
     task = bar.add_task("validate", total=None, phase="")
 
     def update(phase: str, done: int, total: int) -> None:
@@ -45,7 +51,8 @@ def register(app: typer.Typer) -> None:
         2 usage error.
         """
         from orbitdata.load.source import local_folder
-        from orbitdata.validate import ValidateOptions, validate as run
+        from orbitdata.validate import ValidateOptions
+        from orbitdata.validate import validate as run
 
         with usage_errors(FileNotFoundError, NotADirectoryError):
             folder = local_folder(folder.expanduser(), repo_ok=False)

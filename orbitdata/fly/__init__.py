@@ -12,8 +12,10 @@ from orbitdata.lazy import lazy_getattr
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("Pilot", "Task"), "orbitdata.fly.pilot"),
     **dict.fromkeys(("FlightConfig",), "orbitdata.fly.config"),
-    **dict.fromkeys(("ENTRY_POINT_GROUP", "PilotFactory", "list_pilots", "make_pilot", "pilot_factory",
-                     "register_pilot"), "orbitdata.fly.registry"),
+    **dict.fromkeys(
+        ("ENTRY_POINT_GROUP", "PilotFactory", "list_pilots", "make_pilot", "pilot_factory", "register_pilot"),
+        "orbitdata.fly.registry",
+    ),
     **dict.fromkeys(("EpisodeResult", "fly_episode"), "orbitdata.fly.rollout"),
     **dict.fromkeys(("CellResult", "fly_grid", "grid_report"), "orbitdata.fly.grid"),
 }

@@ -107,8 +107,9 @@ def fly_grid(
             for v in speeds:
                 cell = CellResult(obstacles=n, speed=float(v), episodes=episodes)
                 for k in range(episodes):
-                    result = fly_episode(env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink,
-                                         image_quality=image_quality)
+                    result = fly_episode(
+                        env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink, image_quality=image_quality
+                    )
                     cell.add(result.outcome)
                     if on_episode:
                         on_episode(cell, k, result)
@@ -126,8 +127,7 @@ def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | N
         "seed": seed,
         **({"flight": flight} if flight is not None else {}),
         "settings": [
-            {"obstacles": c.obstacles, "speed": c.speed, "episodes": c.episodes,
-             **{o: getattr(c, o) for o in OUTCOMES}}
+            {"obstacles": c.obstacles, "speed": c.speed, "episodes": c.episodes, **{o: getattr(c, o) for o in OUTCOMES}}
             for c in cells
         ],
     }

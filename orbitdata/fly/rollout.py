@@ -79,8 +79,9 @@ def fly_episode(
     :func:`pilot_view`); the recorded frames stay the raw renders."""
     options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
     if pilot.needs_images and not env.sim.render:
-        raise ValueError(f"pilot {pilot.name!r} needs camera images, but the env does not render: "
-                         "use SimConfig(render=True)")
+        raise ValueError(
+            f"pilot {pilot.name!r} needs camera images, but the env does not render: use SimConfig(render=True)"
+        )
     obs, info = env.reset(seed=seed, options=options)
     scn = env.scenario
     task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)

@@ -50,8 +50,18 @@ _LAZY = {  # name -> the module that defines it
 }
 
 __getattr__ = lazy_getattr(__name__, _LAZY)
-__all__ = ["load_windows", "read_meta", "read_info", "Info", "HubUnavailable", "dataset_folder", "is_repo_id",
-           "WindowConfig", "IS_PAD", *_LAZY]
+__all__ = [
+    "load_windows",
+    "read_meta",
+    "read_info",
+    "Info",
+    "HubUnavailable",
+    "dataset_folder",
+    "is_repo_id",
+    "WindowConfig",
+    "IS_PAD",
+    *_LAZY,
+]
 
 
 def load_windows(
@@ -105,10 +115,18 @@ def load_windows(
     from orbitdata.load.windows import WindowDataset
 
     if not streaming and (shuffle_buffer or seed):
-        raise ValueError("shuffle_buffer/seed are for streaming=True; "
-                         "shuffle a map-style dataset with ds.sampler(seed=...)")
-    config = WindowConfig(context=context, horizon=horizon, stride=stride, pad=pad, image_size=image_size,
-                          columns=None if columns is None else tuple(columns), context_only=tuple(context_only))
+        raise ValueError(
+            "shuffle_buffer/seed are for streaming=True; shuffle a map-style dataset with ds.sampler(seed=...)"
+        )
+    config = WindowConfig(
+        context=context,
+        horizon=horizon,
+        stride=stride,
+        pad=pad,
+        image_size=image_size,
+        columns=None if columns is None else tuple(columns),
+        context_only=tuple(context_only),
+    )
     try:  # checks the schema version before anything is read
         read_info(source, load_dataset_kwargs.get("revision"), load_dataset_kwargs.get("token"))
     except HubUnavailable:
@@ -131,6 +149,11 @@ def load_windows(
     if config.columns is not None:
         steps = load_steps(source, split, True, load_dataset_kwargs, columns=wanted)
     return StreamingWindowDataset(
-        steps, config, episodes=None if keep is None else keep.tolist(),
-        lengths=dict(zip(ids.tolist(), lengths.tolist())), shuffle_buffer=shuffle_buffer, seed=seed, where=where,
+        steps,
+        config,
+        episodes=None if keep is None else keep.tolist(),
+        lengths=dict(zip(ids.tolist(), lengths.tolist())),
+        shuffle_buffer=shuffle_buffer,
+        seed=seed,
+        where=where,
     )

@@ -59,9 +59,13 @@ class WindowConfig:
             raise ValueError(f"context_only={self.context_only!r}: pass a list of column names, not one string")
         object.__setattr__(self, "context_only", tuple(self.context_only))
         if set(self.context_only) & set(KEY_COLUMNS):
-            raise ValueError(f"context_only={list(self.context_only)}: {', '.join(KEY_COLUMNS)} are read for every frame")
+            raise ValueError(
+                f"context_only={list(self.context_only)}: {', '.join(KEY_COLUMNS)} are read for every frame"
+            )
         if self.columns is not None and set(self.context_only) - set(self.columns):
-            raise ValueError(f"context_only={list(self.context_only)} names columns not in columns={list(self.columns)}")
+            raise ValueError(
+                f"context_only={list(self.context_only)} names columns not in columns={list(self.columns)}"
+            )
 
     @property
     def length(self) -> int:

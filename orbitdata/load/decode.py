@@ -84,8 +84,9 @@ def plan_columns(schema: pa.Schema, names: tuple[str, ...]) -> tuple[Column, ...
         elif pa.types.is_floating(t):
             plan.append(Column(name, "scalar", (), torch.float32))
         else:
-            raise ValueError(f"column {name!r} has type {t}, which the window loader cannot stack; "
-                             "leave it out of columns=")
+            raise ValueError(
+                f"column {name!r} has type {t}, which the window loader cannot stack; leave it out of columns="
+            )
     return tuple(plan)
 
 
@@ -101,7 +102,7 @@ def _binary_views(col: pa.ChunkedArray) -> list[np.ndarray]:
         dtype = np.dtype(np.int64 if wide else np.int32)
         offsets = np.frombuffer(offsets, dtype, count=len(data) + 1, offset=data.offset * dtype.itemsize)
         values = np.frombuffer(values, np.uint8) if values is not None else np.zeros(0, np.uint8)
-        out += [values[offsets[i]:offsets[i + 1]] for i in range(len(data))]
+        out += [values[offsets[i] : offsets[i + 1]] for i in range(len(data))]
     return out
 
 
@@ -109,9 +110,11 @@ def _fit(img: np.ndarray, hw: tuple[int, int], resize: bool, interpolation: int,
     if img.shape[:2] == hw:
         return img
     if not resize:
-        raise ValueError(f"frame {i} of the window is {img.shape[1]}x{img.shape[0]} px, not "
-                         f"{hw[1]}x{hw[0]} like the dataset's first frame; pass image_size= to resize every "
-                         "frame to one size")
+        raise ValueError(
+            f"frame {i} of the window is {img.shape[1]}x{img.shape[0]} px, not "
+            f"{hw[1]}x{hw[0]} like the dataset's first frame; pass image_size= to resize every "
+            "frame to one size"
+        )
     return cv2.resize(img, (hw[1], hw[0]), interpolation=interpolation)
 
 
@@ -127,7 +130,7 @@ def decode_rgb_frames(blobs: list[np.ndarray], out: np.ndarray, resize: bool) ->
             cv2.split(img, [out[i, 0], out[i, 1], out[i, 2]])
         else:
             out[i] = img.transpose(2, 0, 1)
-    out[len(blobs):] = out[len(blobs) - 1]
+    out[len(blobs) :] = out[len(blobs) - 1]
 
 
 def decode_depth_frames(blobs: list[np.ndarray], out: np.ndarray, resize: bool) -> None:
@@ -140,7 +143,7 @@ def decode_depth_frames(blobs: list[np.ndarray], out: np.ndarray, resize: bool) 
         # Nearest neighbour: averaging would invent depths between an object and "no return".
         img = _fit(img, hw, resize, cv2.INTER_NEAREST, i)
         np.divide(img, np.float32(MM_PER_M), out=out[i])
-    out[len(blobs):] = out[len(blobs) - 1]
+    out[len(blobs) :] = out[len(blobs) - 1]
 
 
 def _place(rows: pa.Table) -> str:
@@ -166,8 +169,10 @@ class WindowDecoder:
             else:  # the stored size, from the first frame (a dataset has one image size)
                 img = cv2.imdecode(_binary_views(rows.column(col.name).slice(0, 1))[0], cv2.IMREAD_UNCHANGED)
                 if img is None:
-                    raise ValueError(f"{_place(rows)}, column {col.name!r}: frame 0 of the window is not a decodable "
-                                     "image; the dataset is corrupt (run `orbitdata validate`)")
+                    raise ValueError(
+                        f"{_place(rows)}, column {col.name!r}: frame 0 of the window is not a decodable "
+                        "image; the dataset is corrupt (run `orbitdata validate`)"
+                    )
                 self._image_hw[col.name] = img.shape[:2]
         hw = self._image_hw[col.name]
         return (3, *hw) if col.kind == "rgb" else hw
@@ -175,9 +180,11 @@ class WindowDecoder:
     def allocate(self, rows: pa.Table, batch: int | None = None) -> dict[str, torch.Tensor]:
         """Uninitialised output for one window (``batch=None``) or ``batch`` windows, like ``rows``."""
         shared = batch is not None and torch.utils.data.get_worker_info() is not None
+
         def lead(col: str | None = None) -> tuple[int, ...]:
             T = self.config.context if col in self.config.context_only else self.config.length
             return (T,) if batch is None else (batch, T)
+
         out = {c.name: empty((*lead(c.name), *self._frame_shape(c, rows)), c.dtype, shared) for c in self.columns}
         out[IS_PAD] = empty(lead(), torch.bool, shared)
         return out
@@ -218,7 +225,7 @@ class WindowDecoder:
         n = len(values)
         if col.kind == "list":
             for chunk, at in zip(values.chunks, np.cumsum([0] + [len(c) for c in values.chunks])):
-                out[at:at + len(chunk)] = chunk.flatten().to_numpy().reshape(len(chunk), *col.frame_shape)
+                out[at : at + len(chunk)] = chunk.flatten().to_numpy().reshape(len(chunk), *col.frame_shape)
         else:
             out[:n] = values.to_numpy()
         out[n:] = out[n - 1]

@@ -31,8 +31,9 @@ class EpisodeNotFound(ValueError):
 def episode_files(root: Path) -> list[Path]:
     """The episodes shards of a finished dataset folder, sorted."""
     root = dataset_folder(root)
-    files = sorted(p for p in (root / S.EPISODES_DIR).glob("*.parquet")
-                   if S.SHARD_RE.match(p.relative_to(root).as_posix()))
+    files = sorted(
+        p for p in (root / S.EPISODES_DIR).glob("*.parquet") if S.SHARD_RE.match(p.relative_to(root).as_posix())
+    )
     if not files:
         raise FileNotFoundError(f"{root} has no {S.EPISODES_DIR}/*.parquet shards; run `orbitdata validate {root}`")
     return files
@@ -124,9 +125,11 @@ class Episode:
 
     def title(self) -> str:
         m = self.meta
-        return (f"episode {self.index} · {m[S.SPLIT]} · {m[S.LEVEL]} pilot · {m[S.OUTCOME]} · "
-                f"{m[S.N_OBSTACLES]} obstacle{'s' if m[S.N_OBSTACLES] != 1 else ''} · "
-                f"{len(self)} frames ({len(self) * S.DT:.1f} s)")
+        return (
+            f"episode {self.index} · {m[S.SPLIT]} · {m[S.LEVEL]} pilot · {m[S.OUTCOME]} · "
+            f"{m[S.N_OBSTACLES]} obstacle{'s' if m[S.N_OBSTACLES] != 1 else ''} · "
+            f"{len(self)} frames ({len(self) * S.DT:.1f} s)"
+        )
 
     # ---- frames (decoded on demand) ---------------------------------------------------------
     def encoded(self, column: str, frames=None) -> list[bytes]:
@@ -163,13 +166,17 @@ def load_episode(root: Path, index: int) -> Episode:
     table = read_episodes(root)
     indices = table.column(S.EPISODE_INDEX).to_pylist()
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index not in indices:
-        raise EpisodeNotFound(f"episode {index!r} is not in {root}: it holds {_index_range(indices)}; "
-                         "pick one of those (`orbitdata info` lists the counts)")
+        raise EpisodeNotFound(
+            f"episode {index!r} is not in {root}: it holds {_index_range(indices)}; "
+            "pick one of those (`orbitdata info` lists the counts)"
+        )
     meta = table.slice(indices.index(index), 1).to_pylist()[0]
     data = root / meta[S.DATA_FILE]
     if not data.exists():
-        raise FileNotFoundError(f"{data} (the data shard of episode {index}) is missing; "
-                                "re-download the dataset or run `orbitdata validate`")
+        raise FileNotFoundError(
+            f"{data} (the data shard of episode {index}) is missing; "
+            "re-download the dataset or run `orbitdata validate`"
+        )
     steps = read_rows(data, meta[S.ROW_START], meta[S.ROW_END], list(STEP_COLUMNS))
     ep_col = steps.column(S.EPISODE_INDEX).to_numpy()
     frame_col = steps.column(S.FRAME_INDEX).to_numpy()

@@ -80,8 +80,9 @@ def build_index(episodes: Episodes, config: WindowConfig, keep: np.ndarray | Non
     lengths = np.where(mask, episodes.lengths, 0)
     which, start = window_starts(lengths, config)
     n_real = np.minimum(config.length, episodes.lengths[which] - start)
-    return WindowIndex(row=episodes.starts[which] + start, n_real=n_real.astype(np.int32),
-                       episode=episodes.ids[which].astype(np.int32))
+    return WindowIndex(
+        row=episodes.starts[which] + start, n_real=n_real.astype(np.int32), episode=episodes.ids[which].astype(np.int32)
+    )
 
 
 def check_windows(lengths: np.ndarray, config: WindowConfig, where: str) -> None:
@@ -104,8 +105,9 @@ def check_lengths(found: Episodes, ids: np.ndarray, lengths: np.ndarray, where: 
     for episode, length in zip(ids.tolist(), lengths.tolist()):
         i = position.get(episode)
         if i is None:
-            raise ValueError(f"episode {episode} is in the episodes table but has no rows in {where}; "
-                             "run `orbitdata validate`")
+            raise ValueError(
+                f"episode {episode} is in the episodes table but has no rows in {where}; run `orbitdata validate`"
+            )
         if int(found.lengths[i]) != length:
             raise ValueError(
                 f"episode {episode}: the episodes table says {length} frames but {where} has "

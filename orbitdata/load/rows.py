@@ -40,8 +40,10 @@ class RowReader:
     def rows(self, start: int, stop: int) -> pa.Table:
         """Rows [start, stop) as one table."""
         if not 0 <= start < stop <= self.num_rows:
-            raise ValueError(f"{self.path} has {self.num_rows} rows; rows {start}..{stop} are out of range. "
-                             "Run `orbitdata validate` on the dataset.")
+            raise ValueError(
+                f"{self.path} has {self.num_rows} rows; rows {start}..{stop} are out of range. "
+                "Run `orbitdata validate` on the dataset."
+            )
         first = int(np.searchsorted(self.starts, start, side="right")) - 1
         last = int(np.searchsorted(self.starts, stop, side="left")) - 1
         for g in [g for g in self._cache if g < first]:
@@ -54,8 +56,10 @@ class RowReader:
         out = []
         for r in rows:
             if not 0 <= r < self.num_rows:
-                raise ValueError(f"{self.path} has {self.num_rows} rows; row {r} is out of range. "
-                                 "Run `orbitdata validate` on the dataset.")
+                raise ValueError(
+                    f"{self.path} has {self.num_rows} rows; row {r} is out of range. "
+                    "Run `orbitdata validate` on the dataset."
+                )
             g = int(np.searchsorted(self.starts, r, side="right")) - 1
             out.append(self._group(g).column(column)[int(r - self.starts[g])].as_py())
         return out

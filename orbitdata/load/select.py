@@ -49,8 +49,9 @@ def _by_values(table: pa.Table, where: Mapping[str, Any], split: str) -> np.ndar
             raise ValueError(f"episodes filter: no episode column {name!r}; columns: {table.column_names}")
         column = table.column(name)
         if pa.types.is_nested(column.type):
-            raise ValueError(f"episodes filter: {name!r} is a nested column; "
-                             "filter it with a callable, e.g. lambda ep: ...")
+            raise ValueError(
+                f"episodes filter: {name!r} is a nested column; filter it with a callable, e.g. lambda ep: ..."
+            )
         values = _values(value)
         if not values:
             raise ValueError(f"episodes filter: empty list of values for {name!r}")
@@ -65,8 +66,7 @@ def _by_values(table: pa.Table, where: Mapping[str, Any], split: str) -> np.ndar
         mask &= pc.is_in(column, value_set=value_set).to_numpy(zero_copy_only=False)
     if not mask.any():
         raise ValueError(
-            f"episodes filter {dict(where)!r} matches no episode of split {split!r}; "
-            f"it has {_available(table, where)}"
+            f"episodes filter {dict(where)!r} matches no episode of split {split!r}; it has {_available(table, where)}"
         )
     return mask
 
@@ -86,8 +86,9 @@ def _by_index(table: pa.Table, wanted: Iterable[int], split: str) -> np.ndarray:
     if wanted.size == 0:
         raise ValueError(f"episodes=[] selects no episode of split {split!r}; pass None for all of them")
     if not np.issubdtype(wanted.dtype, np.integer):
-        raise TypeError(f"episodes: expected episode_index integers, "
-                        f"got {wanted.dtype} values like {wanted[:3].tolist()}")
+        raise TypeError(
+            f"episodes: expected episode_index integers, got {wanted.dtype} values like {wanted[:3].tolist()}"
+        )
     ids = table.column(S.EPISODE_INDEX).to_numpy()
     missing = np.setdiff1d(wanted, ids)
     if missing.size:
@@ -111,6 +112,7 @@ def select_episodes(table: pa.Table, episodes: EpisodeFilter, split: str) -> np.
     elif isinstance(episodes, (Iterable, np.ndarray)):
         mask = _by_index(table, episodes, split)
     else:
-        raise TypeError("episodes: expected None, a dict, a callable or a list of indices, "
-                        f"got {type(episodes).__name__}")
+        raise TypeError(
+            f"episodes: expected None, a dict, a callable or a list of indices, got {type(episodes).__name__}"
+        )
     return np.sort(table.column(S.EPISODE_INDEX).to_numpy()[mask].astype(np.int64))

@@ -31,8 +31,10 @@ def check_repo_id(repo_id: str) -> str:
     try:
         validate_repo_id(repo_id)
     except HFValidationError as exc:
-        raise ValueError(f"{repo_id!r} is not a Hub repo id ({str(exc).splitlines()[0]}); expected NAMESPACE/NAME, "
-                         "e.g. user/orbit_planner") from None
+        raise ValueError(
+            f"{repo_id!r} is not a Hub repo id ({str(exc).splitlines()[0]}); expected NAMESPACE/NAME, "
+            "e.g. user/orbit_planner"
+        ) from None
     return repo_id
 
 
@@ -56,23 +58,28 @@ def local_folder(source: str | Path, repo_ok: bool = True) -> Path | None:
     if path.is_dir():
         return path
     if path.exists():
-        raise NotADirectoryError(f"{source} is a file, not a dataset folder: give the folder that holds "
-                                 f"{S.INFO_PATH}")
+        raise NotADirectoryError(f"{source} is a file, not a dataset folder: give the folder that holds {S.INFO_PATH}")
     if is_repo_id(source):
         if repo_ok:
             return None
-        raise FileNotFoundError(f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
-                                f"first (`hf download {source} --repo-type dataset --local-dir DIR`)")
-    raise FileNotFoundError(f"no dataset folder at {source}: give a folder made by `orbitdata generate`"
-                            + (f", or {REPO_ID_HINT}" if repo_ok else ""))
+        raise FileNotFoundError(
+            f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
+            f"first (`hf download {source} --repo-type dataset --local-dir DIR`)"
+        )
+    raise FileNotFoundError(
+        f"no dataset folder at {source}: give a folder made by `orbitdata generate`"
+        + (f", or {REPO_ID_HINT}" if repo_ok else "")
+    )
 
 
 def dataset_folder(source: str | Path) -> Path:
     """A local, finished dataset folder (it holds meta/info.json); raises saying what is wrong."""
     folder = local_folder(source, repo_ok=False)
     if not (folder / S.INFO_PATH).is_file():
-        raise FileNotFoundError(f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset "
-                                "(if a `generate` run into it was interrupted, run the same command again)")
+        raise FileNotFoundError(
+            f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset "
+            "(if a `generate` run into it was interrupted, run the same command again)"
+        )
     return folder
 
 
@@ -86,9 +93,11 @@ def _offline() -> bool:
 def _unreachable(repo_id: str, filename: str, why: str) -> HubUnavailable:
     from huggingface_hub import constants
 
-    return HubUnavailable(f"cannot fetch {filename} of dataset repo {repo_id!r}: the Hugging Face Hub at "
-                          f"{constants.ENDPOINT} could not be reached ({why}); check your connection (and "
-                          "HF_ENDPOINT), or pass a local dataset folder")
+    return HubUnavailable(
+        f"cannot fetch {filename} of dataset repo {repo_id!r}: the Hugging Face Hub at "
+        f"{constants.ENDPOINT} could not be reached ({why}); check your connection (and "
+        "HF_ENDPOINT), or pass a local dataset folder"
+    )
 
 
 def _check_reachable(repo_id: str, filename: str, revision: str | None, token) -> None:
@@ -101,8 +110,9 @@ def _check_reachable(repo_id: str, filename: str, revision: str | None, token) -
     try:
         get_hf_file_metadata(hf_hub_url(repo_id, filename, repo_type="dataset", revision=revision), token=token)
     except TransportError as exc:
-        raise _unreachable(repo_id, filename, str(exc).strip().splitlines()[0] if str(exc).strip()
-                           else type(exc).__name__) from None
+        raise _unreachable(
+            repo_id, filename, str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        ) from None
     except Exception:  # the download below says what it means
         pass
 
@@ -118,18 +128,22 @@ def hub_file(repo_id: str, filename: str, revision: str | None = None, token=Non
         RevisionNotFoundError,
     )
 
-    if not _offline() and not isinstance(try_to_load_from_cache(repo_id, filename, revision=revision,
-                                                                repo_type="dataset"), str):
+    if not _offline() and not isinstance(
+        try_to_load_from_cache(repo_id, filename, revision=revision, repo_type="dataset"), str
+    ):
         _check_reachable(repo_id, filename, revision, token)  # not cached: the Hub must answer
     try:
         return Path(hf_hub_download(repo_id, filename, repo_type="dataset", revision=revision, token=token))
     except Exception as exc:  # the client raises many types; every one means "not available"
         if _offline():
-            why = ("offline mode is on (HF_HUB_OFFLINE=1) and the file is not in the local cache; "
-                   "unset HF_HUB_OFFLINE to download it, or pass a local dataset folder")
+            why = (
+                "offline mode is on (HF_HUB_OFFLINE=1) and the file is not in the local cache; "
+                "unset HF_HUB_OFFLINE to download it, or pass a local dataset folder"
+            )
         elif isinstance(exc, (RepositoryNotFoundError, GatedRepoError)):
-            why = ("there is no such dataset repo, or it is private or gated: check the id, "
-                   "or log in with `hf auth login`")
+            why = (
+                "there is no such dataset repo, or it is private or gated: check the id, or log in with `hf auth login`"
+            )
         elif isinstance(exc, RevisionNotFoundError):
             why = f"the repo has no revision {revision!r}"
         elif isinstance(exc, LocalEntryNotFoundError):  # a connection problem, and the file is not cached
@@ -139,8 +153,9 @@ def hub_file(repo_id: str, filename: str, revision: str | None = None, token=Non
         else:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
             why = f"{first}; check your connection and the repo id, or pass a local dataset folder"
-        raise HubUnavailable(f"cannot fetch {filename} of dataset repo {repo_id!r} from the Hugging Face Hub: "
-                             f"{why}") from None
+        raise HubUnavailable(
+            f"cannot fetch {filename} of dataset repo {repo_id!r} from the Hugging Face Hub: {why}"
+        ) from None
 
 
 def meta_file(source: str | Path, rel: str, revision: str | None = None, token=None) -> Path:
@@ -152,8 +167,10 @@ def meta_file(source: str | Path, rel: str, revision: str | None = None, token=N
     if not path.is_file():
         if rel == S.INFO_PATH:
             dataset_folder(folder)  # raises the "not a finished dataset" error
-        raise FileNotFoundError(f"{path} is missing: regenerate meta with `orbitdata shard {folder}`, or check "
-                                f"the dataset with `orbitdata validate {folder}`")
+        raise FileNotFoundError(
+            f"{path} is missing: regenerate meta with `orbitdata shard {folder}`, or check "
+            f"the dataset with `orbitdata validate {folder}`"
+        )
     return path
 
 

@@ -50,10 +50,19 @@ class StreamingWindowDataset(IterableDataset):
     ``set_epoch`` must be called before the workers start.
     """
 
-    def __init__(self, steps, config: WindowConfig = WindowConfig(), episodes: Sequence[int] | None = None,
-                 lengths: Mapping[int, int] | None = None, shuffle_buffer: int = 0, seed: int = 0,
-                 rank: int | None = None, world_size: int | None = None, batch_rows: int = 256,
-                 where: str = "the steps stream"):
+    def __init__(
+        self,
+        steps,
+        config: WindowConfig = WindowConfig(),
+        episodes: Sequence[int] | None = None,
+        lengths: Mapping[int, int] | None = None,
+        shuffle_buffer: int = 0,
+        seed: int = 0,
+        rank: int | None = None,
+        world_size: int | None = None,
+        batch_rows: int = 256,
+        where: str = "the steps stream",
+    ):
         if shuffle_buffer < 0:
             raise ValueError(f"shuffle_buffer={shuffle_buffer}: give a number of episodes >= 0 (0 = no shuffle)")
         if steps.column_names is not None:
@@ -174,5 +183,7 @@ class StreamingWindowDataset(IterableDataset):
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"StreamingWindowDataset({c.context}+{c.horizon} frames, stride={c.stride}, pad={c.pad}, "
-                f"shuffle_buffer={self.shuffle_buffer}, from {self.where})")
+        return (
+            f"StreamingWindowDataset({c.context}+{c.horizon} frames, stride={c.stride}, pad={c.pad}, "
+            f"shuffle_buffer={self.shuffle_buffer}, from {self.where})"
+        )

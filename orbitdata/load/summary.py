@@ -32,8 +32,10 @@ def read_source(source: str | Path) -> tuple[Info, pa.Table, str]:
         where = str(folder)
     missing = [str(f) for f in files if not Path(f).exists()]
     if missing or not files:
-        raise FileNotFoundError(f"episodes shards {missing or '(none listed in meta/info.json)'} are missing "
-                                f"from {where}; run `orbitdata validate` on it")
+        raise FileNotFoundError(
+            f"episodes shards {missing or '(none listed in meta/info.json)'} are missing "
+            f"from {where}; run `orbitdata validate` on it"
+        )
     columns = [S.SPLIT, S.LEVEL, S.OUTCOME, S.LENGTH]
     episodes = pa.concat_tables([pq.read_table(f, columns=columns) for f in files])
     return info, episodes, where
@@ -44,8 +46,15 @@ def length_stats(lengths: np.ndarray) -> dict:
     if not len(lengths):
         return {"episodes": 0}
     q = np.percentile(lengths, [10, 50, 90])
-    return {"episodes": int(len(lengths)), "min": int(lengths.min()), "p10": round(float(q[0]), 1),
-            "median": round(float(q[1]), 1), "mean": round(float(lengths.mean()), 1), "p90": round(float(q[2]), 1), "max": int(lengths.max())}
+    return {
+        "episodes": int(len(lengths)),
+        "min": int(lengths.min()),
+        "p10": round(float(q[0]), 1),
+        "median": round(float(q[1]), 1),
+        "mean": round(float(lengths.mean()), 1),
+        "p90": round(float(q[2]), 1),
+        "max": int(lengths.max()),
+    }
 
 
 def lengths_summary(episodes: pa.Table, max_steps: int) -> dict:
@@ -60,10 +69,12 @@ def lengths_summary(episodes: pa.Table, max_steps: int) -> dict:
         "by_outcome": {o: length_stats(length[outcome == o]) for o in S.OUTCOMES if (outcome == o).any()},
         "histogram": {
             "edges": [round(float(e), 3) for e in edges],
-            "by_level": {lv: np.histogram(length[level == lv], edges)[0].tolist()
-                         for lv in S.LEVELS if (level == lv).any()},
-            "by_outcome": {o: np.histogram(length[outcome == o], edges)[0].tolist()
-                           for o in S.OUTCOMES if (outcome == o).any()},
+            "by_level": {
+                lv: np.histogram(length[level == lv], edges)[0].tolist() for lv in S.LEVELS if (level == lv).any()
+            },
+            "by_outcome": {
+                o: np.histogram(length[outcome == o], edges)[0].tolist() for o in S.OUTCOMES if (outcome == o).any()
+            },
         },
     }
 

@@ -53,8 +53,13 @@ class WindowDataset(Dataset):
     each batch is then decoded in place, with no stacking copy.
     """
 
-    def __init__(self, steps, config: WindowConfig = WindowConfig(), episodes: Sequence[int] | None = None,
-                 where: str = "the steps table"):
+    def __init__(
+        self,
+        steps,
+        config: WindowConfig = WindowConfig(),
+        episodes: Sequence[int] | None = None,
+        where: str = "the steps table",
+    ):
         if getattr(steps, "_indices", None) is not None:
             raise ValueError(
                 f"{where} has an index mapping (from .filter/.select/.shuffle); select episodes with "
@@ -70,8 +75,9 @@ class WindowDataset(Dataset):
         )
         keep = None if episodes is None else np.asarray(episodes, dtype=np.int64)
         self.index: WindowIndex = build_index(self.found, config, keep)
-        check_windows(self.found.lengths if keep is None else self.found.lengths[np.isin(self.found.ids, keep)],
-                      config, where)
+        check_windows(
+            self.found.lengths if keep is None else self.found.lengths[np.isin(self.found.ids, keep)], config, where
+        )
         self.episodes = np.unique(self.index.episode)  # (E,) episodes that give at least one window
         self._pid: int | None = None
         self._table: pa.Table | None = None
@@ -113,8 +119,14 @@ class WindowDataset(Dataset):
             self._decoder.decode_into(r, {k: v[j] for k, v in stacked.items()})
         return WindowBatch(stacked)
 
-    def sampler(self, shuffle: bool = True, seed: int = 0, drop_last: bool = False,
-                rank: int | None = None, world_size: int | None = None) -> DistributedSampler:
+    def sampler(
+        self,
+        shuffle: bool = True,
+        seed: int = 0,
+        drop_last: bool = False,
+        rank: int | None = None,
+        world_size: int | None = None,
+    ) -> DistributedSampler:
         """A sampler whose order is a pure function of (seed, epoch): call ``set_epoch(epoch)``.
 
         Under DDP (``torch.distributed`` initialised) each rank gets its share; elsewhere one
@@ -122,8 +134,12 @@ class WindowDataset(Dataset):
         """
         default_rank, default_world = distributed_rank()
         return DistributedSampler(
-            self, num_replicas=default_world if world_size is None else world_size,
-            rank=default_rank if rank is None else rank, shuffle=shuffle, seed=seed, drop_last=drop_last,
+            self,
+            num_replicas=default_world if world_size is None else world_size,
+            rank=default_rank if rank is None else rank,
+            shuffle=shuffle,
+            seed=seed,
+            drop_last=drop_last,
         )
 
     @property
@@ -133,5 +149,7 @@ class WindowDataset(Dataset):
 
     def __repr__(self) -> str:
         c = self.config
-        return (f"WindowDataset({len(self)} windows of {c.context}+{c.horizon} frames from "
-                f"{len(self.episodes)} episodes of {self.where}, stride={c.stride}, pad={c.pad})")
+        return (
+            f"WindowDataset({len(self)} windows of {c.context}+{c.horizon} frames from "
+            f"{len(self.episodes)} episodes of {self.where}, stride={c.stride}, pad={c.pad})"
+        )

@@ -3,5 +3,14 @@
 from orbitdata.publish.hub import HubError, PushOptions, PushRefused, PushResult, preview, push
 from orbitdata.publish.plan import UploadFile, UploadPlan, plan_upload
 
-__all__ = ["HubError", "PushOptions", "PushRefused", "PushResult", "UploadFile", "UploadPlan", "plan_upload",
-           "preview", "push"]
+__all__ = [
+    "HubError",
+    "PushOptions",
+    "PushRefused",
+    "PushResult",
+    "UploadFile",
+    "UploadPlan",
+    "plan_upload",
+    "preview",
+    "push",
+]

@@ -120,20 +120,31 @@ def hub_errors(repo_id: str, endpoint: str) -> Iterator[None]:
         if status == 401:
             raise HubError(f"the Hub rejected the token (401){detail}: {LOGIN_HINT}") from None
         if status == 403:
-            raise HubError(f"the token may not write to {repo_id} (403){detail}: use a token with write access "
-                           "to that namespace, or push to your own namespace") from None
+            raise HubError(
+                f"the token may not write to {repo_id} (403){detail}: use a token with write access "
+                "to that namespace, or push to your own namespace"
+            ) from None
         if status == 404:
-            raise HubError(f"{repo_id} was not found (404){detail}: check the repo id and that your token can "
-                           "see it") from None
-        raise HubError(f"the Hub refused the push (HTTP {status}){detail}; run the same command again to resume")\
-            from None
+            raise HubError(
+                f"{repo_id} was not found (404){detail}: check the repo id and that your token can see it"
+            ) from None
+        raise HubError(
+            f"the Hub refused the push (HTTP {status}){detail}; run the same command again to resume"
+        ) from None
     except TransportError as exc:
-        raise HubError(f"cannot reach the Hub at {endpoint} ({type(exc).__name__}): check the network connection "
-                       "(and HF_ENDPOINT), then run the same command again to resume") from None
+        raise HubError(
+            f"cannot reach the Hub at {endpoint} ({type(exc).__name__}): check the network connection "
+            "(and HF_ENDPOINT), then run the same command again to resume"
+        ) from None
 
 
-def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=None,
-         log: Callable[[str], None] = lambda line: None) -> PushResult:
+def push(
+    root: Path,
+    repo_id: str,
+    options: PushOptions = PushOptions(),
+    report=None,
+    log: Callable[[str], None] = lambda line: None,
+) -> PushResult:
     """Validate (quick) and upload the dataset in ``root`` to dataset repo ``repo_id``.
 
     ``report``: a quick validation report already made for ``root`` (validated here if None).
@@ -149,8 +160,10 @@ def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=
 
         report = validate(root, ValidateOptions(quick=True))
     if not report.ok and not options.force:
-        raise PushRefused(f"{root} failed validation ({', '.join(report.failed())}); fix it, or pass --force to "
-                          "push it anyway", report)
+        raise PushRefused(
+            f"{root} failed validation ({', '.join(report.failed())}); fix it, or pass --force to push it anyway",
+            report,
+        )
     plan = plan_upload(root)
     endpoint = constants.ENDPOINT
     if constants.HF_HUB_OFFLINE:
@@ -164,13 +177,15 @@ def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=
         user = api.whoami().get("name", "?")
         log(f"authenticated as {user} on {endpoint}")
         # private=None (not False) leaves a new repo to the namespace's default visibility
-        url = api.create_repo(repo_id, repo_type="dataset", private=True if options.private else None,
-                              exist_ok=True)
+        url = api.create_repo(repo_id, repo_type="dataset", private=True if options.private else None, exist_ok=True)
         repo_id = getattr(url, "repo_id", None) or repo_id
         if revision != "main":
             api.create_branch(repo_id, branch=revision, repo_type="dataset", exist_ok=True)
-        remote = {f.path: f for f in api.list_repo_tree(repo_id, recursive=True, revision=revision,
-                                                        repo_type="dataset") if isinstance(f, RepoFile)}
+        remote = {
+            f.path: f
+            for f in api.list_repo_tree(repo_id, recursive=True, revision=revision, repo_type="dataset")
+            if isinstance(f, RepoFile)
+        }
         result = PushResult(repo_id, str(url), revision)
         todo = []
         for f in plan.files:
@@ -192,11 +207,17 @@ def push(root: Path, repo_id: str, options: PushOptions = PushOptions(), report=
                 ops += [CommitOperationDelete(path_in_repo=p) for p in result.deleted]
             message = options.message if len(commits) == 1 else f"{options.message} (part {i + 1}/{len(commits)})"
             size = sum(f.bytes for f in batch)
-            log(f"commit {i + 1}/{len(commits)}: {len(batch)} file(s), {size / 1e6:.1f} MB"
-                + (f", deleting {len(result.deleted)} stale file(s)" if i == len(commits) - 1 and result.deleted
-                   else ""))
-            info = api.create_commit(repo_id, operations=ops, commit_message=message, revision=revision,
-                                     repo_type="dataset")
+            log(
+                f"commit {i + 1}/{len(commits)}: {len(batch)} file(s), {size / 1e6:.1f} MB"
+                + (
+                    f", deleting {len(result.deleted)} stale file(s)"
+                    if i == len(commits) - 1 and result.deleted
+                    else ""
+                )
+            )
+            info = api.create_commit(
+                repo_id, operations=ops, commit_message=message, revision=revision, repo_type="dataset"
+            )
             result.commits.append(info.oid)
             result.uploaded += [f.rel for f in batch]
             result.bytes += size

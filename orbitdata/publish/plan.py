@@ -41,8 +41,10 @@ def plan_upload(root: Path) -> UploadPlan:
     listed = read_info(root).files
     missing = [rel for rel in listed if not (root / rel).is_file()]
     if missing:
-        raise FileNotFoundError(f"{root}: {len(missing)} file(s) listed in {S.INFO_PATH} are missing, e.g. "
-                                f"{missing[0]}; run `orbitdata validate {root}`")
+        raise FileNotFoundError(
+            f"{root}: {len(missing)} file(s) listed in {S.INFO_PATH} are missing, e.g. "
+            f"{missing[0]}; run `orbitdata validate {root}`"
+        )
 
     def order(rel: str) -> tuple:
         folder = rel.split("/")[0]

@@ -142,9 +142,10 @@ def sample_scenario(
                 quat=_random_quat(rng),
                 rgba=_rock_rgba(rng),
             )
-            if clearance([ob], (0.0, 0.0, 0.0)) >= c.start_clearance and clearance(
-                [ob], goal_t
-            ) >= c.goal_radius + c.goal_clearance:
+            if (
+                clearance([ob], (0.0, 0.0, 0.0)) >= c.start_clearance
+                and clearance([ob], goal_t) >= c.goal_radius + c.goal_clearance
+            ):
                 obstacles.append(ob)
                 break
         else:

@@ -85,8 +85,9 @@ class Scenario:
     def from_dict(cls, d: dict) -> "Scenario":
         """From :meth:`to_dict`, or from a row of the episodes table (same field names)."""
         return cls(
-            obstacles=tuple(Obstacle(**{k: tuple(v) if isinstance(v, list) else v for k, v in o.items()})
-                            for o in d[S.OBSTACLES]),
+            obstacles=tuple(
+                Obstacle(**{k: tuple(v) if isinstance(v, list) else v for k, v in o.items()}) for o in d[S.OBSTACLES]
+            ),
             goal=tuple(d[S.GOAL]),
             goal_radius=float(d[S.GOAL_RADIUS]),
             initial_velocity=tuple(d[S.INITIAL_VELOCITY]),

@@ -83,8 +83,10 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         if abs(self.dt - DT) > 1e-12:
-            raise ValueError(f"sim.dt must be {DT:g} s (the schema's {1 / DT:g} Hz: timestamps, fps and validation "
-                             f"follow it), got {self.dt}; change substeps for a finer physics step")
+            raise ValueError(
+                f"sim.dt must be {DT:g} s (the schema's {1 / DT:g} Hz: timestamps, fps and validation "
+                f"follow it), got {self.dt}; change substeps for a finer physics step"
+            )
         if self.substeps < 1:
             raise ValueError(f"substeps must be >= 1, got {self.substeps}")
         if self.max_steps < 2:

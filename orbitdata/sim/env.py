@@ -38,6 +38,7 @@ from orbitdata.sim.render import CameraRenderer, pool_depth
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitdata.state import make_state
 
+
 def validate_action(action) -> np.ndarray:
     """Return ``action`` as float64 (8,) or raise ValueError saying what is wrong."""
     a = np.asarray(action, dtype=np.float64)
@@ -46,7 +47,9 @@ def validate_action(action) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"action contains NaN or Inf: {a.tolist()}")
     if a.min() < 0.0 or a.max() > 1.0:
-        raise ValueError(f"action values must be in [0, 1] (normalised thrust), got min {a.min():.4g} max {a.max():.4g}")
+        raise ValueError(
+            f"action values must be in [0, 1] (normalised thrust), got min {a.min():.4g} max {a.max():.4g}"
+        )
     return a
 
 
@@ -75,7 +78,9 @@ class CubeSatEnv:
         if scn is None:
             if seed is None:
                 raise ValueError("reset needs a seed (or options={'scenario': ...}); orbitdata has no global RNG")
-            scn = sample_scenario(seed, self.scenario_config, options.pop("n_obstacles", None), options.pop("speed", None))
+            scn = sample_scenario(
+                seed, self.scenario_config, options.pop("n_obstacles", None), options.pop("speed", None)
+            )
         if options:
             raise ValueError(f"unknown reset options {sorted(options)}; expected scenario, n_obstacles, speed")
         check_scenario(scn, self.body_radius)
@@ -155,8 +160,12 @@ class CubeSatEnv:
         self.done = terminated or truncated
         clearance = 0.0 if collision else self._min_clearance()
         reward = 1.0 if success else (-1.0 if collision else 0.0)
-        return self._observe(), reward, terminated, truncated, self._info(
-            outcome, collision, success, contact_substep, clearance, a
+        return (
+            self._observe(),
+            reward,
+            terminated,
+            truncated,
+            self._info(outcome, collision, success, contact_substep, clearance, a),
         )
 
     def _hull_in_contact(self) -> bool:

@@ -19,9 +19,7 @@ import subprocess
 import sys
 
 BACKENDS = ("egl", "osmesa")
-_PROBE = (
-    "from mujoco.{b} import GLContext; c = GLContext(16, 16); c.make_current(); c.free()"
-)
+_PROBE = "from mujoco.{b} import GLContext; c = GLContext(16, 16); c.make_current(); c.free()"
 INSTALL_HINT = (
     "no headless OpenGL backend works: install EGL with Mesa "
     "(Debian/Ubuntu: `apt-get install libegl1 libgl1-mesa-dri`) or OSMesa "
@@ -63,7 +61,10 @@ def _works(backend: str) -> tuple[bool, str]:
     env = dict(os.environ, MUJOCO_GL=backend, PYOPENGL_PLATFORM=backend)
     proc = subprocess.run(
         [sys.executable, "-c", _PROBE.format(b=backend)],
-        env=env, capture_output=True, text=True, timeout=120,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     return proc.returncode == 0, proc.stderr.strip().splitlines()[-1:] and proc.stderr.strip().splitlines()[-1] or ""
 
@@ -91,9 +92,11 @@ def make_context(width: int, height: int, preferred: str | None = None):
     """A current offscreen GL context of at least ``width`` x ``height``."""
     global _used
     if _inherited is not None:
-        raise RenderBackendError(f"this process was forked from one that had rendered with MUJOCO_GL={_inherited}, "
-                                 "whose state does not survive fork; start it with the 'spawn' start method (e.g. "
-                                 "gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with EGL")
+        raise RenderBackendError(
+            f"this process was forked from one that had rendered with MUJOCO_GL={_inherited}, "
+            "whose state does not survive fork; start it with the 'spawn' start method (e.g. "
+            "gym.make_vec(..., vector_kwargs={'context': 'spawn'})), or render with EGL"
+        )
     backend = select_backend(preferred)
     try:
         if backend == "egl":

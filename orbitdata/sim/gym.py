@@ -60,8 +60,7 @@ try:
     import gymnasium
     from gymnasium import spaces
 except ImportError:  # the optional extra
-    raise ImportError("CubeSat-v1 as a Gymnasium environment needs gymnasium: pip install 'orbitdata[gym]'") \
-        from None
+    raise ImportError("CubeSat-v1 as a Gymnasium environment needs gymnasium: pip install 'orbitdata[gym]'") from None
 
 from orbitdata import schema as S
 from orbitdata.scenario.config import ScenarioConfig
@@ -96,17 +95,29 @@ class CubeSatGymEnv(gymnasium.Env):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 25}
 
-    def __init__(self, n_obstacles: int | None = None, speed: float | None = None, image_size: int | None = None,
-                 seed: int | None = None, images: bool = True, max_steps: int | None = None,
-                 sim: SimConfig | None = None, scenario: ScenarioConfig | None = None, render_mode: str | None = None):
-        n_obstacles = _whole("n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0",
-                             "to draw 1-5 per episode")
+    def __init__(
+        self,
+        n_obstacles: int | None = None,
+        speed: float | None = None,
+        image_size: int | None = None,
+        seed: int | None = None,
+        images: bool = True,
+        max_steps: int | None = None,
+        sim: SimConfig | None = None,
+        scenario: ScenarioConfig | None = None,
+        render_mode: str | None = None,
+    ):
+        n_obstacles = _whole(
+            "n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0", "to draw 1-5 per episode"
+        )
         speed = _speed(speed)
-        image_size = _whole("image_size", image_size, 16, "a whole number of pixels, a multiple of 16",
-                            "for the simulator's camera")
+        image_size = _whole(
+            "image_size", image_size, 16, "a whole number of pixels, a multiple of 16", "for the simulator's camera"
+        )
         seed = _whole("seed", seed, 0, "a whole number >= 0", "to draw the first episode's seed")
-        max_steps = _whole("max_steps", max_steps, 1, "a whole number of steps >= 1",
-                           "for the simulator's frame limit less one")
+        max_steps = _whole(
+            "max_steps", max_steps, 1, "a whole number of steps >= 1", "for the simulator's frame limit less one"
+        )
         if not isinstance(images, bool):
             raise ValueError(f"images={images!r}: give True (render the camera) or False (state and goal only)")
         for name, value, cls in (("sim", sim, SimConfig), ("scenario", scenario, ScenarioConfig)):
@@ -124,8 +135,10 @@ class CubeSatGymEnv(gymnasium.Env):
         self._first_seed = seed  # the first reset's, when it is given none
         self._reset_before = False
         s, far = camera.image_size, float(camera.far)
-        observations = {S.STATE: spaces.Box(-np.inf, np.inf, (S.STATE_DIM,), np.float32),
-                        S.GOAL: spaces.Box(-np.inf, np.inf, (3,), np.float32)}
+        observations = {
+            S.STATE: spaces.Box(-np.inf, np.inf, (S.STATE_DIM,), np.float32),
+            S.GOAL: spaces.Box(-np.inf, np.inf, (3,), np.float32),
+        }
         if images:
             side = S.DEPTH_LOW_SIDE
             observations[S.IMAGE] = spaces.Box(0, 255, (s, s, 3), np.uint8)
@@ -146,8 +159,9 @@ class CubeSatGymEnv(gymnasium.Env):
         if options.get("scenario") is not None:
             options = {"scenario": options["scenario"]}
         else:
-            options["n_obstacles"] = _whole("options['n_obstacles']", options["n_obstacles"], 0,
-                                            "a whole number of obstacles >= 0", "to draw it")
+            options["n_obstacles"] = _whole(
+                "options['n_obstacles']", options["n_obstacles"], 0, "a whole number of obstacles >= 0", "to draw it"
+            )
             options["speed"] = _speed(options["speed"], "options['speed']")
         obs, info = self.env.reset(seed=int(episode_seed), options=options)
         self._episode_seed = int(episode_seed)

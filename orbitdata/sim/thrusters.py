@@ -11,8 +11,14 @@ from orbitdata.sim.config import CubeSatConfig
 # Corner sign patterns (sx, sy, sz) in thruster order 0..7.
 CORNERS = np.array(
     [
-        (+1, +1, +1), (-1, +1, +1), (-1, -1, +1), (+1, -1, +1),
-        (+1, +1, -1), (-1, +1, -1), (-1, -1, -1), (+1, -1, -1),
+        (+1, +1, +1),
+        (-1, +1, +1),
+        (-1, -1, +1),
+        (+1, -1, +1),
+        (+1, +1, -1),
+        (-1, +1, -1),
+        (-1, -1, -1),
+        (+1, -1, -1),
     ],
     dtype=float,
 )

@@ -25,8 +25,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from orbitdata import schema as S
-from orbitdata.codecs import (IMAGE_STRIDE, PIXEL_STRIDE, QUANTILE_ROWS, QUANTILES, SCALAR_FEATURES, VECTOR_FEATURES,
-                              stats_width)
+from orbitdata.codecs import (
+    IMAGE_STRIDE,
+    PIXEL_STRIDE,
+    QUANTILE_ROWS,
+    QUANTILES,
+    SCALAR_FEATURES,
+    VECTOR_FEATURES,
+    stats_width,
+)
 from orbitdata.info import counts
 from orbitdata.state import STATE_NAMES
 from orbitdata.validate import checks as C
@@ -44,8 +51,14 @@ def _diff(a, b, path: str, out: list[str]) -> None:
         out.append(f"{path}: meta/info.json says {a}, the episodes table gives {b}")
 
 
-def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_rows: dict[str, int],
-                 episodes_complete: bool, sink: Sink) -> None:
+def check_counts(
+    info: dict | None,
+    card: dict | None,
+    episode_rows: list,
+    data_rows: dict[str, int],
+    episodes_complete: bool,
+    sink: Sink,
+) -> None:
     """Counts per split (and level, outcome) from the three places that state them."""
     frames_by_split = {s: 0 for s in S.SPLITS}
     for rel, n in data_rows.items():
@@ -55,19 +68,24 @@ def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_
     if episodes_complete:
         for split in S.SPLITS:
             if table_frames[split] != frames_by_split[split]:
-                sink.add(C.COUNTS, f"{split}: the episodes table sums to {table_frames[split]} frames, the data "
-                                   f"shards hold {frames_by_split[split]} rows", S.DATA_DIR)
+                sink.add(
+                    C.COUNTS,
+                    f"{split}: the episodes table sums to {table_frames[split]} frames, the data "
+                    f"shards hold {frames_by_split[split]} rows",
+                    S.DATA_DIR,
+                )
     if info is not None and episodes_complete:
         diffs: list[str] = []
         usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
-        _diff(info.get("counts"), counts((r.split, r.level, r.outcome, r.length) for r in usable), "counts",
-              diffs)
+        _diff(info.get("counts"), counts((r.split, r.level, r.outcome, r.length) for r in usable), "counts", diffs)
         for d in diffs:
             sink.add(C.COUNTS, d, S.INFO_PATH)
     if card is None:
         return
-    expected = {"default": (frames_by_split, "frames in the data shards"),
-                "episodes": (table_eps, "rows in the episodes table")}
+    expected = {
+        "default": (frames_by_split, "frames in the data shards"),
+        "episodes": (table_eps, "rows in the episodes table"),
+    }
     infos = card.get("dataset_info")
     infos = infos if isinstance(infos, list) else [infos] if isinstance(infos, dict) else []
     seen = set()
@@ -80,8 +98,12 @@ def check_counts(info: dict | None, card: dict | None, episode_rows: list, data_
         card_splits = {s.get("name"): s.get("num_examples") for s in entry.get("splits") or [] if isinstance(s, dict)}
         for split in sorted(set(card_splits) | {s for s, n in truth.items() if n}):
             if card_splits.get(split) != truth.get(split, 0):
-                sink.add(C.COUNTS, f"dataset_info[{name}] says {split} has {card_splits.get(split)} examples, "
-                                   f"there are {truth.get(split, 0)} {what}", S.CARD_PATH)
+                sink.add(
+                    C.COUNTS,
+                    f"dataset_info[{name}] says {split} has {card_splits.get(split)} examples, "
+                    f"there are {truth.get(split, 0)} {what}",
+                    S.CARD_PATH,
+                )
     for name in sorted(set(expected) - seen):
         sink.add(C.COUNTS, f"the card's YAML has no dataset_info for config {name!r}", S.CARD_PATH)
 
@@ -208,8 +230,12 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
             sink.add(C.STATS, f"{name} count is {entry.get('count')}, the train split has {m.n} values", S.STATS_PATH)
         with np.errstate(invalid="ignore", over="ignore"):  # NaN/Inf in the data: values.finite says where
             mean = m.sum / m.n
-            values = {"mean": mean, "std": np.sqrt(np.maximum(m.sumsq / m.n - mean * mean, 0.0)), "min": m.min,
-                      "max": m.max}
+            values = {
+                "mean": mean,
+                "std": np.sqrt(np.maximum(m.sumsq / m.n - mean * mean, 0.0)),
+                "min": m.min,
+                "max": m.max,
+            }
             scale = np.maximum(np.abs(m.min), np.abs(m.max))
         for key, ours in values.items():
             try:
@@ -220,8 +246,11 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
             with np.errstate(invalid="ignore"):
                 bad = np.flatnonzero(~(np.abs(theirs - ours) <= RTOL * np.abs(ours) + RANGE_TOL * scale))
             for i in bad[:3]:
-                sink.add(C.STATS, f"{name}[{names[i]}].{key} is {theirs[i]:.7g}, the train split gives {ours[i]:.7g}",
-                         S.STATS_PATH)
+                sink.add(
+                    C.STATS,
+                    f"{name}[{names[i]}].{key} is {theirs[i]:.7g}, the train split gives {ours[i]:.7g}",
+                    S.STATS_PATH,
+                )
         for q, p in QUANTILES:
             if q not in m.ranks:
                 sink.add(C.STATS, f"{name}.{q} is missing or not {width} numbers", S.STATS_PATH)
@@ -233,8 +262,10 @@ def check_stats(stats: dict, measured: dict[str, Moments], train_rows: int, sink
             tol = quantile_tolerance(p, sample)
             bad = np.flatnonzero((below / m.n > p + tol) | (at_or_below / m.n < p - tol))
             for i in bad[:3]:
-                sink.add(C.STATS, f"{name}[{names[i]}].{q} = {entry[q][i]:.7g} is not the {p:g} quantile of the "
-                                  f"train split: {below[i] / m.n:.2%} of the values lie below it, "
-                                  f"{at_or_below[i] / m.n:.2%} at or below (tolerance {tol:.2%})", S.STATS_PATH)
-
-
+                sink.add(
+                    C.STATS,
+                    f"{name}[{names[i]}].{q} = {entry[q][i]:.7g} is not the {p:g} quantile of the "
+                    f"train split: {below[i] / m.n:.2%} of the values lie below it, "
+                    f"{at_or_below[i] / m.n:.2%} at or below (tolerance {tol:.2%})",
+                    S.STATS_PATH,
+                )

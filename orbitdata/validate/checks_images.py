@@ -65,9 +65,9 @@ def jpeg_header(data: bytes) -> tuple[int, int, int] | None:
         if marker == 0xFF:  # fill byte
             i += 1
             continue
-        length = int.from_bytes(data[i + 2:i + 4], "big")
+        length = int.from_bytes(data[i + 2 : i + 4], "big")
         if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # SOFn (not DHT, JPG, DAC)
-            return (int.from_bytes(data[i + 5:i + 7], "big"), int.from_bytes(data[i + 7:i + 9], "big"), data[i + 9])
+            return (int.from_bytes(data[i + 5 : i + 7], "big"), int.from_bytes(data[i + 7 : i + 9], "big"), data[i + 9])
         i += 2 + length
     return None
 
@@ -81,8 +81,15 @@ def _blobs(table: pa.Table, name: str) -> tuple[pa.Array, np.ndarray]:
     return data, valid
 
 
-def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Camera | None, rel: str, sink: Sink,
-                 keep_rgb: np.ndarray) -> dict[int, np.ndarray]:
+def check_images(
+    table: pa.Table,
+    fr: Frames,
+    depth_low: np.ndarray,
+    camera: Camera | None,
+    rel: str,
+    sink: Sink,
+    keep_rgb: np.ndarray,
+) -> dict[int, np.ndarray]:
     """Decode every frame of a row group. Returns the RGB pixels of the rows in ``keep_rgb``."""
     rgb_blobs, rgb_ok = _blobs(table, S.IMAGE)
     depth_blobs, depth_ok = _blobs(table, S.DEPTH)
@@ -97,16 +104,20 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
             buffer = rgb_blobs[i].as_buffer()
             header = jpeg_header(buffer[:4096].to_pybytes())
             full = header is None or i in keep
-            decoded = cv2.imdecode(np.frombuffer(buffer, np.uint8),
-                                   cv2.IMREAD_UNCHANGED if full else cv2.IMREAD_REDUCED_COLOR_8)
+            decoded = cv2.imdecode(
+                np.frombuffer(buffer, np.uint8), cv2.IMREAD_UNCHANGED if full else cv2.IMREAD_REDUCED_COLOR_8
+            )
             if decoded is not None:
                 shape = decoded.shape if header is None else header
                 rgb = decoded if full else None
         if shape is None:
             sink.add(C.DECODE, f"{S.IMAGE} does not decode (missing or corrupt JPEG bytes)", *where)
         elif camera is not None and tuple(shape) != (camera.height, camera.width, 3):
-            sink.add(C.SIZE, f"{S.IMAGE} is {'x'.join(map(str, shape))}, meta/info.json says "
-                             f"{camera.height}x{camera.width}x3", *where)
+            sink.add(
+                C.SIZE,
+                f"{S.IMAGE} is {'x'.join(map(str, shape))}, meta/info.json says {camera.height}x{camera.width}x3",
+                *where,
+            )
         elif i in keep and rgb is not None and rgb.ndim == 3:
             kept[i] = cv2.cvtColor(rgb, cv2.COLOR_BGR2RGB)
         depth = None
@@ -116,11 +127,15 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
             sink.add(C.DECODE, f"{S.DEPTH} does not decode (missing or corrupt PNG bytes)", *where)
         elif depth.dtype != np.uint16 or depth.ndim != 2:
             shape = "x".join(map(str, depth.shape))
-            sink.add(C.SIZE, f"{S.DEPTH} is a {shape} {depth.dtype} image, expected a single-channel 16-bit PNG",
-                     *where)
+            sink.add(
+                C.SIZE, f"{S.DEPTH} is a {shape} {depth.dtype} image, expected a single-channel 16-bit PNG", *where
+            )
         elif camera is not None and depth.shape != (camera.height, camera.width):
-            sink.add(C.SIZE, f"{S.DEPTH} is {depth.shape[0]}x{depth.shape[1]}, meta/info.json says "
-                             f"{camera.height}x{camera.width}", *where)
+            sink.add(
+                C.SIZE,
+                f"{S.DEPTH} is {depth.shape[0]}x{depth.shape[1]}, meta/info.json says {camera.height}x{camera.width}",
+                *where,
+            )
         elif camera is not None:
             good_rows.append(i)
             good_depth.append(depth)
@@ -130,17 +145,26 @@ def check_images(table: pa.Table, fr: Frames, depth_low: np.ndarray, camera: Cam
     return kept
 
 
-def _check_depth(depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: np.ndarray, camera: Camera,
-                 rel: str, sink: Sink) -> None:
+def _check_depth(
+    depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: np.ndarray, camera: Camera, rel: str, sink: Sink
+) -> None:
     """depth_mm (K, H, W) uint16 of table rows ``rows``: range, then depth_low against the pooled image."""
     ep, frame = fr.episode[rows], fr.frame[rows]
     lo, hi = camera.near * MM_PER_M - DEPTH_MM_SLACK, camera.far * MM_PER_M + DEPTH_MM_SLACK
     lowest = (depth_mm - np.uint16(1)).min(axis=(1, 2)).astype(np.int64) + 1  # 0 wraps to 65535: skips no-return
     highest = depth_mm.max(axis=(1, 2))
     out = (highest > 0) & ((lowest < lo) | (highest > hi))
-    sink.add_rows(C.DEPTH_RANGE, np.flatnonzero(out), lambda k: f"depth spans {lowest[k] / MM_PER_M:.3f}-"
-                  f"{highest[k] / MM_PER_M:.3f} m, outside the camera range [{camera.near:g}, {camera.far:g}] m",
-                  rel, ep, frame)
+    sink.add_rows(
+        C.DEPTH_RANGE,
+        np.flatnonzero(out),
+        lambda k: (
+            f"depth spans {lowest[k] / MM_PER_M:.3f}-"
+            f"{highest[k] / MM_PER_M:.3f} m, outside the camera range [{camera.near:g}, {camera.far:g}] m"
+        ),
+        rel,
+        ep,
+        frame,
+    )
     side = S.DEPTH_LOW_SIDE
     k, h, w = depth_mm.shape
     if h % side or w % side:
@@ -158,6 +182,14 @@ def _check_depth(depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: 
         # out-of-range depth is already reported; non-finite depth_low is values.finite's
         bad = np.flatnonzero(~out & np.isfinite(low).all(axis=1) & (err.max(axis=1) > DEPTH_LOW_TOL_M))
     cell = err.argmax(axis=1) if len(bad) else None
-    sink.add_rows(C.DEPTH_LOW, bad, lambda j: f"depth_low cell {cell[j]} is {low[j, cell[j]]:.4f} m, the pooled "
-                  f"depth image says {pooled[j, cell[j]]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)",
-                  rel, ep, frame)
+    sink.add_rows(
+        C.DEPTH_LOW,
+        bad,
+        lambda j: (
+            f"depth_low cell {cell[j]} is {low[j, cell[j]]:.4f} m, the pooled "
+            f"depth image says {pooled[j, cell[j]]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)"
+        ),
+        rel,
+        ep,
+        frame,
+    )

@@ -49,8 +49,10 @@ class Layout:
     footers: dict[str, ParquetFooter] = field(default_factory=dict)  # readable Parquet shards
 
     def shards(self, kind: str, split: str | None = None) -> list[ParquetFooter]:
-        return sorted((f for f in self.footers.values() if f.kind == kind and (split is None or f.split == split)),
-                      key=lambda f: f.rel)
+        return sorted(
+            (f for f in self.footers.values() if f.kind == kind and (split is None or f.split == split)),
+            key=lambda f: f.rel,
+        )
 
 
 def scan(root: Path) -> list[str]:
@@ -97,8 +99,9 @@ def load_card(root: Path, sink: Sink) -> dict | None:
         return None
     parts = text.split("---", 2) if text.startswith("---") else []
     if len(parts) < 3:
-        sink.add(C.UNREADABLE, "the card has no YAML header (--- ... ---); the Hub needs it to load configs",
-                 S.CARD_PATH)
+        sink.add(
+            C.UNREADABLE, "the card has no YAML header (--- ... ---); the Hub needs it to load configs", S.CARD_PATH
+        )
         return None
     try:
         header = yaml.safe_load(parts[1])
@@ -114,9 +117,13 @@ def load_card(root: Path, sink: Sink) -> dict | None:
 def check_version(info: dict, sink: Sink) -> None:
     version = info.get("schema_version")
     if not S.readable_schema(version):
-        sink.add(C.VERSION, f"schema_version {version!r} is not one this orbitdata reads "
-                            f"({S.SCHEMA_VERSION.split('.')[0]}.x); checked against {S.SCHEMA_VERSION} anyway. "
-                            "Upgrade orbitdata, or regenerate the dataset", S.INFO_PATH)
+        sink.add(
+            C.VERSION,
+            f"schema_version {version!r} is not one this orbitdata reads "
+            f"({S.SCHEMA_VERSION.split('.')[0]}.x); checked against {S.SCHEMA_VERSION} anyway. "
+            "Upgrade orbitdata, or regenerate the dataset",
+            S.INFO_PATH,
+        )
 
 
 def check_presence(layout: Layout, sink: Sink) -> None:
@@ -125,8 +132,11 @@ def check_presence(layout: Layout, sink: Sink) -> None:
     listed = set((layout.info or {}).get("files", {}))
     for rel in REQUIRED:
         if rel not in present:
-            hint = ("the dataset is incomplete: run `orbitdata generate` again to finish it"
-                    if rel == S.INFO_PATH else "regenerate meta and the card with `orbitdata shard`")
+            hint = (
+                "the dataset is incomplete: run `orbitdata generate` again to finish it"
+                if rel == S.INFO_PATH
+                else "regenerate meta and the card with `orbitdata shard`"
+            )
             sink.add(C.MISSING, f"required file is missing; {hint}", rel)
     for rel in sorted(listed - present):
         if rel not in REQUIRED:
@@ -158,12 +168,20 @@ def _check_shard_sets(layout: Layout, sink: Sink) -> None:
     for kind in (S.DATA_DIR, S.EPISODES_DIR):
         for split in sorted(splits):
             if (kind, split) not in series:
-                sink.add(C.MISSING, f"no {kind} shard for the {split} split (expected "
-                                    f"{S.shard_path(kind, split, 0, 1)} or a numbered series)", kind)
+                sink.add(
+                    C.MISSING,
+                    f"no {kind} shard for the {split} split (expected "
+                    f"{S.shard_path(kind, split, 0, 1)} or a numbered series)",
+                    kind,
+                )
     for (kind, split), by_count in sorted(series.items()):
         if len(by_count) > 1:
-            sink.add(C.EXTRA, f"{kind}/{split} shards from different layouts (of {sorted(by_count)}): "
-                              "re-shard with `orbitdata shard`", kind)
+            sink.add(
+                C.EXTRA,
+                f"{kind}/{split} shards from different layouts (of {sorted(by_count)}): "
+                "re-shard with `orbitdata shard`",
+                kind,
+            )
         for n, have in sorted(by_count.items()):
             for i in sorted(set(range(n)) - have):
                 sink.add(C.MISSING, "shard missing from its series", S.shard_path(kind, split, i, n))
@@ -186,12 +204,20 @@ def check_hash(info: dict, rel: str, digest: str | None, size: int, error: str |
     if not isinstance(expected, dict):
         return
     if expected.get("bytes") is not None and expected["bytes"] != size:
-        sink.add(C.SHA256, f"{size} bytes, meta/info.json says {expected['bytes']}: the file is truncated or was "
-                           "changed; download it again or regenerate the dataset", rel)
+        sink.add(
+            C.SHA256,
+            f"{size} bytes, meta/info.json says {expected['bytes']}: the file is truncated or was "
+            "changed; download it again or regenerate the dataset",
+            rel,
+        )
     elif expected.get("sha256") != digest:
         recorded = str(expected.get("sha256"))[:12]
-        sink.add(C.SHA256, f"sha256 {digest[:12]}... differs from meta/info.json ({recorded}...): the file was "
-                           "changed or corrupted; download it again or regenerate the dataset", rel)
+        sink.add(
+            C.SHA256,
+            f"sha256 {digest[:12]}... differs from meta/info.json ({recorded}...): the file was "
+            "changed or corrupted; download it again or regenerate the dataset",
+            rel,
+        )
 
 
 def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
@@ -205,12 +231,19 @@ def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
         if isinstance(exc, PermissionError):
             sink.add(C.UNREADABLE, f"cannot read: {exc.strerror}; check its permissions", rel)
         else:
-            sink.add(C.CORRUPT, f"not a readable Parquet file ({exc}); it is truncated or corrupt: "
-                                "download it again or regenerate the dataset", rel)
+            sink.add(
+                C.CORRUPT,
+                f"not a readable Parquet file ({exc}); it is truncated or corrupt: "
+                "download it again or regenerate the dataset",
+                rel,
+            )
         return None
     except Exception as exc:  # pyarrow raises ArrowInvalid & co. for a bad footer
-        sink.add(C.CORRUPT, f"bad Parquet footer ({type(exc).__name__}: {exc}); download it again or "
-                            "regenerate the dataset", rel)
+        sink.add(
+            C.CORRUPT,
+            f"bad Parquet footer ({type(exc).__name__}: {exc}); download it again or regenerate the dataset",
+            rel,
+        )
         return None
     expected = S.STEP_SCHEMA if kind == S.DATA_DIR else S.EPISODE_SCHEMA
     ok = check_schema(rel, pf.schema_arrow, expected, sink)

@@ -19,7 +19,8 @@ import numpy as np
 import pyarrow as pa
 
 from orbitdata import schema as S
-from orbitdata.state import FUEL as FUEL_SLICE, POSITION, ROT6D, STATE_NAMES
+from orbitdata.state import FUEL as FUEL_SLICE
+from orbitdata.state import POSITION, ROT6D, STATE_NAMES
 from orbitdata.validate import checks as C
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.kinematics import POSITION_TOL_M, ROTATION_TOL_RAD, residuals
@@ -46,8 +47,14 @@ def check_finite(fr: Frames, depth_low: np.ndarray, rel: str, sink: Sink) -> Non
     )
     for name, values, names in columns:
         bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
-        sink.add_rows(C.FINITE, bad, lambda i: f"{name}: {_first_bad(values[i], names)} (NaN, Inf or null)",
-                      rel, fr.episode, fr.frame)
+        sink.add_rows(
+            C.FINITE,
+            bad,
+            lambda i: f"{name}: {_first_bad(values[i], names)} (NaN, Inf or null)",
+            rel,
+            fr.episode,
+            fr.frame,
+        )
 
 
 def check_values(fr: Frames, rel: str, sink: Sink) -> None:
@@ -58,15 +65,36 @@ def check_values(fr: Frames, rel: str, sink: Sink) -> None:
         out = np.flatnonzero(((a < 0) | (a > 1)).any(axis=1))
         sink.add_rows(C.ACTION, out, lambda i: f"action {np.round(a[i], 4).tolist()} leaves [0, 1]", rel, ep, frame)
         terminal = np.flatnonzero(fr.is_last & (a != 0).any(axis=1))
-        sink.add_rows(C.ACTION, terminal, lambda i: f"terminal frame has action {np.round(a[i], 4).tolist()}; "
-                      "nothing is applied after the last frame, so it must be all zeros", rel, ep, frame)
+        sink.add_rows(
+            C.ACTION,
+            terminal,
+            lambda i: (
+                f"terminal frame has action {np.round(a[i], 4).tolist()}; "
+                "nothing is applied after the last frame, so it must be all zeros"
+            ),
+            rel,
+            ep,
+            frame,
+        )
 
         r = fr.state[:, ROT6D].reshape(-1, 3, 2)
-        err = np.stack([np.abs((r[:, :, 0] ** 2).sum(1) - 1), np.abs((r[:, :, 1] ** 2).sum(1) - 1),
-                        np.abs((r[:, :, 0] * r[:, :, 1]).sum(1))], axis=1).max(axis=1)
+        err = np.stack(
+            [
+                np.abs((r[:, :, 0] ** 2).sum(1) - 1),
+                np.abs((r[:, :, 1] ** 2).sum(1) - 1),
+                np.abs((r[:, :, 0] * r[:, :, 1]).sum(1)),
+            ],
+            axis=1,
+        ).max(axis=1)
         bad = np.flatnonzero(err > ROT6D_TOL)
-        sink.add_rows(C.ROT6D, bad, lambda i: f"rot6d columns are not orthonormal (off by {err[i]:.3g}, "
-                      f"tolerance {ROT6D_TOL:g})", rel, ep, frame)
+        sink.add_rows(
+            C.ROT6D,
+            bad,
+            lambda i: f"rot6d columns are not orthonormal (off by {err[i]:.3g}, tolerance {ROT6D_TOL:g})",
+            rel,
+            ep,
+            frame,
+        )
 
         fuel = fr.state[:, FUEL]
         bad = np.flatnonzero((fuel < 0) | (fuel > 1))
@@ -74,15 +102,32 @@ def check_values(fr: Frames, rel: str, sink: Sink) -> None:
 
         p = fr.state[:, POSITION]
         bad = np.flatnonzero((frame == 0) & (np.abs(p) > START_TOL_M).any(axis=1))
-        sink.add_rows(C.START, bad, lambda i: f"position at frame 0 is {np.round(p[i], 6).tolist()} m; states are "
-                      "relative to the start, so it must be 0", rel, ep, frame)
+        sink.add_rows(
+            C.START,
+            bad,
+            lambda i: (
+                f"position at frame 0 is {np.round(p[i], 6).tolist()} m; states are "
+                "relative to the start, so it must be 0"
+            ),
+            rel,
+            ep,
+            frame,
+        )
 
         c = fr.clearance
         bad = np.flatnonzero(c < 0)
         sink.add_rows(C.CLEARANCE, bad, lambda i: f"min_clearance {c[i]:.4g} m is negative", rel, ep, frame)
         bad = np.flatnonzero(fr.collision & (c != 0))
-        sink.add_rows(C.CLEARANCE, bad, lambda i: f"min_clearance {c[i]:.4g} m on a collision frame, where the hull "
-                      "touches an obstacle (expected 0)", rel, ep, frame)
+        sink.add_rows(
+            C.CLEARANCE,
+            bad,
+            lambda i: (
+                f"min_clearance {c[i]:.4g} m on a collision frame, where the hull touches an obstacle (expected 0)"
+            ),
+            rel,
+            ep,
+            frame,
+        )
 
 
 def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: Sink) -> None:
@@ -91,8 +136,14 @@ def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: 
     ep, frame = b.episode, b.frame
     with np.errstate(invalid="ignore"):
         rise = np.flatnonzero(step & (b.state[:, FUEL] > a.state[:, FUEL]))
-        sink.add_rows(C.FUEL, rise, lambda i: f"fuel rises from {a.state[i, FUEL]:.6g} to {b.state[i, FUEL]:.6g}; "
-                      "thrusters only burn it", rel, ep, frame)
+        sink.add_rows(
+            C.FUEL,
+            rise,
+            lambda i: f"fuel rises from {a.state[i, FUEL]:.6g} to {b.state[i, FUEL]:.6g}; thrusters only burn it",
+            rel,
+            ep,
+            frame,
+        )
     finite = np.isfinite(a.state).all(axis=1) & np.isfinite(b.state).all(axis=1)
     idx = np.flatnonzero(step & finite & ~b.collision)  # contact impulses make the collision step unpredictable
     if not len(idx):
@@ -100,13 +151,31 @@ def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: 
     with np.errstate(invalid="ignore", divide="ignore"):
         pos, rot = residuals(a.state[idx], b.state[idx], dt, substeps)
     bad = np.flatnonzero(~(pos <= POSITION_TOL_M))
-    sink.add_rows(C.KIN_POSITION, bad, lambda k: f"step {frame[idx][k] - 1}->{frame[idx][k]}: position ends "
-                  f"{1000 * pos[k]:.1f} mm from where the velocities put it after {dt:g} s (tolerance "
-                  f"{1000 * POSITION_TOL_M:g} mm)", rel, ep[idx], frame[idx])
+    sink.add_rows(
+        C.KIN_POSITION,
+        bad,
+        lambda k: (
+            f"step {frame[idx][k] - 1}->{frame[idx][k]}: position ends "
+            f"{1000 * pos[k]:.1f} mm from where the velocities put it after {dt:g} s (tolerance "
+            f"{1000 * POSITION_TOL_M:g} mm)"
+        ),
+        rel,
+        ep[idx],
+        frame[idx],
+    )
     bad = np.flatnonzero(~(rot <= ROTATION_TOL_RAD))
-    sink.add_rows(C.KIN_ROTATION, bad, lambda k: f"step {frame[idx][k] - 1}->{frame[idx][k]}: attitude ends "
-                  f"{rot[k]:.3g} rad from where the angular velocities turn it in {dt:g} s (tolerance "
-                  f"{ROTATION_TOL_RAD:g} rad)", rel, ep[idx], frame[idx])
+    sink.add_rows(
+        C.KIN_ROTATION,
+        bad,
+        lambda k: (
+            f"step {frame[idx][k] - 1}->{frame[idx][k]}: attitude ends "
+            f"{rot[k]:.3g} rad from where the angular velocities turn it in {dt:g} s (tolerance "
+            f"{ROTATION_TOL_RAD:g} rad)"
+        ),
+        rel,
+        ep[idx],
+        frame[idx],
+    )
 
 
 def _all_finite(value) -> bool:
@@ -124,7 +193,8 @@ def check_episode_floats(table: pa.Table, rel: str, sink: Sink) -> None:
     episodes = table.column(S.EPISODE_INDEX).to_pylist()
     for name in table.column_names:
         if not pa.types.is_floating(table.schema.field(name).type) and not pa.types.is_nested(
-                table.schema.field(name).type):
+            table.schema.field(name).type
+        ):
             continue
         for i, value in enumerate(table.column(name).to_pylist()):
             if not _all_finite(value):

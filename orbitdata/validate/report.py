@@ -42,16 +42,24 @@ class Sink:
         self.kept: dict[str, list[Finding]] = {}
         self.counts: dict[str, int] = {}
 
-    def add(self, check: str, message: str, file: str | None = None, episode: int | None = None,
-            frame: int | None = None) -> None:
+    def add(
+        self, check: str, message: str, file: str | None = None, episode: int | None = None, frame: int | None = None
+    ) -> None:
         assert check in BY_NAME, f"unknown check {check!r}"
         self.counts[check] = self.counts.get(check, 0) + 1
         kept = self.kept.setdefault(check, [])
         if len(kept) < self.cap:
             kept.append(Finding(check, message, file, episode, frame))
 
-    def add_rows(self, check: str, rows: Sequence[int], message: Callable[[int], str], file: str | None,
-                 episodes: Sequence[int] | None = None, frames: Sequence[int] | None = None) -> None:
+    def add_rows(
+        self,
+        check: str,
+        rows: Sequence[int],
+        message: Callable[[int], str],
+        file: str | None,
+        episodes: Sequence[int] | None = None,
+        frames: Sequence[int] | None = None,
+    ) -> None:
         """Many hits at once (indices into ``episodes``/``frames``); messages only for kept ones."""
         n = len(rows)
         if not n:
@@ -106,23 +114,41 @@ class Report:
 
     def throughput(self) -> dict:
         s = max(self.seconds, 1e-9)
-        return {"seconds": round(self.seconds, 3), "mb_per_s": round(self.bytes / 1e6 / s, 2),
-                "frames_per_s": round(self.frames / s, 1)}
+        return {
+            "seconds": round(self.seconds, 3),
+            "mb_per_s": round(self.bytes / 1e6 / s, 2),
+            "frames_per_s": round(self.frames / s, 1),
+        }
 
     def to_dict(self) -> dict:
         checks = []
         for c in CHECKS:
-            entry = {"name": c.name, "group": c.group, "summary": c.summary, "status": self.status(c.name),
-                     "count": self.sink.counts.get(c.name, 0),
-                     "findings": [asdict(f) for f in self.findings(c.name)]}
+            entry = {
+                "name": c.name,
+                "group": c.group,
+                "summary": c.summary,
+                "status": self.status(c.name),
+                "count": self.sink.counts.get(c.name, 0),
+                "findings": [asdict(f) for f in self.findings(c.name)],
+            }
             if c.name in self.skipped:
                 entry["skipped"] = self.skipped[c.name]
             checks.append(entry)
         return {
-            "dataset": self.root, "mode": self.mode, "ok": self.ok, "problems": self.sink.total(),
-            "failed_checks": self.failed(), "cap_per_check": self.sink.cap,
-            "checked": {"files": self.files, "bytes": self.bytes, "episodes": self.episodes, "frames": self.frames,
-                        "workers": self.workers, **self.throughput()},
+            "dataset": self.root,
+            "mode": self.mode,
+            "ok": self.ok,
+            "problems": self.sink.total(),
+            "failed_checks": self.failed(),
+            "cap_per_check": self.sink.cap,
+            "checked": {
+                "files": self.files,
+                "bytes": self.bytes,
+                "episodes": self.episodes,
+                "frames": self.frames,
+                "workers": self.workers,
+                **self.throughput(),
+            },
             "checks": checks,
         }
 
@@ -151,8 +177,10 @@ class Report:
                         where = f.where()
                         lines.append(f"          {where + ': ' if where else ''}{f.message}")
                     if n > len(self.findings(c.name)):
-                        lines.append(f"          ... and {n - len(self.findings(c.name))} more "
-                                     f"(see --json, or raise --max-per-check)")
+                        lines.append(
+                            f"          ... and {n - len(self.findings(c.name))} more "
+                            f"(see --json, or raise --max-per-check)"
+                        )
                 elif status == "skip":
                     lines.append(f"  skip  {c.name:<{width}}  {self.skipped[c.name]}")
                 else:
@@ -161,7 +189,7 @@ class Report:
         if self.ok:
             lines.append("valid: no problems found")
         else:
-            lines.append(f"INVALID: {self.sink.total()} problem(s) in {len(self.failed())} check(s): "
-                         + ", ".join(self.failed()))
+            lines.append(
+                f"INVALID: {self.sink.total()} problem(s) in {len(self.failed())} check(s): " + ", ".join(self.failed())
+            )
         return "\n".join(lines)
-

@@ -14,8 +14,8 @@ import numpy as np
 import pyarrow.parquet as pq
 
 from orbitdata import schema as S
-from orbitdata.validate import checks as C
 from orbitdata.codecs import stats_width
+from orbitdata.validate import checks as C
 from orbitdata.validate.checks_consistency import Moments, StatsPlan
 from orbitdata.validate.checks_episodes import check_rows, check_transitions, runs
 from orbitdata.validate.checks_images import Camera, check_images
@@ -75,9 +75,12 @@ def check_row_group(task: RowGroupTask) -> RowGroupResult:
     try:
         table = pq.ParquetFile(f"{ctx.root}/{ctx.rel}").read_row_group(task.index, use_threads=False)
     except Exception as exc:  # bad pages surface as ArrowInvalid, OSError, ...
-        sink.add(C.CORRUPT, f"row group {task.index} (rows {task.first_row}+) does not decode "
-                            f"({type(exc).__name__}: {str(exc)[:160]}); download the file again or regenerate it",
-                 ctx.rel)
+        sink.add(
+            C.CORRUPT,
+            f"row group {task.index} (rows {task.first_row}+) does not decode "
+            f"({type(exc).__name__}: {str(exc)[:160]}); download the file again or regenerate it",
+            ctx.rel,
+        )
         result.ok = False
         return result
     fr = Frames.from_table(table, task.first_row)
@@ -106,8 +109,13 @@ def check_row_group(task: RowGroupTask) -> RowGroupResult:
 
 def _moments(fr: Frames, depth_low: np.ndarray, rgb: dict, plan: StatsPlan) -> dict:
     """This row group's share of the train statistics (see checks_consistency)."""
-    columns = {S.STATE: fr.state, S.ACTION: fr.action, S.DEPTH_LOW: depth_low,
-               S.MIN_CLEARANCE: fr.clearance[:, None], S.TIMESTAMP: fr.timestamp[:, None]}
+    columns = {
+        S.STATE: fr.state,
+        S.ACTION: fr.action,
+        S.DEPTH_LOW: depth_low,
+        S.MIN_CLEARANCE: fr.clearance[:, None],
+        S.TIMESTAMP: fr.timestamp[:, None],
+    }
     out = {}
     for name, x in columns.items():
         assert x.shape[1] == stats_width(name), name

@@ -26,11 +26,27 @@ from orbitdata import schema as S
 from orbitdata.load.source import local_folder
 from orbitdata.validate import checks as C
 from orbitdata.validate.checks_consistency import Moments, StatsPlan, check_counts, check_stats, merge_moments
-from orbitdata.validate.checks_episodes import (EpisodeRow, check_file_edges, check_row_ranges, check_runs,
-                                                check_table, check_transitions, episode_rows)
+from orbitdata.validate.checks_episodes import (
+    EpisodeRow,
+    check_file_edges,
+    check_row_ranges,
+    check_runs,
+    check_table,
+    check_transitions,
+    episode_rows,
+)
 from orbitdata.validate.checks_images import Camera
-from orbitdata.validate.checks_structure import (Layout, check_hash, check_presence, check_version, load_card,
-                                                 load_json, open_footer, scan, sha256_task)
+from orbitdata.validate.checks_structure import (
+    Layout,
+    check_hash,
+    check_presence,
+    check_version,
+    load_card,
+    load_json,
+    open_footer,
+    scan,
+    sha256_task,
+)
 from orbitdata.validate.checks_values import check_episode_floats, check_steps
 from orbitdata.validate.report import DEFAULT_CAP, Report, Sink
 from orbitdata.validate.rowgroup import FileContext, RowGroupResult, RowGroupTask, check_row_group, init_worker
@@ -107,8 +123,9 @@ def _sha_task(args: tuple[str, str]):
     return sha256_task(*args)
 
 
-def validate(root: str | Path, options: ValidateOptions = ValidateOptions(),
-             progress: Progress | None = None) -> Report:
+def validate(
+    root: str | Path, options: ValidateOptions = ValidateOptions(), progress: Progress | None = None
+) -> Report:
     """Check the dataset in ``root`` against the contract. Raises only if ``root`` is not a folder."""
     root = local_folder(root, repo_ok=False)
     start = time.monotonic()
@@ -171,8 +188,12 @@ def _check_metadata(layout: Layout, sink: Sink) -> list[EpisodeRow]:
         try:
             table = pq.read_table(layout.root / footer.rel)
         except Exception as exc:
-            sink.add(C.CORRUPT, f"does not decode ({type(exc).__name__}: {str(exc)[:160]}); download it again or "
-                                "regenerate the dataset", footer.rel)
+            sink.add(
+                C.CORRUPT,
+                f"does not decode ({type(exc).__name__}: {str(exc)[:160]}); download it again or "
+                "regenerate the dataset",
+                footer.rel,
+            )
             complete = False
             continue
         split_of_file[footer.rel] = footer.split
@@ -189,8 +210,9 @@ def _check_metadata(layout: Layout, sink: Sink) -> list[EpisodeRow]:
     return rows
 
 
-def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink, report: Report,
-                progress: Progress | None) -> None:
+def _check_rows(
+    layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink, report: Report, progress: Progress | None
+) -> None:
     """The full pass: every row group of every data shard, then seams, runs and stats."""
     for footer in layout.shards(S.EPISODES_DIR):
         if footer.table is not None:
@@ -215,8 +237,16 @@ def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink,
     tasks, train_row = [], 0
     for footer in files:
         outcomes = {r.index: r.outcome for r in rows if r.data_file == footer.rel}
-        ctx = FileContext(str(layout.root), footer.rel, dt, substeps, camera, outcomes,
-                          plan if footer.split == "train" else None, sink.cap)
+        ctx = FileContext(
+            str(layout.root),
+            footer.rel,
+            dt,
+            substeps,
+            camera,
+            outcomes,
+            plan if footer.split == "train" else None,
+            sink.cap,
+        )
         first = 0
         for i, n in enumerate(footer.row_groups):
             tasks.append(RowGroupTask(ctx, i, first, train_row if footer.split == "train" else 0))
@@ -243,9 +273,13 @@ def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink,
         seen |= _finish_file(current, by_index, dt, substeps, sink, checked_files)
     for r in rows:
         if r.data_file in checked_files and r.index not in seen:
-            sink.add(C.LENGTHS, f"the episodes table puts {r.length} rows at {r.data_file} rows "
-                                f"{r.row_start}-{r.row_end}, but the file has no row of this episode",
-                     r.source, r.index)
+            sink.add(
+                C.LENGTHS,
+                f"the episodes table puts {r.length} rows at {r.data_file} rows "
+                f"{r.row_start}-{r.row_end}, but the file has no row of this episode",
+                r.source,
+                r.index,
+            )
     if plan is not None:
         if stats_whole and train:
             check_stats(layout.stats, moments, train_rows, sink)
@@ -253,8 +287,14 @@ def _check_rows(layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink,
             report.skipped[C.STATS] = "part of the train split could not be read"
 
 
-def _finish_file(results: list[RowGroupResult], by_index: dict[int, EpisodeRow], dt: float, substeps: int,
-                 sink: Sink, checked_files: set[str]) -> set[int]:
+def _finish_file(
+    results: list[RowGroupResult],
+    by_index: dict[int, EpisodeRow],
+    dt: float,
+    substeps: int,
+    sink: Sink,
+    checked_files: set[str],
+) -> set[int]:
     """Seams between consecutive row groups, the file's first and last rows, and its episode runs."""
     rel = results[0].rel
     readable = [r for r in results if r.ok and r.rows]

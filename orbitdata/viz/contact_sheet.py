@@ -12,8 +12,8 @@ import numpy as np
 from PIL import Image
 
 from orbitdata import schema as S
-from orbitdata.viz import plots as P
 from orbitdata.load.episodes import Episode
+from orbitdata.viz import plots as P
 from orbitdata.viz.topdown import PlaneMap, draw_numbered, paired_views
 
 
@@ -37,8 +37,9 @@ class ContactSheet:
         with P.theme():
             fig = P.figure(self.WIDTH, self.HEIGHT)
             fig.text(0.5, 1 - 22 / self.HEIGHT, ep.title(), ha="center", va="center", fontsize=14, weight="bold")
-            fig.text(0.5, 1 - 48 / self.HEIGHT, self._subtitle(), ha="center", va="center", fontsize=10,
-                     color="#b0b0bc")
+            fig.text(
+                0.5, 1 - 48 / self.HEIGHT, self._subtitle(), ha="center", va="center", fontsize=10, color="#b0b0bc"
+            )
             cams, deps = [], []
             for n, t in enumerate(self.frames, 1):
                 x = 40 + (n - 1) * self.PITCH
@@ -51,16 +52,17 @@ class ContactSheet:
                 deps.append(dep)
             fig.text(24 / self.WIDTH, 1 - 186 / self.HEIGHT, "onboard RGB", rotation=90, ha="center", va="center")
             fig.text(24 / self.WIDTH, 1 - 396 / self.HEIGHT, "depth", rotation=90, ha="center", va="center")
-            colours.colorbar(fig, P.add_axes(fig, 40 + (len(self.frames) - 1) * self.PITCH + self.FRAME + 18, 300,
-                                             12, self.FRAME))
+            colours.colorbar(
+                fig, P.add_axes(fig, 40 + (len(self.frames) - 1) * self.PITCH + self.FRAME + 18, 300, 12, self.FRAME)
+            )
             top = P.add_axes(fig, 70, 560, 590, 300)
             side = P.add_axes(fig, 770, 560, 590, 300)
-            self.top, self.side = paired_views(ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size,
-                                               ep.positions)
+            self.top, self.side = paired_views(
+                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, ep.positions
+            )
             P.setup_map_axes(top, self.top, "top view (obstacles to scale)")
             P.setup_map_axes(side, self.side, "side view (obstacles to scale)")
-            P.map_legend(fig, (0.5, 1 - 908 / self.HEIGHT), collision=ep.collision_at is not None, marks=True,
-                         ncol=7)
+            P.map_legend(fig, (0.5, 1 - 908 / self.HEIGHT), collision=ep.collision_at is not None, marks=True, ncol=7)
             ep_axes = {
                 "speed": P.add_axes(fig, 60, 970, 270, 190),
                 "clearance": P.add_axes(fig, 400, 970, 270, 190),

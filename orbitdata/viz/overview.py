@@ -20,9 +20,9 @@ from PIL import Image
 
 from orbitdata import schema as S
 from orbitdata.codecs import decode_rgb
-from orbitdata.write.parts import atomic_write
-from orbitdata.viz import plots as P
 from orbitdata.load.rows import RowReader, read_rows
+from orbitdata.viz import plots as P
+from orbitdata.write.parts import atomic_write
 
 P.require_matplotlib()  # fail at import, so that `shard` skips the figure without the extra
 
@@ -103,35 +103,70 @@ def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
     size = frames[next(iter(frames))][0][1].shape[0] if frames else 0
     with P.theme():
         fig = P.figure(width, height)
-        fig.text(0.5, 1 - 24 / height, f"{len(rows)} episodes ({', '.join(f'{n} {s}' for s, n in splits.items() if n)})"
-                 f", {sum(r[S.LENGTH] for r in rows)} frames at {S.FPS} Hz, {size} px camera",
-                 ha="center", va="center", fontsize=14, weight="bold")
-        fig.text(0.5, 1 - 48 / height, "a typical (median-length) episode per pilot level and outcome: its start, the frame where "
-                 "obstacles fill most of the view, and just before the end", ha="center", va="center", color="#b0b0bc")
+        fig.text(
+            0.5,
+            1 - 24 / height,
+            f"{len(rows)} episodes ({', '.join(f'{n} {s}' for s, n in splits.items() if n)})"
+            f", {sum(r[S.LENGTH] for r in rows)} frames at {S.FPS} Hz, {size} px camera",
+            ha="center",
+            va="center",
+            fontsize=14,
+            weight="bold",
+        )
+        fig.text(
+            0.5,
+            1 - 48 / height,
+            "a typical (median-length) episode per pilot level and outcome: its start, the frame where "
+            "obstacles fill most of the view, and just before the end",
+            ha="center",
+            va="center",
+            color="#b0b0bc",
+        )
         boxes = []
         for j, outcome in enumerate(outcomes):
             x = GRID_X + j * pitch
-            fig.text((x + cell_w / 2) / width, 1 - (grid_y - 14) / height, outcome.replace("_", " "), ha="center",
-                     va="center", fontsize=11, weight="bold", color=OUTCOME_COLOURS[outcome])
+            fig.text(
+                (x + cell_w / 2) / width,
+                1 - (grid_y - 14) / height,
+                outcome.replace("_", " "),
+                ha="center",
+                va="center",
+                fontsize=11,
+                weight="bold",
+                color=OUTCOME_COLOURS[outcome],
+            )
         for i, level in enumerate(levels):
             y = grid_y + i * row_h
-            fig.text(14 / width, 1 - (y + thumb / 2) / height, level, ha="left", va="center", fontsize=11,
-                     weight="bold")
+            fig.text(
+                14 / width, 1 - (y + thumb / 2) / height, level, ha="left", va="center", fontsize=11, weight="bold"
+            )
             for j, outcome in enumerate(outcomes):
                 x = GRID_X + j * pitch
                 pick = picks.get((level, outcome))
                 if pick is None:
-                    fig.text((x + cell_w / 2) / width, 1 - (y + thumb / 2) / height, "no episodes", ha="center",
-                             va="center", color="#70707c")
+                    fig.text(
+                        (x + cell_w / 2) / width,
+                        1 - (y + thumb / 2) / height,
+                        "no episodes",
+                        ha="center",
+                        va="center",
+                        color="#70707c",
+                    )
                     continue
                 for k, (t, rgb) in enumerate(frames[(level, outcome)]):
                     ax = P.add_axes(fig, x + k * (thumb + 6), y, thumb, thumb)
                     ax.set_axis_off()
                     boxes.append((ax, rgb))
-                fig.text((x + cell_w / 2) / width, 1 - (y + thumb + 14) / height,
-                         f"episode {pick[S.EPISODE_INDEX]} ({pick[S.LENGTH]} frames): frames "
-                         + ", ".join(str(t) for t, _ in frames[(level, outcome)]), ha="center", va="center",
-                         fontsize=8, color="#b0b0bc")
+                fig.text(
+                    (x + cell_w / 2) / width,
+                    1 - (y + thumb + 14) / height,
+                    f"episode {pick[S.EPISODE_INDEX]} ({pick[S.LENGTH]} frames): frames "
+                    + ", ".join(str(t) for t, _ in frames[(level, outcome)]),
+                    ha="center",
+                    va="center",
+                    fontsize=8,
+                    color="#b0b0bc",
+                )
         split = int(0.55 * width)
         _rates(fig, P.add_axes(fig, 110, plots_y, split - 180, 180), rows, levels)
         _lengths(fig, P.add_axes(fig, split + 40, plots_y, width - split - 80, 180), rows, levels)
@@ -153,8 +188,16 @@ def _rates(fig, ax, rows: list[dict], levels: list[str]) -> None:
             if n:
                 ax.barh(i, share, left=left, color=OUTCOME_COLOURS[outcome], height=0.6)
                 if share >= 0.08:
-                    ax.text(left + share / 2, i, f"{100 * share:.0f}%", ha="center", va="center", color="#121218",
-                            fontsize=9, weight="bold")
+                    ax.text(
+                        left + share / 2,
+                        i,
+                        f"{100 * share:.0f}%",
+                        ha="center",
+                        va="center",
+                        color="#121218",
+                        fontsize=9,
+                        weight="bold",
+                    )
             left += share
         ax.text(1.01, i, f"n = {len(mine)}", va="center", fontsize=9)
     ax.set_yticks(range(len(levels)), levels)
@@ -164,8 +207,13 @@ def _rates(fig, ax, rows: list[dict], levels: list[str]) -> None:
     ax.set_title("outcome rates per level (all splits)")
     from matplotlib.patches import Patch
 
-    ax.legend(handles=[Patch(color=OUTCOME_COLOURS[o], label=o.replace("_", " ")) for o in S.OUTCOMES],
-              loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4, fontsize=9)
+    ax.legend(
+        handles=[Patch(color=OUTCOME_COLOURS[o], label=o.replace("_", " ")) for o in S.OUTCOMES],
+        loc="upper center",
+        bbox_to_anchor=(0.5, -0.14),
+        ncol=4,
+        fontsize=9,
+    )
 
 
 def _lengths(fig, ax, rows: list[dict], levels: list[str]) -> None:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from orbitdata.schema import DT
 from orbitdata.load.episodes import Episode
+from orbitdata.schema import DT
 
 INSTALL_HINT = "pip install 'orbitdata[viz]'"
 DPI = 100
@@ -25,10 +25,19 @@ SIGNAL = {"speed": "#50c8ff", "clearance": "#ffb347", "fuel": "#7ee07e", "danger
 
 # A dark theme that matches the OpenCV maps (background (18, 18, 24)).
 THEME = {
-    "figure.facecolor": "#121218", "axes.facecolor": "#1a1a22", "savefig.facecolor": "#121218",
-    "axes.edgecolor": "#8a8a96", "axes.labelcolor": "#e6e6ee", "text.color": "#e6e6ee",
-    "xtick.color": "#c0c0cc", "ytick.color": "#c0c0cc", "grid.color": "#3a3a48",
-    "font.size": 9, "axes.titlesize": 10, "axes.titleweight": "bold", "legend.frameon": False,
+    "figure.facecolor": "#121218",
+    "axes.facecolor": "#1a1a22",
+    "savefig.facecolor": "#121218",
+    "axes.edgecolor": "#8a8a96",
+    "axes.labelcolor": "#e6e6ee",
+    "text.color": "#e6e6ee",
+    "xtick.color": "#c0c0cc",
+    "ytick.color": "#c0c0cc",
+    "grid.color": "#3a3a48",
+    "font.size": 9,
+    "axes.titlesize": 10,
+    "axes.titleweight": "bold",
+    "legend.frameon": False,
 }
 
 
@@ -92,7 +101,7 @@ class Box:
     def paste(self, canvas: np.ndarray, img: np.ndarray) -> None:
         w, h = self.size
         assert img.shape[:2] == (h, w), f"panel {img.shape[:2]} does not fit box {(h, w)}"
-        canvas[self.y0:self.y1, self.x0:self.x1] = img
+        canvas[self.y0 : self.y1, self.x0 : self.x1] = img
 
 
 def box_of(fig, ax) -> Box:
@@ -104,8 +113,16 @@ def box_of(fig, ax) -> Box:
 
 def note(canvas: np.ndarray, box: Box, text: str, scale: float = 1.0) -> None:
     """A small grey caption in the top left corner of a pasted panel."""
-    cv2.putText(canvas, text, (box.x0 + int(8 * scale), box.y0 + int(20 * scale)), cv2.FONT_HERSHEY_SIMPLEX,
-                0.45 * scale, (150, 150, 160), 1, cv2.LINE_AA)
+    cv2.putText(
+        canvas,
+        text,
+        (box.x0 + int(8 * scale), box.y0 + int(20 * scale)),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45 * scale,
+        (150, 150, 160),
+        1,
+        cv2.LINE_AA,
+    )
 
 
 NO_RETURN = "no return in range"
@@ -167,14 +184,27 @@ def plot_signals(fig, axes: dict, ep: Episode, marks: list[int] = ()) -> None:
     k = int(np.argmin(ep.clearance))
     ax.plot([t[k]], [ep.clearance[k]], "o", color=SIGNAL["danger"] if ep.collision_at is not None else "white", ms=4)
     right = t[k] > 0.6 * t[-1]  # keep the label inside the axes
-    ax.annotate(f"min {ep.clearance[k]:.2f} m", (t[k], ep.clearance[k]), xytext=(-4 if right else 4, 6),
-                textcoords="offset points", ha="right" if right else "left", fontsize=8)
+    ax.annotate(
+        f"min {ep.clearance[k]:.2f} m",
+        (t[k], ep.clearance[k]),
+        xytext=(-4 if right else 4, 6),
+        textcoords="offset points",
+        ha="right" if right else "left",
+        fontsize=8,
+    )
     ax.set_title("clearance to nearest obstacle (m)")
     ax.set_ylim(min(-0.1, float(ep.clearance.min()) - 0.1), max(1.0, float(ep.clearance.max()) * 1.1))
 
     ax = axes["thrust"]
-    img = ax.imshow(ep.actions.T, aspect="auto", cmap="magma", vmin=0, vmax=1, interpolation="nearest",
-                    extent=(-DT / 2, t[-1] + DT / 2, 7.5, -0.5))
+    img = ax.imshow(
+        ep.actions.T,
+        aspect="auto",
+        cmap="magma",
+        vmin=0,
+        vmax=1,
+        interpolation="nearest",
+        extent=(-DT / 2, t[-1] + DT / 2, 7.5, -0.5),
+    )
     ax.set_yticks(range(8))
     ax.tick_params(axis="y", labelsize=7)
     ax.set_title("thrust per thruster (0 to 1)")
@@ -197,8 +227,16 @@ def plot_signals(fig, axes: dict, ep: Episode, marks: list[int] = ()) -> None:
         for n, f in enumerate(marks, 1):
             ax.axvline(t[f], color="white", lw=0.8, ls=":", alpha=0.8)
             last = f == len(t) - 1  # label the last mark on its left, inside the axes
-            ax.text(t[f], 0.98, f"{n} " if last else f" {n}", transform=ax.get_xaxis_transform(),
-                    ha="right" if last else "left", va="top", fontsize=8, color="white")
+            ax.text(
+                t[f],
+                0.98,
+                f"{n} " if last else f" {n}",
+                transform=ax.get_xaxis_transform(),
+                ha="right" if last else "left",
+                va="top",
+                fontsize=8,
+                color="white",
+            )
 
 
 @dataclass(frozen=True)
@@ -223,7 +261,6 @@ class TimeCursor:
             cv2.line(canvas, (x, box.y0), (x, box.y1 - 1), CURSOR, 2)
 
 
-
 def setup_map_axes(ax, view, title: str) -> None:
     """Metre ticks on an axes whose plotting area will be covered by the OpenCV map ``view``.
 
@@ -239,8 +276,9 @@ def setup_map_axes(ax, view, title: str) -> None:
     ax.set_title(title)
 
 
-def map_legend(fig, anchor: tuple[float, float], collision: bool, heading: bool = False, marks: bool = False,
-               ncol: int = 6) -> None:
+def map_legend(
+    fig, anchor: tuple[float, float], collision: bool, heading: bool = False, marks: bool = False, ncol: int = 6
+) -> None:
     """What the map symbols mean, in the maps' colours, centred at figure fraction ``anchor``."""
     from matplotlib.lines import Line2D
 
@@ -258,9 +296,11 @@ def map_legend(fig, anchor: tuple[float, float], collision: bool, heading: bool 
     if heading:
         items.append(Line2D([], [], color=rgb(T.HEADING), lw=2, marker=">", ms=6, label="now, camera axis"))
     if marks:
-        items.append(Line2D([], [], color=rgb(T.HEADING), marker="o", ls="-", lw=2, ms=6,
-                            label="key frames, camera axis"))
+        items.append(
+            Line2D([], [], color=rgb(T.HEADING), marker="o", ls="-", lw=2, ms=6, label="key frames, camera axis")
+        )
     if collision:
         items.append(Line2D([], [], color=rgb(T.HIT), marker="x", ls="", ms=9, mew=3, label="collision"))
-    fig.legend(handles=items, loc="center", bbox_to_anchor=anchor, ncol=ncol, fontsize=8, handlelength=1.6,
-               columnspacing=1.2)
+    fig.legend(
+        handles=items, loc="center", bbox_to_anchor=anchor, ncol=ncol, fontsize=8, handlelength=1.6, columnspacing=1.2
+    )

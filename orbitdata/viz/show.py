@@ -14,11 +14,12 @@ import numpy as np
 
 from orbitdata import schema as S
 from orbitdata.codecs import decode_depth, decode_rgb
+from orbitdata.load.episodes import Episode, load_episode
 from orbitdata.schema import FPS, OUTCOME
 from orbitdata.viz import plots as P
-from orbitdata.load.episodes import Episode, load_episode
 from orbitdata.viz.topdown import PlaneMap, paired_views
-from orbitdata.viz.video import FORMATS as VIDEO_FILE_FORMATS, write_video
+from orbitdata.viz.video import FORMATS as VIDEO_FILE_FORMATS
+from orbitdata.viz.video import write_video
 
 VIDEO_FORMATS = VIDEO_FILE_FORMATS
 FORMATS = VIDEO_FORMATS + (".png",)
@@ -29,8 +30,10 @@ def check_format(path: Path) -> str:
     """The output's suffix, or a ValueError that lists the formats."""
     suffix = Path(path).suffix.lower()
     if suffix not in FORMATS:
-        raise ValueError(f"cannot write {path}: unknown format {repr(suffix) if suffix else '(no suffix)'}; "
-                         "use .mp4 or .gif for a video, or .png for a contact sheet")
+        raise ValueError(
+            f"cannot write {path}: unknown format {repr(suffix) if suffix else '(no suffix)'}; "
+            "use .mp4 or .gif for a video, or .png for a contact sheet"
+        )
     return suffix
 
 
@@ -59,12 +62,18 @@ class EpisodeVideo:
                 ax.set_axis_off()
                 ax.set_title(title)
             self.colours.colorbar(fig, cbar)
-            self.top, self.side = paired_views(ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size,
-                                               ep.positions)
+            self.top, self.side = paired_views(
+                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, ep.positions
+            )
             P.setup_map_axes(top, self.top, "top view")
             P.setup_map_axes(side, self.side, "side view")
-            P.map_legend(fig, ((650 + 1265) / 2 / self.WIDTH, 1 - 370 / self.HEIGHT),
-                         collision=ep.collision_at is not None, heading=True, ncol=3)
+            P.map_legend(
+                fig,
+                ((650 + 1265) / 2 / self.WIDTH, 1 - 370 / self.HEIGHT),
+                collision=ep.collision_at is not None,
+                heading=True,
+                ncol=3,
+            )
             sig = {
                 "speed": P.add_axes(fig, 60, 440, 250, 220),
                 "clearance": P.add_axes(fig, 370, 440, 250, 220),
@@ -74,8 +83,9 @@ class EpisodeVideo:
             }
             P.plot_signals(fig, sig, ep)
             self.background = P.render(fig)
-            self.boxes = {name: P.box_of(fig, ax) for name, ax in (("camera", cam), ("depth", dep),
-                                                                   ("top", top), ("side", side))}
+            self.boxes = {
+                name: P.box_of(fig, ax) for name, ax in (("camera", cam), ("depth", dep), ("top", top), ("side", side))
+            }
             self.cursor = P.TimeCursor.of(fig, [sig[n] for n in ("speed", "clearance", "thrust", "fuel")])
         self.map_background = {"top": self.top.background(), "side": self.side.background()}
         assert self.background.shape[:2] == (round(self.HEIGHT * scale), round(self.WIDTH * scale))
@@ -111,8 +121,16 @@ class EpisodeVideo:
         if last:
             status += f"   {ep.meta[OUTCOME].upper()}"
         cam = self.boxes["camera"]
-        cv2.putText(img, status, (cam.x0, cam.y1 + int(28 * self.k)), cv2.FONT_HERSHEY_SIMPLEX, 0.6 * self.k, TEXT,
-                    1, cv2.LINE_AA)
+        cv2.putText(
+            img,
+            status,
+            (cam.x0, cam.y1 + int(28 * self.k)),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.6 * self.k,
+            TEXT,
+            1,
+            cv2.LINE_AA,
+        )
         return img
 
     def __getitem__(self, t: int) -> np.ndarray:

@@ -50,8 +50,15 @@ class PlaneMap:
     1 m margin and centred; ``scale`` (px per metre) may be given to share it between views.
     """
 
-    def __init__(self, scenario: Scenario, size: int | tuple[int, int], extra_points: np.ndarray | None = None,
-                 axes: tuple[int, int] = (0, 1), scale: float | None = None, margin: float = 1.0):
+    def __init__(
+        self,
+        scenario: Scenario,
+        size: int | tuple[int, int],
+        extra_points: np.ndarray | None = None,
+        axes: tuple[int, int] = (0, 1),
+        scale: float | None = None,
+        margin: float = 1.0,
+    ):
         self.width, self.height = (size, size) if np.isscalar(size) else (int(size[0]), int(size[1]))
         if self.width < 8 or self.height < 8:
             raise ValueError(f"map size {self.width}x{self.height} px is too small; use at least 8x8")
@@ -93,8 +100,12 @@ class PlaneMap:
     @property
     def extent(self) -> tuple[float, float, float, float]:
         """World (left, right, bottom, top) of the pixel centres at the image edges, metres."""
-        return (self.lo[0], self.lo[0] + (self.width - 1) / self.scale,
-                self.lo[1], self.lo[1] + (self.height - 1) / self.scale)
+        return (
+            self.lo[0],
+            self.lo[0] + (self.width - 1) / self.scale,
+            self.lo[1],
+            self.lo[1] + (self.height - 1) / self.scale,
+        )
 
     @property
     def axis_names(self) -> tuple[str, str]:
@@ -143,15 +154,17 @@ class PlaneMap:
         return img
 
 
-
-def paired_views(scenario: Scenario, top_size: tuple[int, int], side_size: tuple[int, int],
-                 extra_points: np.ndarray | None = None) -> tuple[PlaneMap, PlaneMap]:
+def paired_views(
+    scenario: Scenario, top_size: tuple[int, int], side_size: tuple[int, int], extra_points: np.ndarray | None = None
+) -> tuple[PlaneMap, PlaneMap]:
     """A top-down (x-y) and a side (x-z) map at one scale, so lengths compare between them."""
     top = PlaneMap(scenario, top_size, extra_points, (0, 1))
     side = PlaneMap(scenario, side_size, extra_points, (0, 2))
     scale = min(top.scale, side.scale)
-    return (PlaneMap(scenario, top_size, extra_points, (0, 1), scale=scale),
-            PlaneMap(scenario, side_size, extra_points, (0, 2), scale=scale))
+    return (
+        PlaneMap(scenario, top_size, extra_points, (0, 1), scale=scale),
+        PlaneMap(scenario, side_size, extra_points, (0, 2), scale=scale),
+    )
 
 
 def draw_numbered(img: np.ndarray, view: PlaneMap, points: np.ndarray, first: int = 1) -> np.ndarray:

@@ -45,8 +45,15 @@ def _write_mp4(path: Path, frames: Iterable[np.ndarray], fps: float) -> int:
             if writer is None:
                 h, w = frame.shape[:2]
                 writer = imageio_ffmpeg.write_frames(
-                    str(path), (w, h), fps=fps, codec="libx264", pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
-                    macro_block_size=1, quality=7, ffmpeg_log_level="error",
+                    str(path),
+                    (w, h),
+                    fps=fps,
+                    codec="libx264",
+                    pix_fmt_in="rgb24",
+                    pix_fmt_out="yuv420p",
+                    macro_block_size=1,
+                    quality=7,
+                    ffmpeg_log_level="error",
                     output_params=["-movflags", "+faststart"],
                 )
                 writer.send(None)  # start ffmpeg
@@ -64,7 +71,8 @@ def _write_gif(path: Path, frames: Iterable[np.ndarray], fps: float) -> int:
     with open(path, "wb") as f:
         for frame in frames:
             image = Image.fromarray(np.ascontiguousarray(frame, dtype=np.uint8)).convert(
-                "P", palette=Image.Palette.ADAPTIVE, colors=256)
+                "P", palette=Image.Palette.ADAPTIVE, colors=256
+            )
             if count == 0:
                 header, _ = GifImagePlugin.getheader(image, info={"loop": 0, "duration": duration})
                 f.writelines(header)

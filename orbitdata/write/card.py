@@ -19,8 +19,14 @@ TAGS = ["space-robotics", "world-models", "cubesat", "obstacle-avoidance", "mujo
 
 
 def _size_category(n: int) -> str:
-    bounds = [(1_000, "n<1K"), (10_000, "1K<n<10K"), (100_000, "10K<n<100K"), (1_000_000, "100K<n<1M"),
-              (10_000_000, "1M<n<10M"), (100_000_000, "10M<n<100M")]
+    bounds = [
+        (1_000, "n<1K"),
+        (10_000, "1K<n<10K"),
+        (100_000, "10K<n<100K"),
+        (1_000_000, "100K<n<1M"),
+        (10_000_000, "1M<n<10M"),
+        (100_000_000, "10M<n<100M"),
+    ]
     return next((label for limit, label in bounds if n < limit), "n>100M")
 
 
@@ -46,8 +52,7 @@ def yaml_header(info: Info, sizes: dict) -> dict:
     dataset_info = []
     for name, folder, key in (("default", S.DATA_DIR, "frames"), ("episodes", S.EPISODES_DIR, "episodes")):
         split_info = [
-            {"name": s, "num_bytes": sizes[folder][s], "num_examples": info.counts["splits"][s][key]}
-            for s in splits
+            {"name": s, "num_bytes": sizes[folder][s], "num_examples": info.counts["splits"][s][key]} for s in splits
         ]
         total = sum(sizes[folder].values())
         dataset_info.append(
@@ -90,17 +95,22 @@ def column_table(kind: str) -> str:
     return "\n".join(rows)
 
 
-def render_card(info: Info, config: GenerationConfig, sizes: dict, repo: str = "path/to/orbit_planner",
-                overview: str | None = None) -> str:
+def render_card(
+    info: Info, config: GenerationConfig, sizes: dict, repo: str = "path/to/orbit_planner", overview: str | None = None
+) -> str:
     c = info.counts
     split_rows, level_rows = [], []
     for s, sc in c["splits"].items():
         o = sc["outcomes"]
-        split_rows.append(f"| {s} | {sc['episodes']} | {sc['frames']} | " + " | ".join(str(o[k]) for k in S.OUTCOMES) + " |")
+        split_rows.append(
+            f"| {s} | {sc['episodes']} | {sc['frames']} | " + " | ".join(str(o[k]) for k in S.OUTCOMES) + " |"
+        )
         for level, lc in sc["levels"].items():
             lo = lc["outcomes"]
             level_rows.append(
-                f"| {s} | {level} | {lc['episodes']} | {lc['frames']} | " + " | ".join(str(lo[k]) for k in S.OUTCOMES) + " |"
+                f"| {s} | {level} | {lc['episodes']} | {lc['frames']} | "
+                + " | ".join(str(lo[k]) for k in S.OUTCOMES)
+                + " |"
             )
     total_bytes = sum(v for folder in sizes.values() for v in folder.values())
     sim, scn, pil, ds = config.sim, config.scenario, config.pilots, config.dataset

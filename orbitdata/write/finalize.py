@@ -43,15 +43,22 @@ def existing_config(out: Path) -> dict | None:
     return None
 
 
-def finalize(out: Path, config: GenerationConfig | None = None, repo_id: str | None = None,
-             max_shard_bytes: int | None = None, figure: Figure | None = None) -> Info:
+def finalize(
+    out: Path,
+    config: GenerationConfig | None = None,
+    repo_id: str | None = None,
+    max_shard_bytes: int | None = None,
+    figure: Figure | None = None,
+) -> Info:
     """Compact parts (or re-shard existing shards) and write meta/ and the card. Returns the info."""
     out = Path(out)
     if config is None:
         existing = existing_config(out)
         if existing is None:
-            raise NoDataset(f"{out} holds no orbitdata dataset (no {S.PARTS_DIR}/{parts.MANIFEST_FILE} or "
-                                    f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`")
+            raise NoDataset(
+                f"{out} holds no orbitdata dataset (no {S.PARTS_DIR}/{parts.MANIFEST_FILE} or "
+                f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`"
+            )
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
     if max_shard_bytes is not None:
         config = config.replace(dataset={"max_shard_bytes": int(max_shard_bytes)})

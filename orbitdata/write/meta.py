@@ -62,7 +62,11 @@ def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: l
                 "no_return": 0,
                 "range_m": [config.sim.camera.near, config.sim.camera.far],
             },
-            S.DEPTH_LOW: {"dtype": "float32", "shape": [S.DEPTH_LOW_SIDE, S.DEPTH_LOW_SIDE], "unit": _unit(S.DEPTH_LOW)},
+            S.DEPTH_LOW: {
+                "dtype": "float32",
+                "shape": [S.DEPTH_LOW_SIDE, S.DEPTH_LOW_SIDE],
+                "unit": _unit(S.DEPTH_LOW),
+            },
             S.STATE: {"dtype": "float32", "shape": [S.STATE_DIM], "names": list(STATE_NAMES)},
             S.ACTION: {"dtype": "float32", "shape": [S.ACTION_DIM], "names": list(S.ACTION_NAMES)},
             S.MIN_CLEARANCE: {"dtype": "float32", "shape": [1], "unit": _unit(S.MIN_CLEARANCE)},

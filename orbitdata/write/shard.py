@@ -24,6 +24,7 @@ from orbitdata.load.rows import RowReader
 from orbitdata.write.parts import atomic_write, episodes_part, parts_dir, remove_temporaries, steps_part
 from orbitdata.write.stats import StatsAccumulator
 
+
 def _image_bytes(table: pa.Table) -> int:
     """Estimated stored size of ``table``: its encoded images plus ~1.2 KB a row for the rest."""
     total = 0
@@ -53,8 +54,7 @@ class _ShardWriter:
         self.files.append(path)
         # No dictionary encoding: images are unique blobs, and a dictionary's fallback point
         # would depend on how the input happens to be chunked, breaking byte-identity.
-        self.writer = pq.ParquetWriter(path, self.schema, compression=self.storage.compression,
-                                       use_dictionary=False)
+        self.writer = pq.ParquetWriter(path, self.schema, compression=self.storage.compression, use_dictionary=False)
         self.shard_bytes = self.shard_rows = 0
 
     def _flush(self, final: bool) -> None:
@@ -133,8 +133,10 @@ def _source_from_shards(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]
 
 
 def _rows_per_split(out: Path, from_parts: bool) -> dict[str, int]:
-    paths = list(parts_dir(out).glob("unit-*.episodes.parquet")) if from_parts else list(
-        (out / S.EPISODES_DIR).glob("*.parquet")
+    paths = (
+        list(parts_dir(out).glob("unit-*.episodes.parquet"))
+        if from_parts
+        else list((out / S.EPISODES_DIR).glob("*.parquet"))
     )
     totals = {s: 0 for s in S.SPLITS}
     for p in paths:

@@ -18,8 +18,17 @@ import numpy as np
 import pyarrow as pa
 
 from orbitdata import schema as S
-from orbitdata.codecs import (IMAGE_CHANNELS, IMAGE_STRIDE, PIXEL_STRIDE, QUANTILE_ROWS, QUANTILES, SCALAR_FEATURES,
-                              VECTOR_FEATURES, decode_rgb, stats_width)
+from orbitdata.codecs import (
+    IMAGE_CHANNELS,
+    IMAGE_STRIDE,
+    PIXEL_STRIDE,
+    QUANTILE_ROWS,
+    QUANTILES,
+    SCALAR_FEATURES,
+    VECTOR_FEATURES,
+    decode_rgb,
+    stats_width,
+)
 
 
 def _matrix(column: pa.ChunkedArray | pa.Array, width: int) -> np.ndarray:

@@ -37,21 +37,36 @@ def _numbers(text: str, kind, flag: str) -> list:
 
 @friendly
 def closed_loop(
-    run: Annotated[Optional[Path], typer.Argument(help="Stage I run folder (with its probe) or a policy run "
-                                                        "(`orbitmodel train-policy`), or the Hub repo id of either "
-                                                        "(owner/name[@revision]); optional for the rigid-body oracles")
-                   ] = None,
-    pilot: Annotated[PilotName, typer.Option(help="planner, or an oracle (true dynamics and/or obstacles); a policy "
-                                                  "run flies itself")] = "planner",
-    preset: Annotated[Optional[str], typer.Option(
-        help="the pilot's preset: a planner preset (paper: K 256; cpu: K 32, history 2) or, for a policy run, a "
-             "flight preset (cpu: the reported flight; reference: the reference's sampler); `orbitmodel presets` "
-             "lists them (default: cpu for a policy; for a planner paper with CUDA, else cpu)")] = None,
-    set_: Annotated[Optional[list[str]], typer.Option(
-        "--set", help="KEY=VALUE: change one setting of the preset, repeatable: for a planner a field of "
-                      "PlannerConfig, MPPIConfig or CostConfig (samples=K, horizon, history, depth_head, "
-                      "margin_per_speed, image_codec, ...), for a policy a field of PolicySampling (draws, pick, "
-                      "action_steps, ensemble, noise_scale, timestep_spacing, inference_steps, image_codec)")] = None,
+    run: Annotated[
+        Optional[Path],
+        typer.Argument(
+            help="Stage I run folder (with its probe) or a policy run "
+            "(`orbitmodel train-policy`), or the Hub repo id of either "
+            "(owner/name[@revision]); optional for the rigid-body oracles"
+        ),
+    ] = None,
+    pilot: Annotated[
+        PilotName,
+        typer.Option(help="planner, or an oracle (true dynamics and/or obstacles); a policy run flies itself"),
+    ] = "planner",
+    preset: Annotated[
+        Optional[str],
+        typer.Option(
+            help="the pilot's preset: a planner preset (paper: K 256; cpu: K 32, history 2) or, for a policy run, a "
+            "flight preset (cpu: the reported flight; reference: the reference's sampler); `orbitmodel presets` "
+            "lists them (default: cpu for a policy; for a planner paper with CUDA, else cpu)"
+        ),
+    ] = None,
+    set_: Annotated[
+        Optional[list[str]],
+        typer.Option(
+            "--set",
+            help="KEY=VALUE: change one setting of the preset, repeatable: for a planner a field of "
+            "PlannerConfig, MPPIConfig or CostConfig (samples=K, horizon, history, depth_head, "
+            "margin_per_speed, image_codec, ...), for a policy a field of PolicySampling (draws, pick, "
+            "action_steps, ensemble, noise_scale, timestep_spacing, inference_steps, image_codec)",
+        ),
+    ] = None,
     obstacles: Annotated[str, typer.Option(help="obstacle counts, comma-separated")] = "1,3,5",
     speeds: Annotated[str, typer.Option(help="initial speeds in m/s, comma-separated")] = "1,2",
     episodes: Annotated[int, typer.Option(min=1, help="episodes per setting")] = 20,
@@ -61,7 +76,9 @@ def closed_loop(
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
     video: Annotated[Optional[Path], typer.Option(help="write a video of each episode to this folder")] = None,
     video_format: Annotated[VideoFormat, typer.Option(help="mp4 or gif")] = "mp4",
-    config: Annotated[Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")] = None,
+    config: Annotated[
+        Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")
+    ] = None,
 ) -> None:
     """Fly a planning pilot (or a policy run) over the orbitdata fly grid and print the success table.
 
@@ -70,18 +87,27 @@ def closed_loop(
     """
     import torch
 
-    from orbitdata.config import GenerationConfig
     from orbitdata.cli.options import key_values
+    from orbitdata.config import GenerationConfig
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
 
     options = key_values(set_ or [], "--set", "samples=32")
     settings, preset = pilot_settings(run, preset, **options)
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
-        variant=Variant(pilot.value), run=run, obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
-        speeds=tuple(_numbers(speeds, float, "--speeds")), episodes=episodes, seed=seed, settings=settings,
-        preset=preset, config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
-        max_steps=max_steps, video_dir=video, video_format=f".{video_format.value}")
+        variant=Variant(pilot.value),
+        run=run,
+        obstacles=tuple(_numbers(obstacles, int, "--obstacles")),
+        speeds=tuple(_numbers(speeds, float, "--speeds")),
+        episodes=episodes,
+        seed=seed,
+        settings=settings,
+        preset=preset,
+        config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
+        max_steps=max_steps,
+        video_dir=video,
+        video_format=f".{video_format.value}",
+    )
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     report = loop.report(_fly_with_progress(loop, json_out))
     print_table(report, episodes)
@@ -100,8 +126,13 @@ def _fly_with_progress(loop, json_out: Path | None):
         json_out.parent.mkdir(parents=True, exist_ok=True)
         stream = json_out.with_suffix(".episodes.jsonl").open("w")
     req = loop.req
-    with Progress(TextColumn(f"[bold]fly {loop.name}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  console=Console(stderr=True)) as bar:
+    with Progress(
+        TextColumn(f"[bold]fly {loop.name}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeRemainingColumn(),
+        console=Console(stderr=True),
+    ) as bar:
         task = bar.add_task("fly", total=len(req.obstacles) * len(req.speeds) * req.episodes)
 
         def landed(cell, record: dict) -> None:
@@ -130,17 +161,23 @@ def print_table(report: dict, episodes: int) -> None:
         table.add_column(col, justify="right")
     for c in report["settings"]:
         low, high = wilson(c["success"], c["episodes"])
-        table.add_row(str(c["obstacles"]), f"{c['speed']:g}", str(c["success"]), str(c["collision"]),
-                      str(c["timeout"]), str(c["out_of_fuel"]),
-                      f"{100 * c['success'] / c['episodes']:.0f} [{100 * low:.0f}, {100 * high:.0f}]")
+        table.add_row(
+            str(c["obstacles"]),
+            f"{c['speed']:g}",
+            str(c["success"]),
+            str(c["collision"]),
+            str(c["timeout"]),
+            str(c["out_of_fuel"]),
+            f"{100 * c['success'] / c['episodes']:.0f} [{100 * low:.0f}, {100 * high:.0f}]",
+        )
     console = Console()
     console.print(table)
     line = f"success {rate_text(*report_totals(report))}"
     step, replan = report["latency_ms"]["step"], report["latency_ms"]["replan"]
     if step["median"] is not None:
-        line += (f"; planning per control step {step['median']:.1f} ms median, {step['p95']:.1f} ms p95"
-                 + (f" (per replan {replan['median']:.1f} / {replan['p95']:.1f} ms)" if replan["median"] is not None
-                    else ""))
+        line += f"; planning per control step {step['median']:.1f} ms median, {step['p95']:.1f} ms p95" + (
+            f" (per replan {replan['median']:.1f} / {replan['p95']:.1f} ms)" if replan["median"] is not None else ""
+        )
     if report["time_share"]:
         line += "; time: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in report["time_share"].items())
     console.print(line)
@@ -185,8 +222,9 @@ def merge(
 @friendly
 def table(
     results: Annotated[list[Path], typer.Argument(help="JSON tables of orbitmodel eval closed-loop / orbitdata fly")],
-    per_setting: Annotated[bool, typer.Option("--per-setting-ci", help="each setting's rate with its interval, "
-                                                                      "not its count")] = False,
+    per_setting: Annotated[
+        bool, typer.Option("--per-setting-ci", help="each setting's rate with its interval, not its count")
+    ] = False,
     links: Annotated[bool, typer.Option(help="a last column linking each row's JSON file")] = True,
 ) -> None:
     """Print one grid's results as a markdown table: successes per setting, the success rate over
@@ -210,9 +248,11 @@ def pool(
 
     pooled = pool_seeds([read_report(p) for p in results])
     worst = pooled["worst_setting"]
-    typer.echo(f"{pooled['pilot']}, seeds {', '.join(map(str, pooled['seeds']))}: {rate_text(*report_totals(pooled))}; "
-               f"worst setting: seed {worst['seed']}, {worst['obstacles']} obstacles at {worst['speed']:g} m/s, "
-               f"{worst['success']}/{worst['episodes']}")
+    typer.echo(
+        f"{pooled['pilot']}, seeds {', '.join(map(str, pooled['seeds']))}: {rate_text(*report_totals(pooled))}; "
+        f"worst setting: seed {worst['seed']}, {worst['obstacles']} obstacles at {worst['speed']:g} m/s, "
+        f"{worst['success']}/{worst['episodes']}"
+    )
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(pooled, indent=2) + "\n")
@@ -229,14 +269,19 @@ def flips(
     from orbitmodel.evaluate.success import outcome_flips
 
     result = outcome_flips(json.loads(first.read_text()), json.loads(second.read_text()))
-    typer.echo(f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
-               f"{result['successes'][1]})")
+    typer.echo(
+        f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
+        f"{result['successes'][1]})"
+    )
     if "identical" in result:
         c, f = result["clearance_change_m"], result["frames_change"]
-        typer.echo(f"{result['identical']} of {result['episodes']} flown identically; closest approach changed by "
-                   f"{c['median']:.3f} m median ({c['max']:.3f} max), frames by {f['median']:g} median ({f['max']} max)")
+        typer.echo(
+            f"{result['identical']} of {result['episodes']} flown identically; closest approach changed by "
+            f"{c['median']:.3f} m median ({c['max']:.3f} max), frames by {f['median']:g} median ({f['max']} max)"
+        )
     for f in result["flipped"]:
-        typer.echo(f"  {f['obstacles']} obstacles, {f['speed']:g} m/s, episode {f['episode']}: {f['first']} -> "
-                   f"{f['second']}")
+        typer.echo(
+            f"  {f['obstacles']} obstacles, {f['speed']:g} m/s, episode {f['episode']}: {f['first']} -> {f['second']}"
+        )
     if json_out is not None:
         json_out.write_text(json.dumps(result, indent=2) + "\n")

@@ -22,14 +22,23 @@ def depth(
     run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
     dataset: Annotated[str, typer.Argument(help="the run's orbitdata dataset (train split fitted, test split scored)")],
     frames: Annotated[int, typer.Option(min=1, help="random training frames encoded once")] = _D.frames,
-    test_frames: Annotated[int, typer.Option(min=1, help="random test frames for the before/after table")] = _D.test_frames,
+    test_frames: Annotated[
+        int, typer.Option(min=1, help="random test frames for the before/after table")
+    ] = _D.test_frames,
     epochs: Annotated[int, typer.Option(min=1)] = _D.epochs,
     lr: Annotated[float, typer.Option(min=0.0)] = _D.lr,
-    near_weight: Annotated[float, typer.Option(min=0.0, help="extra loss weight of cells nearer than --near-m")] = _D.near_weight,
+    near_weight: Annotated[
+        float, typer.Option(min=0.0, help="extra loss weight of cells nearer than --near-m")
+    ] = _D.near_weight,
     near_m: Annotated[float, typer.Option(min=0.0, help="metres: the planner's range")] = _D.near_m,
     seed: Annotated[int, typer.Option(min=0)] = _D.seed,
-    eval_split: Annotated[str, typer.Option(help="frames the before/after table scores: test (to report) or val, "
-                                                  "the run's validation episodes (to choose a recipe)")] = _D.eval_split,
+    eval_split: Annotated[
+        str,
+        typer.Option(
+            help="frames the before/after table scores: test (to report) or val, "
+            "the run's validation episodes (to choose a recipe)"
+        ),
+    ] = _D.eval_split,
     overwrite: Annotated[bool, typer.Option(help="replace a refitted head already in RUN/depth")] = False,
 ) -> None:
     """Refit the depth head on the frozen encoder with near cells weighted (written to RUN/depth).
@@ -41,8 +50,16 @@ def depth(
     from orbitmodel.plan.depth_bands import comparison_lines
     from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head
 
-    cfg = DepthRefitConfig(frames=frames, test_frames=test_frames, epochs=epochs, lr=lr, near_weight=near_weight,
-                           near_m=near_m, seed=seed, eval_split=eval_split)
+    cfg = DepthRefitConfig(
+        frames=frames,
+        test_frames=test_frames,
+        epochs=epochs,
+        lr=lr,
+        near_weight=near_weight,
+        near_m=near_m,
+        seed=seed,
+        eval_split=eval_split,
+    )
     result = refit_depth_head(run, dataset, cfg, overwrite=overwrite)
     for line in comparison_lines(result):
         typer.echo(line)

@@ -19,7 +19,8 @@ def rollout(
     run: Annotated[Path, typer.Argument(help="a Stage I run folder (orbitmodel train --out RUN)")],
     dataset: Annotated[str, typer.Argument(help="the orbitdata dataset (its test split is used)")],
     windows: Annotated[int, typer.Option(min=2, help="windows, chosen at random with --seed")] = 100,
-    split: Annotated[str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
+    split: Annotated[
+        str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
     ] = "test",
     horizon: Annotated[int, typer.Option(min=1, max=200, help="rollout steps")] = 50,
     seed: Annotated[int, typer.Option(min=0)] = 0,
@@ -33,8 +34,11 @@ def rollout(
     if out is None:
         local_run_folder(run, "eval rollout without --out")  # before minutes of evaluation
 
-    result = evaluate_rollout(run, dataset, RolloutEvalConfig(horizon=horizon, windows=windows, seed=seed,
-                                                              check_h=min(12, horizon), split=split))
+    result = evaluate_rollout(
+        run,
+        dataset,
+        RolloutEvalConfig(horizon=horizon, windows=windows, seed=seed, check_h=min(12, horizon), split=split),
+    )
     paths = write_rollout_report(result, out or local_run_folder(run, "eval rollout without --out") / "eval")
     for line in summary_lines(result):
         typer.echo(line)

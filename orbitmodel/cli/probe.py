@@ -26,28 +26,57 @@ def register(app: typer.Typer, eval_app: typer.Typer) -> None:
 def probe(
     run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
     dataset: Annotated[str, typer.Argument(help="orbitdata dataset: a local folder or a Hub repo id")],
-    state_only: Annotated[bool, typer.Option(help="train the state-only reference MLP (RUN/probe-state) instead")] = False,
-    epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the probe recipe of the run's preset)")] = None,
-    max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
+    state_only: Annotated[
+        bool, typer.Option(help="train the state-only reference MLP (RUN/probe-state) instead")
+    ] = False,
+    epochs: Annotated[
+        Optional[int], typer.Option(min=1, help="epochs (default: the probe recipe of the run's preset)")
+    ] = None,
+    max_steps: Annotated[
+        Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")
+    ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
-    inputs: Annotated[Optional[Inputs], typer.Option(
-        help="latent+change: the MLP reads [z_k, z_k - z_{k-1}]; latent: z_k alone (upstream) "
-             "[default: the probe recipe of the run's preset]")] = None,
-    integrator: Annotated[Optional[Integrator], typer.Option(
-        help="coasting: zero increments hold the world-frame velocity; upstream: p += dp, v += dv "
-             "[default: the probe recipe of the run's preset]")] = None,
-    per_frame: Annotated[Optional[bool], typer.Option(
-        help="for a run stepping s > 1 frames: predict every frame's increments from each latent (10 s outputs) "
-             "instead of one per latent with the frames between interpolated [default: the probe recipe of the "
-             "run's preset]")] = None,
-    loss_weights: Annotated[Optional[str], typer.Option(
-        help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)")] = None,
-    increment_weight: Annotated[Optional[float], typer.Option(
-        min=0.0, help="weight of the MSE of the predicted per-step increments against the true ones, added to the "
-                      "state loss [default: the probe recipe's]")] = None,
-    cache_windows: Annotated[Optional[int], typer.Option(
-        min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)")] = None,
+    inputs: Annotated[
+        Optional[Inputs],
+        typer.Option(
+            help="latent+change: the MLP reads [z_k, z_k - z_{k-1}]; latent: z_k alone (upstream) "
+            "[default: the probe recipe of the run's preset]"
+        ),
+    ] = None,
+    integrator: Annotated[
+        Optional[Integrator],
+        typer.Option(
+            help="coasting: zero increments hold the world-frame velocity; upstream: p += dp, v += dv "
+            "[default: the probe recipe of the run's preset]"
+        ),
+    ] = None,
+    per_frame: Annotated[
+        Optional[bool],
+        typer.Option(
+            help="for a run stepping s > 1 frames: predict every frame's increments from each latent (10 s outputs) "
+            "instead of one per latent with the frames between interpolated [default: the probe recipe of the "
+            "run's preset]"
+        ),
+    ] = None,
+    loss_weights: Annotated[
+        Optional[str],
+        typer.Option(help="position,velocity,rot6d,w,fuel MSE weights, e.g. 1,1,1,1,0.1 (default: the recipe's)"),
+    ] = None,
+    increment_weight: Annotated[
+        Optional[float],
+        typer.Option(
+            min=0.0,
+            help="weight of the MSE of the predicted per-step increments against the true ones, added to the "
+            "state loss [default: the probe recipe's]",
+        ),
+    ] = None,
+    cache_windows: Annotated[
+        Optional[int],
+        typer.Option(
+            min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)"
+        ),
+    ] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
     seed: Annotated[Optional[int], typer.Option(min=0, help="data order and initialisation")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
@@ -71,15 +100,27 @@ def probe(
         except ValueError:
             weights = ()
         if len(weights) != 5 or min(weights) < 0:
-            fail(f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
-                 "(e.g. 1,1,1,1,100)")
+            fail(
+                f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
+                "(e.g. 1,1,1,1,100)"
+            )
     recipe = run_recipe(run).with_changes(
-        inputs=inputs.value if inputs else None, integrator=integrator.value if integrator else None,
-        per_frame=per_frame, epochs=epochs, increment_weight=increment_weight,
-        max_steps=max_steps, batch_size=batch_size, lr=lr, weights=weights, cache_windows=cache_windows,
-        num_workers=workers, seed=seed)
-    req = ProbeRequest(run=run, dataset=dataset, recipe=recipe, kind=kind, device=device.value, resume=resume,
-                       overwrite=overwrite)
+        inputs=inputs.value if inputs else None,
+        integrator=integrator.value if integrator else None,
+        per_frame=per_frame,
+        epochs=epochs,
+        increment_weight=increment_weight,
+        max_steps=max_steps,
+        batch_size=batch_size,
+        lr=lr,
+        weights=weights,
+        cache_windows=cache_windows,
+        num_workers=workers,
+        seed=seed,
+    )
+    req = ProbeRequest(
+        run=run, dataset=dataset, recipe=recipe, kind=kind, device=device.value, resume=resume, overwrite=overwrite
+    )
     echo_trained(f"the {kind} probe", train_probe(req), probe_folder(run, kind))
 
 
@@ -93,19 +134,34 @@ def eval_probe(
     out: Annotated[Optional[Path], typer.Option(help="folder for the table and figures (default RUN/eval)")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "cpu",
     figures: Annotated[bool, typer.Option(help="write Figure 5 (needs matplotlib)")] = True,
-    split: Annotated[str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
+    split: Annotated[
+        str, typer.Option(help="test (to report) or val: the run's validation episodes (to choose)")
     ] = "test",
-    history: Annotated[Optional[int], typer.Option(
-        min=1, help="latents the world model sees per imagined step, as the planner flies it (the cpu planner "
-                    "preset: 2) [default: the model's own]")] = None,
+    history: Annotated[
+        Optional[int],
+        typer.Option(
+            min=1,
+            help="latents the world model sees per imagined step, as the planner flies it (the cpu planner "
+            "preset: 2) [default: the model's own]",
+        ),
+    ] = None,
 ) -> None:
     """The paper's Table I: probe MAE at h = 25 and 50 steps beside the paper's, the state-only
     MLP's and constant velocity's, on the same windows; and Figure 5."""
     from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe, markdown
 
-    req = EvalRequest(run=run, dataset=dataset, windows=windows, seed=seed,
-                      horizons=tuple(horizon) if horizon else (25, 50), out=out, device=device.value, figures=figures,
-                      history=history, split=split)
+    req = EvalRequest(
+        run=run,
+        dataset=dataset,
+        windows=windows,
+        seed=seed,
+        horizons=tuple(horizon) if horizon else (25, 50),
+        out=out,
+        device=device.value,
+        figures=figures,
+        history=history,
+        split=split,
+    )
     try:
         result = evaluate_probe(req)
     except MissingExtra as err:

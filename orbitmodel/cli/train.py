@@ -24,8 +24,10 @@ def register(app: typer.Typer) -> None:
 
 def echo_trained(what: str, result, where) -> None:
     """The one line every training command ends with (``train.loop.FitResult``)."""
-    typer.echo(f"trained {what} {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} "
-               f"windows/s, {100 * result.data_wait:.1f} % waiting for data); weights in {where}")
+    typer.echo(
+        f"trained {what} {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} "
+        f"windows/s, {100 * result.data_wait:.1f} % waiting for data); weights in {where}"
+    )
 
 
 @friendly
@@ -34,20 +36,33 @@ def train(
     out: Annotated[Path, typer.Option("--out", help="run folder to write (checkpoints, metrics, config)")],
     preset: Annotated[Preset, typer.Option(help="model size and recipe; see `orbitmodel presets`")] = "cpu",
     epochs: Annotated[Optional[int], typer.Option(min=1, help="epochs (default: the preset's)")] = None,
-    max_steps: Annotated[Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")] = None,
-    val_fraction: Annotated[Optional[float], typer.Option(
-        min=0.0, max=0.99, help="hold this seeded fraction of the train episodes out of Stage I, the probe and the "
-                                "depth refit: the validation split of `eval ... --split val` [default: the preset's, 0]")
+    max_steps: Annotated[
+        Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")
+    ] = None,
+    val_fraction: Annotated[
+        Optional[float],
+        typer.Option(
+            min=0.0,
+            max=0.99,
+            help="hold this seeded fraction of the train episodes out of Stage I, the probe and the "
+            "depth refit: the validation split of `eval ... --split val` [default: the preset's, 0]",
+        ),
     ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=2, help="windows per step and process")] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
-    lambda_sigreg: Annotated[Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
+    lambda_sigreg: Annotated[
+        Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
     ] = None,
-    sigreg_pool: Annotated[Optional[bool], typer.Option(
-        help="SIGReg over every frame of the batch (pool) or per frame over the batch (upstream; default: the preset's)")
+    sigreg_pool: Annotated[
+        Optional[bool],
+        typer.Option(
+            help="SIGReg over every frame of the batch (pool) or per frame over the batch (upstream; default: the preset's)"
+        ),
     ] = None,
-    frame_step: Annotated[Optional[int], typer.Option(
-        min=1, help="frames per predictor step (upstream 1; 5 makes a 50-frame plan 10 predictor calls)")] = None,
+    frame_step: Annotated[
+        Optional[int],
+        typer.Option(min=1, help="frames per predictor step (upstream 1; 5 makes a 50-frame plan 10 predictor calls)"),
+    ] = None,
     level: Annotated[Optional[list[Level]], typer.Option(help="train on these levels only (repeatable)")] = None,
     outcome: Annotated[Optional[list[Outcome]], typer.Option(help="train on these outcomes only (repeatable)")] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
@@ -64,11 +79,25 @@ def train(
     from orbitmodel.config import get_preset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
-    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool,
-                                             frame_step=frame_step)
-    p = p.with_train(epochs=epochs, max_steps=max_steps, batch_size=batch_size, lr=lr, num_workers=workers, seed=seed,
-                     val_fraction=val_fraction)
-    req = Stage1Request(dataset=dataset, preset=p, out=out, levels=tuple(l.value for l in level or ()),
-                        outcomes=tuple(o.value for o in outcome or ()), resize=resize, device=device.value,
-                        resume=resume, overwrite=overwrite)
+    p = get_preset(preset.value).with_model(lambda_sigreg=lambda_sigreg, sigreg_pool=sigreg_pool, frame_step=frame_step)
+    p = p.with_train(
+        epochs=epochs,
+        max_steps=max_steps,
+        batch_size=batch_size,
+        lr=lr,
+        num_workers=workers,
+        seed=seed,
+        val_fraction=val_fraction,
+    )
+    req = Stage1Request(
+        dataset=dataset,
+        preset=p,
+        out=out,
+        levels=tuple(x.value for x in level or ()),
+        outcomes=tuple(o.value for o in outcome or ()),
+        resize=resize,
+        device=device.value,
+        resume=resume,
+        overwrite=overwrite,
+    )
     echo_trained("the world model", train_world_model(req), out)

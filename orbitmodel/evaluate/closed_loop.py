@@ -20,18 +20,17 @@ import numpy as np
 import torch
 
 from orbitdata.config import GenerationConfig
-from orbitdata.seeding import episode_seed, grid_seed
-from orbitdata.sim.env import CubeSatEnv
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
 from orbitdata.fly.rollout import fly_episode
-from orbitmodel.kinematics import FUEL, P
+from orbitdata.seeding import episode_seed, grid_seed
+from orbitdata.sim.env import CubeSatEnv
 from orbitmodel.baselines.diffusion.sampling import PolicySampling
+from orbitmodel.kinematics import FUEL, P
 from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config
 from orbitmodel.plan.factory import build_pilot, camera_for_run
 from orbitmodel.plan.pilot import Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.runs import POLICY, RunDir, RunError, resolve_run, stage_of
-
 
 PilotSettings = PlannerConfig | PolicySampling
 
@@ -77,8 +76,10 @@ def pilot_settings(run: str | Path | None, preset: str | None = None, **options)
         from orbitmodel.baselines.diffusion.sampling import DEFAULT_FLIGHT, POLICY_FLIGHTS, policy_sampling
 
         if preset is not None and preset not in POLICY_FLIGHTS:
-            raise ValueError(f"--preset {preset}: {run} holds a diffusion policy, whose flight presets are "
-                             f"{', '.join(POLICY_FLIGHTS)}")
+            raise ValueError(
+                f"--preset {preset}: {run} holds a diffusion policy, whose flight presets are "
+                f"{', '.join(POLICY_FLIGHTS)}"
+            )
         preset = preset or DEFAULT_FLIGHT
         return policy_sampling(preset, **options), preset
     if preset is not None and preset not in PLANNER_PRESETS:
@@ -111,16 +112,26 @@ def check_unseen_seeds(seeds: list[int], root_seed: int, episodes: int) -> None:
     """Raise ValueError if a grid seed generated one of the dataset's episodes."""
     seen = dataset_seeds(root_seed, episodes) & set(seeds)
     if seen:
-        raise ValueError(f"{len(seen)} grid seed(s) generated training episodes of the run's dataset "
-                         f"(root seed {root_seed}); choose another --seed")
+        raise ValueError(
+            f"{len(seen)} grid seed(s) generated training episodes of the run's dataset "
+            f"(root seed {root_seed}); choose another --seed"
+        )
 
 
 def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
     goal = np.asarray(result.scenario.goal)
-    return {"obstacles": n, "speed": v, "episode": k, "seed": seed, "outcome": result.outcome,
-            "frames": int(result.length), "min_clearance_m": float(result.min_clearance.min()),
-            "goal_distance_m": float(np.linalg.norm(result.states[-1, P] - goal)),
-            "fuel_used": float(result.states[0, FUEL.start] - result.states[-1, FUEL.start]), **result.pilot_info}
+    return {
+        "obstacles": n,
+        "speed": v,
+        "episode": k,
+        "seed": seed,
+        "outcome": result.outcome,
+        "frames": int(result.length),
+        "min_clearance_m": float(result.min_clearance.min()),
+        "goal_distance_m": float(np.linalg.norm(result.states[-1, P] - goal)),
+        "fuel_used": float(result.states[0, FUEL.start] - result.states[-1, FUEL.start]),
+        **result.pilot_info,
+    }
 
 
 EpisodeHook = Callable[[CellResult, dict], None]
@@ -134,15 +145,21 @@ def load_pilot(req: "ClosedLoopRequest", run: Path | None, sim, timings: Timings
         from orbitmodel.baselines.diffusion.pilot import load_policy_pilot
 
         if req.variant != Variant.PLANNER:
-            raise RunError(f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}")
+            raise RunError(
+                f"{req.run} holds a diffusion policy, which flies as itself; drop --pilot {req.variant.value}"
+            )
         if not isinstance(req.settings, PolicySampling):
-            raise RunError(f"{req.run} holds a diffusion policy: fly it with a flight preset (--preset cpu) and its "
-                           "sampling settings, not planner settings")
+            raise RunError(
+                f"{req.run} holds a diffusion policy: fly it with a flight preset (--preset cpu) and its "
+                "sampling settings, not planner settings"
+            )
         pilot = load_policy_pilot(run, req.settings, preset=req.preset)
         return pilot, camera_for_run(sim, pilot.policy), pilot.name
     if not isinstance(req.settings, PlannerConfig):
-        raise RunError(f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot: give planner settings "
-                       "(--preset cpu), not a policy's sampling settings")
+        raise RunError(
+            f"{req.run or 'a rigid-body oracle'} is flown by a planning pilot: give planner settings "
+            "(--preset cpu), not a policy's sampling settings"
+        )
     planner = dataclasses.replace(req.settings, record=req.video_dir is not None)
     pilot, sim = build_pilot(req.variant, run, planner, sim, timings)
     return pilot, sim, req.variant.value
@@ -180,22 +197,29 @@ class ClosedLoop:
         self.pilot, sim, self.name = load_pilot(req, run, req.config.sim, self.timings)
         self.image_codec = bool(getattr(self.pilot, "image_codec", False))
         self.image_quality = req.config.dataset.jpeg_quality if self.image_codec else None
-        self.sim = dataclasses.replace(sim, render=self.pilot.needs_images or req.video_dir is not None,
-                                       max_steps=req.max_steps or sim.max_steps)
+        self.sim = dataclasses.replace(
+            sim, render=self.pilot.needs_images or req.video_dir is not None, max_steps=req.max_steps or sim.max_steps
+        )
 
     def report(self, result: ClosedLoopResult) -> dict:
         """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
         flight preset and every sampling setting) and the torch threads it flew on."""
         planning = self.name == self.req.variant.value
         report = closed_loop_report(self.req, result, None if planning else self.name, self.image_codec)
-        return {**report, "pilot_settings": None if planning else self.pilot.metadata(),
-                "threads": torch.get_num_threads()}
+        return {
+            **report,
+            "pilot_settings": None if planning else self.pilot.metadata(),
+            "threads": torch.get_num_threads(),
+        }
 
     def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
         req, pilot = self.req, self.pilot
         env = CubeSatEnv(self.sim, req.config.scenario)
-        cells = {(n, float(v)): CellResult(obstacles=n, speed=float(v), episodes=req.episodes)
-                 for n in req.obstacles for v in req.speeds}
+        cells = {
+            (n, float(v)): CellResult(obstacles=n, speed=float(v), episodes=req.episodes)
+            for n in req.obstacles
+            for v in req.speeds
+        }
         out = ClosedLoopResult(list(cells.values()), [], [], [], {})
         self.timings.clear()
         # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
@@ -236,25 +260,28 @@ def _stats(values: list[float]) -> dict:
     return {"median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 
-def closed_loop_report(req: ClosedLoopRequest, result: ClosedLoopResult, pilot: str | None = None,
-                       image_codec: bool = False) -> dict:
+def closed_loop_report(
+    req: ClosedLoopRequest, result: ClosedLoopResult, pilot: str | None = None, image_codec: bool = False
+) -> dict:
     """``orbitdata fly --json``'s table (pilot, seed, settings) plus episodes, settings, latency;
     ``pilot``: the name of a pilot that is not a planning variant (a policy run's), which has no
     planner settings; ``image_codec``: the pilot saw its camera through the dataset's codec."""
     planning = pilot is None
     report = grid_report(req.variant.value if planning else pilot, req.seed, result.cells)
     total = sum(result.timings.values()) or 1.0
-    report.update({
-        "run": None if req.run is None else str(req.run),
-        "preset": req.preset,
-        "planner_preset": req.preset if planning else None,
-        "planner": dataclasses.asdict(req.settings) if planning else None,
-        "image_codec": image_codec,
-        "max_steps": req.max_steps or req.config.sim.max_steps,  # an episode's frames at most (300: 12 s)
-        "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
-        "time_share": {k: v / total for k, v in sorted(result.timings.items())},
-        "episodes": result.episodes,
-    })
+    report.update(
+        {
+            "run": None if req.run is None else str(req.run),
+            "preset": req.preset,
+            "planner_preset": req.preset if planning else None,
+            "planner": dataclasses.asdict(req.settings) if planning else None,
+            "image_codec": image_codec,
+            "max_steps": req.max_steps or req.config.sim.max_steps,  # an episode's frames at most (300: 12 s)
+            "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},
+            "time_share": {k: v / total for k, v in sorted(result.timings.items())},
+            "episodes": result.episodes,
+        }
+    )
     return report
 
 
@@ -272,18 +299,23 @@ def merge_reports(reports: list[dict]) -> dict:
     for key in ("pilot", "seed", "planner", "run"):
         odd = [r for r in reports if r.get(key) != first.get(key)]
         if odd:
-            raise ValueError(f"the parts differ in {key} ({first.get(key)!r} vs {odd[0].get(key)!r}); merge only "
-                             "parts of one grid flown with the same flags")
+            raise ValueError(
+                f"the parts differ in {key} ({first.get(key)!r} vs {odd[0].get(key)!r}); merge only "
+                "parts of one grid flown with the same flags"
+            )
     keys = [(s["obstacles"], s["speed"]) for r in reports for s in r["settings"]]
     if len(set(keys)) != len(keys):
-        raise ValueError(f"the parts overlap in settings {sorted({k for k in keys if keys.count(k) > 1})}; "
-                         "fly disjoint --obstacles / --speeds")
+        raise ValueError(
+            f"the parts overlap in settings {sorted({k for k in keys if keys.count(k) > 1})}; "
+            "fly disjoint --obstacles / --speeds"
+        )
     settings = sorted((s for r in reports for s in r["settings"]), key=lambda s: (s["obstacles"], s["speed"]))
     episodes = [e for r in reports for e in r.get("episodes", [])]
     merged = {**first, "settings": settings, "episodes": episodes, "merged_from": len(reports)}
-    merged["latency_ms"] = {name: _stats([e[f"{name}_ms_median"] for e in episodes
-                                          if e.get(f"{name}_ms_median") is not None])
-                            for name in ("step", "replan")}
+    merged["latency_ms"] = {
+        name: _stats([e[f"{name}_ms_median"] for e in episodes if e.get(f"{name}_ms_median") is not None])
+        for name in ("step", "replan")
+    }
     merged["latency_ms"]["of"] = "per-episode medians (merged parts)"
     total = sum(sum(r.get("time_share", {}).values()) for r in reports) or 1.0
     shares: dict[str, float] = {}

@@ -29,8 +29,10 @@ def read_report(path: str | Path) -> dict:
     except FileNotFoundError:
         raise
     except (json.JSONDecodeError, KeyError, TypeError) as err:
-        raise ValueError(f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
-                         f"--json): {type(err).__name__} {err}") from None
+        raise ValueError(
+            f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
+            f"--json): {type(err).__name__} {err}"
+        ) from None
     return report
 
 
@@ -45,14 +47,16 @@ def report_from_episodes(path: str | Path) -> dict:
                 continue
             e = json.loads(line)
             key = (int(e["obstacles"]), float(e["speed"]))
-            cell = settings.setdefault(key, {"obstacles": key[0], "speed": key[1], "episodes": 0,
-                                             **{o: 0 for o in OUTCOMES}})
+            cell = settings.setdefault(
+                key, {"obstacles": key[0], "speed": key[1], "episodes": 0, **{o: 0 for o in OUTCOMES}}
+            )
             cell["episodes"] += 1
             cell[e["outcome"]] += 1
             pilot = e.get("variant", pilot)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
-        raise ValueError(f"{path} is not an episode stream of orbitmodel eval closed-loop --json: "
-                         f"{type(err).__name__} {err}") from None
+        raise ValueError(
+            f"{path} is not an episode stream of orbitmodel eval closed-loop --json: {type(err).__name__} {err}"
+        ) from None
     if not settings:
         raise ValueError(f"{path} holds no episodes yet")
     name = pilot or path.name.split(".")[0]
@@ -71,8 +75,10 @@ def success_table(reports: list[dict]) -> tuple[list[tuple[int, float]], dict[st
     for r in reports:
         mine = {(int(s["obstacles"]), float(s["speed"])): s for s in r["settings"]}
         if sorted(mine) != sorted(settings):
-            raise ValueError(f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
-                             f"{reports[0]['pilot']!r} ({sorted(settings)}); fly them on the same one")
+            raise ValueError(
+                f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
+                f"{reports[0]['pilot']!r} ({sorted(settings)}); fly them on the same one"
+            )
         name = r["pilot"] if r["pilot"] not in rates else f"{r['pilot']} ({len(rates)})"
         per = [mine[k]["success"] / max(mine[k]["episodes"], 1) for k in settings]
         rates[name] = per + [sum(per) / len(per)]
@@ -97,8 +103,9 @@ def plot_figure6(reports: list[dict], out: str | Path, title: str | None = None)
     episodes = {s["episodes"] for r in reports for s in r["settings"]}
     seeds = sorted({str(s) for r in reports for s in (r.get("seeds") or [r.get("seed")]) if s is not None})
     where = f", seed{'s' if len(seeds) > 1 else ''} {', '.join(seeds)}" if seeds else ""  # eval pool's: every seed
-    ax.set_title(title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting{where}",
-                 fontsize=9)
+    ax.set_title(
+        title or f"closed-loop success, {'/'.join(map(str, sorted(episodes)))} episodes per setting{where}", fontsize=9
+    )
     ax.legend(fontsize=7, ncols=min(len(rates), 3), loc="upper center", bbox_to_anchor=(0.5, -0.2), frameon=False)
     fig.tight_layout()
     out = Path(out)

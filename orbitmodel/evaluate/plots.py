@@ -19,7 +19,9 @@ def plot_rollout(result: dict, path: Path) -> None:
         for curve in result["nmse_per_window"]:
             ax.plot(h, curve, color="tab:blue", lw=0.5, alpha=0.25)
         ax.plot(h, result["nmse"], color="tab:blue", lw=2.5, label="world model (recorded actions)")
-        ax.plot(h, result["shuffled_nmse"], color="tab:red", lw=2, ls="--", label="world model, another window's actions")
+        ax.plot(
+            h, result["shuffled_nmse"], color="tab:red", lw=2, ls="--", label="world model, another window's actions"
+        )
         ax.plot(h, result["persistence_nmse"], color="k", lw=2, ls=":", label="persistence z(t+h) = z(t)")
         ax.set_xlabel("horizon h (steps of 0.04 s)")
         ax.set_ylabel("latent NMSE")
@@ -53,6 +55,8 @@ def plot_depth(examples: list, result: dict, path: Path) -> None:
     axes[1, 0].set_ylabel("depth_low (true)")
     axes[2, 0].set_ylabel("depth head")
     fig.colorbar(im, ax=axes[1:, :].ravel().tolist(), shrink=0.8, label="metres (clipped at 10)")
-    fig.suptitle(f"depth MAE {result['depth_mae_m']:.2f} m vs predict-the-mean {result['depth_mean_baseline_mae_m']:.2f} m")
+    fig.suptitle(
+        f"depth MAE {result['depth_mae_m']:.2f} m vs predict-the-mean {result['depth_mean_baseline_mae_m']:.2f} m"
+    )
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -85,27 +85,33 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     stats_mean = _depth_mean(dataset)
     step = model.config.frame_step  # context and horizon count the model's steps of `step` frames
     split, episodes = split_selection(cfg.split, model.run.validation)
-    windows = load_model_windows(dataset, step, split=split, episodes=episodes, context=cfg.context, horizon=cfg.horizon,
-                                 columns=list(COLUMNS))
-    chosen = _select(len(windows), cfg.windows, cfg.seed, f"the {cfg.split} split of {dataset} (windows of "
-                     f"{cfg.context}+{cfg.horizon} steps of {step} frame{'s' * (step > 1)})")
+    windows = load_model_windows(
+        dataset, step, split=split, episodes=episodes, context=cfg.context, horizon=cfg.horizon, columns=list(COLUMNS)
+    )
+    chosen = _select(
+        len(windows),
+        cfg.windows,
+        cfg.seed,
+        f"the {cfg.split} split of {dataset} (windows of "
+        f"{cfg.context}+{cfg.horizon} steps of {step} frame{'s' * (step > 1)})",
+    )
     shuffle = derangement(len(chosen), cfg.seed)  # each window rolls out another window's actions
     m, n = cfg.context, cfg.horizon
     z_true, z_pred, z_shuf, depth_err, depth_base, episodes = [], [], [], [], [], []
     depth_pairs: list[tuple[torch.Tensor, torch.Tensor]] = []
     all_actions = torch.stack([windows[int(i)][S.ACTION] for i in chosen])  # (N, T, 8)
     for start in range(0, len(chosen), cfg.batch):
-        idx = chosen[start:start + cfg.batch]
+        idx = chosen[start : start + cfg.batch]
         batch = [windows[int(i)] for i in idx]
         images = torch.stack([b[S.IMAGE] for b in batch])  # (b, T, 3, H, W) uint8
         states = torch.stack([b[S.STATE] for b in batch])  # (b, T, 16)
-        actions = all_actions[start:start + len(idx)]
+        actions = all_actions[start : start + len(idx)]
         depth = torch.stack([b[S.DEPTH_LOW] for b in batch])  # (b, T, 16, 16) m
         z = model.encode(images, states)  # (b, T, D)
         z_true.append(z)
-        z_pred.append(model.rollout(z[:, :m], actions[:, :m + n - 1]))
-        other = all_actions[shuffle[start:start + len(idx)]]
-        mixed = torch.cat([actions[:, :m - 1], other[:, m - 1:m + n - 1]], dim=1)
+        z_pred.append(model.rollout(z[:, :m], actions[:, : m + n - 1]))
+        other = all_actions[shuffle[start : start + len(idx)]]
+        mixed = torch.cat([actions[:, : m - 1], other[:, m - 1 : m + n - 1]], dim=1)
         z_shuf.append(model.rollout(z[:, :m], mixed))
         pred_depth = model.predict_depth(images)
         depth_err.append((pred_depth - depth).abs().flatten(1).mean(1))
@@ -117,22 +123,37 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     flat = _frame_latents(model, dataset, cfg, split, episodes)  # (F, D) independent frames of the split
     var = float(flat.var(0).mean())
     mse = ((z_pred - future) ** 2).mean(-1)  # (N, n)
-    persistence = ((z_true[:, m - 1:m] - future) ** 2).mean(-1)
+    persistence = ((z_true[:, m - 1 : m] - future) ** 2).mean(-1)
     shuffled = ((z_shuf - future) ** 2).mean(-1)
     curve = lambda x: x.mean(0).tolist()  # noqa: E731
     h = cfg.check_h
     std = flat.std(0)
     result = {
-        "run": str(run), "dataset": str(dataset), "config": asdict(cfg), "frame_step": step, "episodes": episodes,
-        "latent_dim": flat.shape[1], "latent_variance": var, "latent_frames": len(flat),
+        "run": str(run),
+        "dataset": str(dataset),
+        "config": asdict(cfg),
+        "frame_step": step,
+        "episodes": episodes,
+        "latent_dim": flat.shape[1],
+        "latent_variance": var,
+        "latent_frames": len(flat),
         "horizons": list(range(1, n + 1)),
-        "mse": curve(mse), "nmse": curve(mse / var),
-        "persistence_nmse": curve(persistence / var), "shuffled_nmse": curve(shuffled / var),
+        "mse": curve(mse),
+        "nmse": curve(mse / var),
+        "persistence_nmse": curve(persistence / var),
+        "shuffled_nmse": curve(shuffled / var),
         "nmse_per_window": (mse / var).tolist(),
-        "depth_mae_m": float(torch.cat(depth_err).mean()), "depth_mean_baseline_mae_m": float(torch.cat(depth_base).mean()),
-        "depth_by_band": depth_by_band(torch.cat([p for p, _ in depth_pairs]), torch.cat([t for _, t in depth_pairs]),
-                                       cfg.depth_bands, cfg.depth_range),
-        "z_std": std.tolist(), "z_std_min": float(std.min()), "z_std_median": float(std.median()),
+        "depth_mae_m": float(torch.cat(depth_err).mean()),
+        "depth_mean_baseline_mae_m": float(torch.cat(depth_base).mean()),
+        "depth_by_band": depth_by_band(
+            torch.cat([p for p, _ in depth_pairs]),
+            torch.cat([t for _, t in depth_pairs]),
+            cfg.depth_bands,
+            cfg.depth_range,
+        ),
+        "z_std": std.tolist(),
+        "z_std_min": float(std.min()),
+        "z_std_median": float(std.median()),
         "effective_rank": effective_rank(flat),
     }
     nmse, pers = np.array(result["nmse"]), np.array(result["persistence_nmse"])
@@ -153,8 +174,10 @@ def _frame_latents(model: WorldModel, dataset: str, cfg: RolloutEvalConfig, spli
     idx = np.sort(np.random.default_rng(cfg.seed + 3).choice(len(frames), min(cfg.frames, len(frames)), replace=False))
     out = []
     for start in range(0, len(idx), 256):
-        batch = [frames[int(i)] for i in idx[start:start + 256]]
-        out.append(model.encode(torch.stack([b[S.IMAGE] for b in batch]), torch.stack([b[S.STATE] for b in batch]))[:, 0])
+        batch = [frames[int(i)] for i in idx[start : start + 256]]
+        out.append(
+            model.encode(torch.stack([b[S.IMAGE] for b in batch]), torch.stack([b[S.STATE] for b in batch]))[:, 0]
+        )
     return torch.cat(out)
 
 
@@ -172,9 +195,15 @@ def _depth_examples(model: WorldModel, windows, chosen: np.ndarray, cfg: Rollout
         w = windows[int(i)]
         t = int(torch.argmin(w[S.DEPTH_LOW].flatten(1).min(1).values))  # the frame with the nearest return
         pred = model.predict_depth(w[S.IMAGE][t][None, None])[0, 0]
-        out.append({"episode": int(w[S.EPISODE_INDEX][0]), "frame": int(w[S.FRAME_INDEX][t]),
-                    "image": w[S.IMAGE][t].permute(1, 2, 0).numpy().tolist(),
-                    "true": w[S.DEPTH_LOW][t].numpy().tolist(), "pred": pred.numpy().tolist()})
+        out.append(
+            {
+                "episode": int(w[S.EPISODE_INDEX][0]),
+                "frame": int(w[S.FRAME_INDEX][t]),
+                "image": w[S.IMAGE][t].permute(1, 2, 0).numpy().tolist(),
+                "true": w[S.DEPTH_LOW][t].numpy().tolist(),
+                "pred": pred.numpy().tolist(),
+            }
+        )
     return out
 
 
@@ -194,19 +223,26 @@ def write_rollout_report(result: dict, out: Path) -> list[Path]:
 def summary_lines(result: dict) -> list[str]:
     c = result["checks"]
     h = result["config"]["check_h"]
-    rows = [f"latent rollout on {result['config']['windows']} {result['config'].get('split', 'test')} windows "
-            f"(context {result['config']['context']}, horizon {result['config']['horizon']}"
-            + (f"; h counts steps of {result['frame_step']} frames" if result.get("frame_step", 1) > 1 else "") + "):",
-            "   h   NMSE   persistence   shuffled actions"]
+    rows = [
+        f"latent rollout on {result['config']['windows']} {result['config'].get('split', 'test')} windows "
+        f"(context {result['config']['context']}, horizon {result['config']['horizon']}"
+        + (f"; h counts steps of {result['frame_step']} frames" if result.get("frame_step", 1) > 1 else "")
+        + "):",
+        "   h   NMSE   persistence   shuffled actions",
+    ]
     for k in (1, 5, 12, 25, 50):
         if k <= len(result["nmse"]):
-            rows.append(f"  {k:2d}  {result['nmse'][k - 1]:.4f}   {result['persistence_nmse'][k - 1]:.4f}       "
-                        f"{result['shuffled_nmse'][k - 1]:.4f}")
-    rows += [f"NMSE below persistence at every h: {c['nmse_below_persistence_at_every_h']}",
-             f"shuffled / recorded NMSE at h={h}: {c[f'shuffled_over_recorded_nmse_at_h{h}']:.2f}",
-             f"depth MAE {result['depth_mae_m']:.3f} m vs mean baseline {result['depth_mean_baseline_mae_m']:.3f} m "
-             f"({100 * c['depth_mae_reduction_vs_mean']:.0f} % lower)",
-             *band_lines(result.get("depth_by_band")),
-             f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} frames; "
-             f"z std min {result['z_std_min']:.3f}, median {result['z_std_median']:.3f}"]
+            rows.append(
+                f"  {k:2d}  {result['nmse'][k - 1]:.4f}   {result['persistence_nmse'][k - 1]:.4f}       "
+                f"{result['shuffled_nmse'][k - 1]:.4f}"
+            )
+    rows += [
+        f"NMSE below persistence at every h: {c['nmse_below_persistence_at_every_h']}",
+        f"shuffled / recorded NMSE at h={h}: {c[f'shuffled_over_recorded_nmse_at_h{h}']:.2f}",
+        f"depth MAE {result['depth_mae_m']:.3f} m vs mean baseline {result['depth_mean_baseline_mae_m']:.3f} m "
+        f"({100 * c['depth_mae_reduction_vs_mean']:.0f} % lower)",
+        *band_lines(result.get("depth_by_band")),
+        f"effective rank {result['effective_rank']:.1f} of {result['latent_dim']} dims over {result['latent_frames']} frames; "
+        f"z std min {result['z_std_min']:.3f}, median {result['z_std_median']:.3f}",
+    ]
     return rows

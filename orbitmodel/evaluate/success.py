@@ -53,14 +53,21 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
     settings = [(int(s["obstacles"]), float(s["speed"])) for s in reports[0]["settings"]]
     head = [f"{n} obst. {v:g} m/s" for n, v in settings]
     pooled = all("worst_setting" in r for r in reports)  # eval pool's tables: add each pilot's worst setting
-    lines = ["| pilot | " + " | ".join(head) + " | all settings, 95 % CI | failures |"
-             + (" lowest setting on one seed |" if pooled else "") + (" JSON |" if sources else ""),
-             "|---" * (len(head) + 3 + pooled + bool(sources)) + "|"]
+    lines = [
+        "| pilot | "
+        + " | ".join(head)
+        + " | all settings, 95 % CI | failures |"
+        + (" lowest setting on one seed |" if pooled else "")
+        + (" JSON |" if sources else ""),
+        "|---" * (len(head) + 3 + pooled + bool(sources)) + "|",
+    ]
     for i, r in enumerate(reports):
         mine = {(int(s["obstacles"]), float(s["speed"])): s for s in r["settings"]}
         if sorted(mine) != sorted(settings):
-            raise ValueError(f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
-                             f"{reports[0]['pilot']!r} ({sorted(settings)}); tabulate one grid at a time")
+            raise ValueError(
+                f"pilot {r['pilot']!r} was flown on another grid ({sorted(mine)}) than "
+                f"{reports[0]['pilot']!r} ({sorted(settings)}); tabulate one grid at a time"
+            )
         cells = []
         for key in settings:
             k, n = int(mine[key]["success"]), int(mine[key]["episodes"])
@@ -94,21 +101,25 @@ def pool_seeds(reports: list[dict]) -> dict:
     first = reports[0]
     keys = sorted((int(s["obstacles"]), float(s["speed"])) for s in first["settings"])
     if any(r.get("seed") is None for r in reports):
-        raise ValueError("every grid result needs its root seed: pool the --json tables, not the .episodes.jsonl "
-                         "of a stopped grid")
+        raise ValueError(
+            "every grid result needs its root seed: pool the --json tables, not the .episodes.jsonl of a stopped grid"
+        )
     seeds = [int(r["seed"]) for r in reports]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds {seeds} repeat: pool each root seed once")
-    pooled = {k: {"obstacles": k[0], "speed": k[1], "episodes": 0, "success": 0, **{f: 0 for f in FAILURES}}
-              for k in keys}
+    pooled = {
+        k: {"obstacles": k[0], "speed": k[1], "episodes": 0, "success": 0, **{f: 0 for f in FAILURES}} for k in keys
+    }
     per_seed, worst = {}, None
     for r in reports:
         if r["pilot"] != first["pilot"]:
             raise ValueError(f"pilots differ ({first['pilot']!r}, {r['pilot']!r}): pool one pilot's seeds")
         for key in FLIGHT_KEYS:
             if r.get(key) != first.get(key):
-                raise ValueError(f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
-                                 f"{first.get(key)!r}: pool one way of flying")
+                raise ValueError(
+                    f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
+                    f"{first.get(key)!r}: pool one way of flying"
+                )
         mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
         if sorted(mine) != keys:
             raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")
@@ -118,11 +129,23 @@ def pool_seeds(reports: list[dict]) -> dict:
                 pooled[k][f] += int(x.get(f, 0))
             rate = int(x["success"]) / int(x["episodes"])
             if worst is None or rate < worst["rate"]:
-                worst = {"seed": int(r["seed"]), "obstacles": k[0], "speed": k[1], "rate": rate,
-                         "success": int(x["success"]), "episodes": int(x["episodes"])}
+                worst = {
+                    "seed": int(r["seed"]),
+                    "obstacles": k[0],
+                    "speed": k[1],
+                    "rate": rate,
+                    "success": int(x["success"]),
+                    "episodes": int(x["episodes"]),
+                }
     out = {key: first[key] for key in ("pilot", "run", "planner_preset", "planner", *FLIGHT_KEYS) if key in first}
-    return {**out, "seed": seeds[0] if len(seeds) == 1 else None, "seeds": seeds, "settings": list(pooled.values()),
-            "per_seed": per_seed, "worst_setting": worst}
+    return {
+        **out,
+        "seed": seeds[0] if len(seeds) == 1 else None,
+        "seeds": seeds,
+        "settings": list(pooled.values()),
+        "per_seed": per_seed,
+        "worst_setting": worst,
+    }
 
 
 def outcome_flips(a: dict, b: dict) -> dict:
@@ -132,6 +155,7 @@ def outcome_flips(a: dict, b: dict) -> dict:
     the flights themselves moved: the episodes flown identically (the same frame count and
     closest approach) and the median and largest change of the closest approach (metres) and of the
     frame count, where the reports record them."""
+
     def by_seed(report: dict, name: str) -> dict[int, dict]:
         episodes = report.get("episodes")
         if not episodes:
@@ -142,15 +166,26 @@ def outcome_flips(a: dict, b: dict) -> dict:
     common = sorted(set(ea) & set(eb))
     if not common:
         raise ValueError("the two reports share no episode seed: fly the same grid (--seed, settings) twice")
-    flips = [{"obstacles": ea[s]["obstacles"], "speed": ea[s]["speed"], "episode": ea[s]["episode"], "seed": s,
-              "first": ea[s]["outcome"], "second": eb[s]["outcome"]}
-             for s in common if ea[s]["outcome"] != eb[s]["outcome"]]
+    flips = [
+        {
+            "obstacles": ea[s]["obstacles"],
+            "speed": ea[s]["speed"],
+            "episode": ea[s]["episode"],
+            "seed": s,
+            "first": ea[s]["outcome"],
+            "second": eb[s]["outcome"],
+        }
+        for s in common
+        if ea[s]["outcome"] != eb[s]["outcome"]
+    ]
     success = (sum(ea[s]["outcome"] == "success" for s in common), sum(eb[s]["outcome"] == "success" for s in common))
     moved: dict = {}
     if all("frames" in e[s] and "min_clearance_m" in e[s] for e in (ea, eb) for s in common):
         clearance = [abs(ea[s]["min_clearance_m"] - eb[s]["min_clearance_m"]) for s in common]
         frames = [abs(ea[s]["frames"] - eb[s]["frames"]) for s in common]
-        moved = {"identical": sum(c == 0 and f == 0 for c, f in zip(clearance, frames)),
-                 "clearance_change_m": {"median": float(statistics.median(clearance)), "max": float(max(clearance))},
-                 "frames_change": {"median": float(statistics.median(frames)), "max": int(max(frames))}}
+        moved = {
+            "identical": sum(c == 0 and f == 0 for c, f in zip(clearance, frames)),
+            "clearance_change_m": {"median": float(statistics.median(clearance)), "max": float(max(clearance))},
+            "frames_change": {"median": float(statistics.median(frames)), "max": int(max(frames))},
+        }
     return {"episodes": len(common), "flips": len(flips), "successes": list(success), "flipped": flips, **moved}

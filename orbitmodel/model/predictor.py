@@ -46,15 +46,18 @@ class Predictor(nn.Module):
         c = config
         self.pos = nn.Parameter(torch.zeros(1, c.max_seq_len, c.latent_dim))
         self.drop = nn.Dropout(c.pred_dropout)
-        self.blocks = nn.ModuleList(AdaLNBlock(c.latent_dim, c.pred_heads, c.pred_mlp, c.pred_dropout)
-                                    for _ in range(c.pred_depth))
+        self.blocks = nn.ModuleList(
+            AdaLNBlock(c.latent_dim, c.pred_heads, c.pred_mlp, c.pred_dropout) for _ in range(c.pred_depth)
+        )
         self.norm = nn.LayerNorm(c.latent_dim)
 
     def modulations(self, cond: torch.Tensor) -> list[torch.Tensor]:
         """Every block's AdaLN shift/scale/gate for action embeddings cond (B, T, D): [(B, T, 6D)]."""
         return [block.adaln(cond) for block in self.blocks]
 
-    def forward(self, z: torch.Tensor, cond: torch.Tensor | None, mods: list[torch.Tensor] | None = None) -> torch.Tensor:
+    def forward(
+        self, z: torch.Tensor, cond: torch.Tensor | None, mods: list[torch.Tensor] | None = None
+    ) -> torch.Tensor:
         """z (B, T, D) and cond (B, T, D), or ``mods`` = ``self.modulations(cond)`` sliced to the
         same T frames, -> features (B, T, D)."""
         T = z.shape[1]

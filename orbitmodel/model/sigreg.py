@@ -24,7 +24,9 @@ def epps_pulley_weights(knots: int, t_max: float = 3.0, device=None) -> tuple[to
     return t, 2 * trapezoid * torch.exp(-t.square() / 2)
 
 
-def sigreg(z: torch.Tensor, projections: int, knots: int = 17, generator: torch.Generator | None = None) -> torch.Tensor:
+def sigreg(
+    z: torch.Tensor, projections: int, knots: int = 17, generator: torch.Generator | None = None
+) -> torch.Tensor:
     """SIGReg of samples z (..., N, D): the mean Epps-Pulley statistic over ``projections``
     random unit directions (drawn from ``generator``) and over the leading dims."""
     N, D = z.shape[-2:]

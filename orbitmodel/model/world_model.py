@@ -107,10 +107,12 @@ class WorldModel(NormalisedStates, nn.Module):
         """Xavier linears and truncated-normal embeddings (ViT / DiT), then zero every AdaLN
         modulation so each predictor block starts as the identity on its residual path (DiT's
         AdaLN-Zero): early training sees a plain causal transformer that actions then steer."""
+
         def basic(m: nn.Module):
             if isinstance(m, nn.Linear):
                 nn.init.xavier_uniform_(m.weight)
                 nn.init.zeros_(m.bias)
+
         self.apply(basic)
         w = self.encoder.patch.weight
         nn.init.xavier_uniform_(w.view(w.shape[0], -1))
@@ -198,8 +200,14 @@ class WorldModel(NormalisedStates, nn.Module):
         cond = self.action_encoder(self._norm_action(actions))
         return z + self.pred_projector(self.predictor(z, cond))
 
-    def loss(self, images: torch.Tensor, states: torch.Tensor, actions: torch.Tensor, depth_low: torch.Tensor,
-             generator: torch.Generator | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    def loss(
+        self,
+        images: torch.Tensor,
+        states: torch.Tensor,
+        actions: torch.Tensor,
+        depth_low: torch.Tensor,
+        generator: torch.Generator | None = None,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """Upstream's Stage I loss over windows of T frames (teacher forcing, no stop-gradient):
         MSE(ẑ[:, :-1], z[:, 1:]) + lambda_sig SIGReg(z, per frame over the batch, or pooled) + lambda_depth
         MSE(depth). images (B, T, 3, H, W) float in [0, 1] or uint8; depth_low (B, T, 16, 16) m."""
@@ -230,8 +238,9 @@ class WorldModel(NormalisedStates, nn.Module):
 
     # ---- persistence ------------------------------------------------------------------------
     @classmethod
-    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu",
-                        revision: str | None = None) -> "WorldModel":
+    def from_pretrained(
+        cls, path: str | Path, device: str | torch.device = "cpu", revision: str | None = None
+    ) -> "WorldModel":
         """Load a trained model, in eval mode, from a run folder (``orbitmodel train --out RUN``) or
         a Hub model repo id (``owner/name``, ``orbitmodel push``; ``revision`` or ``owner/name@rev``).
 
@@ -243,9 +252,11 @@ class WorldModel(NormalisedStates, nn.Module):
         try:
             model.load_state_dict(run.weights)
         except RuntimeError as err:
-            raise RunError(f"{path}: the weights do not fit the model its config.json describes "
-                           f"({str(err).splitlines()[1].strip() if len(str(err).splitlines()) > 1 else err}); "
-                           "train the run again") from None
+            raise RunError(
+                f"{path}: the weights do not fit the model its config.json describes "
+                f"({str(err).splitlines()[1].strip() if len(str(err).splitlines()) > 1 else err}); "
+                "train the run again"
+            ) from None
         model.run, model.run_dir = run.config, run.path
         model.run_info = run.config.dataset
         model.fingerprint = fingerprint(run.weights)

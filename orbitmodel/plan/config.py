@@ -20,7 +20,6 @@ from orbitmodel.plan.depth_recipe import MAX_RANGE
 from orbitmodel.plan.mppi import MPPIConfig
 
 
-
 @dataclass(frozen=True)
 class PlannerConfig:
     """Everything a planning pilot is tuned by.
@@ -83,8 +82,10 @@ class PlannerConfig:
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
         if self.reach < self.cost.margin + self.cost.hull_radius:
-            raise ValueError(f"reach={self.reach} m is shorter than the collision ramp "
-                             f"({self.cost.hull_radius + self.cost.margin:.2f} m)")
+            raise ValueError(
+                f"reach={self.reach} m is shorter than the collision ramp "
+                f"({self.cost.hull_radius + self.cost.margin:.2f} m)"
+            )
 
 
 PLANNER_PRESETS: dict[str, Callable[[], PlannerConfig]] = {
@@ -117,9 +118,14 @@ def planner_config(preset: str | None = None, **options) -> PlannerConfig:
         if kind is bool and isinstance(value, str) and value.lower() not in ("1", "true", "yes", "0", "false", "no"):
             raise ValueError(f"planner option {key}={value!r}: give true or false")
         try:
-            parts[owner][key] = (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) \
-                else kind(value)
+            parts[owner][key] = (
+                (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) else kind(value)
+            )
         except ValueError:
             raise ValueError(f"planner option {key}={value!r}: give a {kind.__name__}") from None
-    return dataclasses.replace(base, mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),
-                               cost=dataclasses.replace(base.cost, **parts[CostConfig]), **parts[PlannerConfig])
+    return dataclasses.replace(
+        base,
+        mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),
+        cost=dataclasses.replace(base.cost, **parts[CostConfig]),
+        **parts[PlannerConfig],
+    )

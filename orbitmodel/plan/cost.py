@@ -64,8 +64,21 @@ class CostConfig:
     def __post_init__(self):
         if self.margin <= 0 or self.hull_radius < 0:
             raise ValueError(f"margin={self.margin} must be > 0 and hull_radius={self.hull_radius} >= 0")
-        if any(getattr(self, k) < 0 for k in ("collision", "crash", "progress", "terminal", "effort", "spin",
-                                                "heading", "speed", "margin_per_speed", "urgency")):
+        if any(
+            getattr(self, k) < 0
+            for k in (
+                "collision",
+                "crash",
+                "progress",
+                "terminal",
+                "effort",
+                "spin",
+                "heading",
+                "speed",
+                "margin_per_speed",
+                "urgency",
+            )
+        ):
             raise ValueError("cost weights must be >= 0")
 
 
@@ -77,8 +90,14 @@ def collision_ramp(clearance: torch.Tensor, config: CostConfig, speed: torch.Ten
     return (1 - gap / margin).clamp(0, 1) ** 2
 
 
-def trajectory_cost(states: torch.Tensor, actions: torch.Tensor, goal: torch.Tensor, goal_radius: float,
-                    obstacles: ObstacleField, config: CostConfig = CostConfig()) -> tuple[torch.Tensor, dict]:
+def trajectory_cost(
+    states: torch.Tensor,
+    actions: torch.Tensor,
+    goal: torch.Tensor,
+    goal_radius: float,
+    obstacles: ObstacleField,
+    config: CostConfig = CostConfig(),
+) -> tuple[torch.Tensor, dict]:
     """states (K, H, 16), actions (K, H, 8) thrust in [0,1], goal (3,) metres -> cost (K,) and its terms."""
     c = config
     H = states.shape[1]

@@ -23,9 +23,15 @@ def depth_by_band(pred: torch.Tensor, true: torch.Tensor, edges=DEPTH_BANDS_M, s
     for lo, hi in zip(bounds[:-1], bounds[1:]):
         inside = (true >= lo) & (true < hi)
         n = int(inside.sum())
-        bands.append({"from_m": lo, "to_m": None if hi == float("inf") else hi, "cells": n,
-                      "mae_m": float((pred[inside] - true[inside]).abs().mean()) if n else None,
-                      "missed": float((pred[inside] >= seen_within).double().mean()) if n else None})
+        bands.append(
+            {
+                "from_m": lo,
+                "to_m": None if hi == float("inf") else hi,
+                "cells": n,
+                "mae_m": float((pred[inside] - true[inside]).abs().mean()) if n else None,
+                "missed": float((pred[inside] >= seen_within).double().mean()) if n else None,
+            }
+        )
     far = true >= seen_within
     phantom = float((pred[far] < seen_within).double().mean()) if far.any() else None
     return {"range_m": seen_within, "bands": bands, "phantom": phantom}
@@ -43,24 +49,34 @@ def band_lines(bands: dict | None) -> list[str]:
     rows = [f"  depth by true distance (missed: predicted at or beyond the planner's {bands['range_m']:g} m):"]
     for b in bands["bands"]:
         if b["cells"]:
-            rows.append(f"    {band_label(b):>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %")
+            rows.append(
+                f"    {band_label(b):>9}: {b['cells']:8d} cells, MAE {b['mae_m']:.2f} m, missed {100 * b['missed']:.1f} %"
+            )
     if bands["phantom"] is not None:
-        rows.append(f"    far cells predicted inside {bands['range_m']:g} m (phantom obstacles): {100 * bands['phantom']:.1f} %")
+        rows.append(
+            f"    far cells predicted inside {bands['range_m']:g} m (phantom obstacles): {100 * bands['phantom']:.1f} %"
+        )
     return rows
 
 
 def comparison_lines(result: dict) -> list[str]:
     """Two heads' bands side by side (``orbitmodel depth``: Stage I -> refit)."""
-    rows = [f"depth head on {result['config']['test_frames']} {result['config'].get('eval_split', 'test')} frames: "
-            "Stage I -> refit "
-            f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"]
+    rows = [
+        f"depth head on {result['config']['test_frames']} {result['config'].get('eval_split', 'test')} frames: "
+        "Stage I -> refit "
+        f"(missed: predicted at or beyond {result['config']['near_m']:g} m)"
+    ]
     before, after = result["stage1"], result["refit"]
     rows.append(f"  all cells: MAE {before['mae_m']:.2f} -> {after['mae_m']:.2f} m")
     for b, a in zip(before["bands"], after["bands"]):
         if b["cells"]:
-            rows.append(f"  {band_label(b):>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
-                        f"missed {100 * b['missed']:.1f} -> {100 * a['missed']:.1f} %")
+            rows.append(
+                f"  {band_label(b):>9} ({b['cells']} cells): MAE {b['mae_m']:.2f} -> {a['mae_m']:.2f} m, "
+                f"missed {100 * b['missed']:.1f} -> {100 * a['missed']:.1f} %"
+            )
     if before["phantom"] is not None:
-        rows.append(f"  far cells predicted inside {result['config']['near_m']:g} m: "
-                    f"{100 * before['phantom']:.2f} -> {100 * after['phantom']:.2f} %")
+        rows.append(
+            f"  far cells predicted inside {result['config']['near_m']:g} m: "
+            f"{100 * before['phantom']:.2f} -> {100 * after['phantom']:.2f} %"
+        )
     return rows

@@ -29,8 +29,18 @@ from orbitmodel.data import read_dataset_meta, split_selection, training_episode
 from orbitmodel.model.world_model import WorldModel, images_to_float
 from orbitmodel.plan.depth_bands import depth_by_band
 from orbitmodel.plan.depth_recipe import DepthRefitConfig
-from orbitmodel.runs import (CONFIG, DEPTH_REFIT, WEIGHTS, RunDir, RunError, check_image_size, load_weights,
-                             local_run_folder, run_config, write_json_atomic)
+from orbitmodel.runs import (
+    CONFIG,
+    DEPTH_REFIT,
+    WEIGHTS,
+    RunDir,
+    RunError,
+    check_image_size,
+    load_weights,
+    local_run_folder,
+    run_config,
+    write_json_atomic,
+)
 
 FOLDER = "depth"
 EVAL = "eval.json"
@@ -40,20 +50,23 @@ def depth_folder(run: str | Path) -> Path:
     return Path(run) / FOLDER
 
 
-def _patches(model, dataset: str, split: str, n: int, seed: int, where: str,
-             episodes=None) -> tuple[torch.Tensor, torch.Tensor]:
+def _patches(
+    model, dataset: str, split: str, n: int, seed: int, where: str, episodes=None
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Patch tokens (n, P, width) float16 and true depth (n, 16, 16) of n random frames of ``split``."""
     from orbitdata.load import load_windows
 
     frames = load_windows(dataset, split=split, context=1, horizon=0, columns=[S.IMAGE, S.DEPTH_LOW], episodes=episodes)
     if len(frames) < n:
-        raise RunError(f"the {split} split of {dataset} has {len(frames)} frames, fewer than the {n} asked; "
-                       f"pass {where} {len(frames)} or less")
+        raise RunError(
+            f"the {split} split of {dataset} has {len(frames)} frames, fewer than the {n} asked; "
+            f"pass {where} {len(frames)} or less"
+        )
     idx = np.sort(np.random.default_rng(seed).choice(len(frames), n, replace=False))
     tokens, depth = [], []
     with torch.no_grad():
         for start in range(0, n, 256):
-            batch = [frames[int(i)] for i in idx[start:start + 256]]
+            batch = [frames[int(i)] for i in idx[start : start + 256]]
             _, p = model.encoder(images_to_float(torch.stack([b[S.IMAGE][0] for b in batch])))
             tokens.append(p.half())
             depth.append(torch.stack([b[S.DEPTH_LOW][0] for b in batch]))
@@ -62,11 +75,12 @@ def _patches(model, dataset: str, split: str, n: int, seed: int, where: str,
 
 def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
     with torch.no_grad():
-        return torch.cat([head(tokens[s:s + 512].float()) for s in range(0, len(tokens), 512)]) * scale
+        return torch.cat([head(tokens[s : s + 512].float()) for s in range(0, len(tokens), 512)]) * scale
 
 
-def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(),
-                     overwrite: bool = False) -> dict:
+def refit_depth_head(
+    run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(), overwrite: bool = False
+) -> dict:
     """Refit ``run``'s depth head (see the module docstring); returns the before/after evaluation."""
     out = depth_folder(local_run_folder(run, "a depth refit"))
     if (out / WEIGHTS).exists() and not overwrite:
@@ -75,8 +89,9 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
     check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
     start = time.perf_counter()
     held_out = model.run.validation  # the run's validation episodes: never fitted, scored with eval_split "val"
-    train_x, train_d = _patches(model, dataset, "train", cfg.frames, cfg.seed, "--frames",
-                                training_episodes(dataset, (), (), held_out))
+    train_x, train_d = _patches(
+        model, dataset, "train", cfg.frames, cfg.seed, "--frames", training_episodes(dataset, (), (), held_out)
+    )
     split, episodes = split_selection(cfg.eval_split, held_out)
     test_x, test_d = _patches(model, dataset, split, cfg.test_frames, cfg.seed + 1, "--test-frames", episodes)
     encoded = time.perf_counter() - start
@@ -93,7 +108,7 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
         for _ in range(cfg.epochs):
             order = torch.randperm(cfg.frames, generator=g)
             for s in range(steps_per_epoch):
-                i = order[s * cfg.batch_size:(s + 1) * cfg.batch_size]
+                i = order[s * cfg.batch_size : (s + 1) * cfg.batch_size]
                 pred, true = head(train_x[i].float()) * scale, train_d[i]
                 weight = 1 + cfg.near_weight * (true < cfg.near_m).float()
                 loss = (weight * (pred - true) ** 2).mean() / scale**2
@@ -103,13 +118,24 @@ def refit_depth_head(run: str | Path, dataset: str, cfg: DepthRefitConfig = Dept
                 sched.step()
             losses.append(float(loss.detach()))
     head.eval()
-    result = {"run": str(run), "dataset": str(dataset), "config": asdict(cfg),
-              "seconds": {"encode": encoded, "fit": time.perf_counter() - start - encoded}, "epoch_loss": losses}
+    result = {
+        "run": str(run),
+        "dataset": str(dataset),
+        "config": asdict(cfg),
+        "seconds": {"encode": encoded, "fit": time.perf_counter() - start - encoded},
+        "epoch_loss": losses,
+    }
     for name, h in (("stage1", model.depth_head), ("refit", head)):
         pred = _predict(h, test_x, scale)
-        result[name] = {"mae_m": float((pred - test_d).abs().mean()), **depth_by_band(pred, test_d, seen_within=cfg.near_m)}
-    RunDir(out).start(run_config(DEPTH_REFIT, refit=asdict(cfg), dataset=str(dataset), world_model=model.fingerprint),
-                      resume=False, overwrite=True)
+        result[name] = {
+            "mae_m": float((pred - test_d).abs().mean()),
+            **depth_by_band(pred, test_d, seen_within=cfg.near_m),
+        }
+    RunDir(out).start(
+        run_config(DEPTH_REFIT, refit=asdict(cfg), dataset=str(dataset), world_model=model.fingerprint),
+        resume=False,
+        overwrite=True,
+    )
     RunDir(out).save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
     write_json_atomic(out / EVAL, result)
     return result
@@ -120,18 +146,23 @@ def load_refit_head(run: str | Path, model):
     RunError with the command that makes it."""
     folder = depth_folder(run)
     if not (folder / WEIGHTS).is_file() or not (folder / CONFIG).is_file():
-        raise RunError(f"{run} has no refitted depth head ({folder} is missing); fit one with "
-                       f"`orbitmodel depth {run} DATASET`")
+        raise RunError(
+            f"{run} has no refitted depth head ({folder} is missing); fit one with `orbitmodel depth {run} DATASET`"
+        )
     made_on = RunDir(folder).read_config().get("world_model")  # refits before fingerprints have none
     if made_on is not None and made_on != getattr(model, "fingerprint", made_on):
-        raise RunError(f"{folder} was refitted on another world model than {run} holds now; fit it again with "
-                       f"`orbitmodel depth {run} DATASET --overwrite`")
+        raise RunError(
+            f"{folder} was refitted on another world model than {run} holds now; fit it again with "
+            f"`orbitmodel depth {run} DATASET --overwrite`"
+        )
     head = copy.deepcopy(model.depth_head)
     try:
         head.load_state_dict(load_weights(folder))
     except RuntimeError as err:
-        raise RunError(f"{folder / WEIGHTS} does not fit this run's depth head ({str(err).splitlines()[0]}); "
-                       f"fit it again with `orbitmodel depth {run} DATASET --overwrite`") from None
+        raise RunError(
+            f"{folder / WEIGHTS} does not fit this run's depth head ({str(err).splitlines()[0]}); "
+            f"fit it again with `orbitmodel depth {run} DATASET --overwrite`"
+        ) from None
     return head.eval()
 
 

@@ -19,9 +19,10 @@ import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, matrix_to_rot6d, rot6d_to_matrix, so3_exp
+from orbitmodel.kinematics import FUEL, ROT, P, V, W, matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.timing import Timings
+
 
 class Probe(Protocol):
     """The PhysicsProbe's API: latents (B, n, D) of a world model stepping s frames, the state
@@ -29,8 +30,14 @@ class Probe(Protocol):
     (B, n s, 16) of frames t+1..t+n s. z_last is what a probe reading latent changes starts from,
     the actions what one reading thrusts reads (others ignore them)."""
 
-    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None,
-                  frame_step: int, actions: torch.Tensor | None = None) -> torch.Tensor: ...
+    def per_frame(
+        self,
+        z_future: torch.Tensor,
+        state0: torch.Tensor,
+        z_last: torch.Tensor | None,
+        frame_step: int,
+        actions: torch.Tensor | None = None,
+    ) -> torch.Tensor: ...
 
 
 class RigidBodyDynamics:
@@ -126,16 +133,24 @@ class LearnedDynamics:
 
     needs_images = True
 
-    def __init__(self, model, probe: Probe, timings: Timings | None = None, history: int | None = None,
-                 frames: FrameEncoder | None = None):
+    def __init__(
+        self,
+        model,
+        probe: Probe,
+        timings: Timings | None = None,
+        history: int | None = None,
+        frames: FrameEncoder | None = None,
+    ):
         self.model = model.eval()
         self.probe = probe
         self.frames = frames or FrameEncoder(self.model)  # share it with the depth head: one ViT pass a frame
         self.step = int(model.config.frame_step)
         self.history = model.config.history if history is None else int(history)
         if not 1 <= self.history <= model.config.history:
-            raise ValueError(f"history={self.history}: the world model rolls out from at most "
-                             f"{model.config.history} latents; give 1..{model.config.history}")
+            raise ValueError(
+                f"history={self.history}: the world model rolls out from at most "
+                f"{model.config.history} latents; give 1..{model.config.history}"
+            )
         self.timings = timings or Timings()
         self.reset()
 
@@ -166,7 +181,7 @@ class LearnedDynamics:
         z = torch.stack([self._z[i] for i in frames])  # (m, D)
         if m == 1:
             return z, None
-        taken = list(self._actions)[-(m - 1) * s:]  # the (m-1) s thrusts since the oldest context frame
+        taken = list(self._actions)[-(m - 1) * s :]  # the (m-1) s thrusts since the oldest context frame
         assert len(taken) == (m - 1) * s, "one action between each pair of observed frames"
         return z, torch.stack(taken).reshape(m - 1, s * taken[0].shape[-1])
 
@@ -178,8 +193,10 @@ class LearnedDynamics:
         K, H, _ = actions.shape
         s = self.step
         if H % s:
-            raise ValueError(f"a plan of {H} frames does not split into the world model's steps of {s} frames; "
-                             f"give a horizon that is a multiple of {s}")
+            raise ValueError(
+                f"a plan of {H} frames does not split into the world model's steps of {s} frames; "
+                f"give a horizon that is a multiple of {s}"
+            )
         with self.timings("rollout"):
             z, past = self.context()
             z_ctx = z[None].expand(K, -1, -1)  # (K, m, D)
@@ -189,4 +206,4 @@ class LearnedDynamics:
             z_future = self.model.rollout(z_ctx, planned, self.history)  # (K, H / s, D)
         with self.timings("probe"):
             start = state0.float().expand(K, -1)
-            return self.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -(H // s):])  # (K, H, 16)
+            return self.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -(H // s) :])  # (K, H, 16)

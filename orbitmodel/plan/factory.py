@@ -70,14 +70,21 @@ def camera_for_run(sim: SimConfig, model) -> SimConfig:
     cam = sim.camera
     default = type(cam)()
     if (cam.image_size, cam.fovy_deg) not in ((size, fovy), (default.image_size, default.fovy_deg)):
-        raise RunError(f"the run sees {size} px images at {fovy:g} deg, but the simulator's camera is "
-                       f"{cam.image_size} px at {cam.fovy_deg:g} deg; fly it with the run's camera (drop the "
-                       "camera settings from --config) or use a run trained on such images")
+        raise RunError(
+            f"the run sees {size} px images at {fovy:g} deg, but the simulator's camera is "
+            f"{cam.image_size} px at {cam.fovy_deg:g} deg; fly it with the run's camera (drop the "
+            "camera settings from --config) or use a run trained on such images"
+        )
     return dataclasses.replace(sim, camera=dataclasses.replace(cam, image_size=size, fovy_deg=fovy))
 
 
-def build_pilot(variant: Variant | str, run: str | Path | None = None, config: PlannerConfig = PlannerConfig(),
-                sim: SimConfig = SimConfig(), timings: Timings | None = None) -> tuple[PlannerPilot, SimConfig]:
+def build_pilot(
+    variant: Variant | str,
+    run: str | Path | None = None,
+    config: PlannerConfig = PlannerConfig(),
+    sim: SimConfig = SimConfig(),
+    timings: Timings | None = None,
+) -> tuple[PlannerPilot, SimConfig]:
     """The pilot of ``variant`` and the simulator settings it must fly in (the run's camera).
     ``run``: a run folder or a Hub model repo id (``owner/name[@revision]``, ``orbitmodel push``).
 
@@ -94,19 +101,22 @@ def build_pilot(variant: Variant | str, run: str | Path | None = None, config: P
     if variant.learned_dynamics:
         step = model.config.frame_step
         if config.mppi.horizon % step:
-            raise RunError(f"{run} predicts {step} frames per step, so the plan's horizon must be a multiple of "
-                           f"{step} frames (got {config.mppi.horizon}); pass --horizon "
-                           f"{max(step, config.mppi.horizon // step * step)}")
+            raise RunError(
+                f"{run} predicts {step} frames per step, so the plan's horizon must be a multiple of "
+                f"{step} frames (got {config.mppi.horizon}); pass --horizon "
+                f"{max(step, config.mppi.horizon // step * step)}"
+            )
         if config.compile:
             model.compile_rollout()
         probe = PhysicsProbe.from_pretrained(run, world_model=model.fingerprint)
         dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)
     else:
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
-    depth = {"depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head),
-                                                  frames),
-             "sensor": lambda: sensor_depth,
-             "true": lambda: None}[variant.obstacles]()
+    depth = {
+        "depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head), frames),
+        "sensor": lambda: sensor_depth,
+        "true": lambda: None,
+    }[variant.obstacles]()
     camera = Camera.from_sim(sim)
     cls = OraclePilot if variant.privileged else PlannerPilot
     return cls(variant, dynamics, depth, camera, config, sim, timings), sim
@@ -121,11 +131,14 @@ def pilot_factory(variant: Variant | str):
     one that suits the machine, ``plan.config.default_planner_preset``); the other options are PlannerConfig / MPPIConfig / CostConfig field names
     (``samples``, ``horizon``, ``memory_frames``, ...); ``--pilot-option`` passes strings, converted here.
     """
+
     def factory(config, run: str | None = None, preset: str | None = None, **options) -> PlannerPilot:
         pilot, sim = build_pilot(variant, run, planner_config(preset, **options), config.sim)
         if sim.camera != config.sim.camera:
-            raise ValueError(f"pilot {Variant(variant).value} needs the run's camera ({sim.camera.image_size} px); "
-                             "fly it with `orbitmodel eval closed-loop`, which sets it")
+            raise ValueError(
+                f"pilot {Variant(variant).value} needs the run's camera ({sim.camera.image_size} px); "
+                "fly it with `orbitmodel eval closed-loop`, which sets it"
+            )
         return pilot
 
     return factory

@@ -49,8 +49,10 @@ class MPPIConfig:
 
     def __post_init__(self):
         if self.samples < 2 or self.horizon < 1 or self.iterations < 1:
-            raise ValueError(f"MPPI needs samples >= 2, horizon >= 1 and iterations >= 1; got "
-                             f"{self.samples}, {self.horizon}, {self.iterations}")
+            raise ValueError(
+                f"MPPI needs samples >= 2, horizon >= 1 and iterations >= 1; got "
+                f"{self.samples}, {self.horizon}, {self.iterations}"
+            )
         if not self.noise_std > 0 or not self.temperature > 0:
             raise ValueError(f"noise_std={self.noise_std} and temperature={self.temperature} must be > 0")
         if not 0 <= self.smoothing < 1:
@@ -88,8 +90,14 @@ class MPPI:
     that produce independent forces and torques); default: independent per action coordinate.
     """
 
-    def __init__(self, config: MPPIConfig = MPPIConfig(), action_dim: int = 8,
-                 noise_basis: torch.Tensor | None = None, low: float = 0.0, high: float = 1.0):
+    def __init__(
+        self,
+        config: MPPIConfig = MPPIConfig(),
+        action_dim: int = 8,
+        noise_basis: torch.Tensor | None = None,
+        low: float = 0.0,
+        high: float = 1.0,
+    ):
         self.config = config
         self.action_dim = action_dim
         if noise_basis is not None and (noise_basis.ndim != 2 or noise_basis.shape[0] != action_dim):

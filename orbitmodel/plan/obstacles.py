@@ -25,7 +25,7 @@ import torch
 from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.schema import DEPTH_LOW_SIDE
 from orbitdata.sim.config import SimConfig
-from orbitmodel.kinematics import P, ROT, rot6d_to_matrix
+from orbitmodel.kinematics import ROT, P, rot6d_to_matrix
 
 
 @dataclass(frozen=True)
@@ -55,9 +55,12 @@ class Camera:
         cam = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
         R = np.zeros(9)
         mujoco.mju_quat2Mat(R, model.cam_quat[cam])
-        return cls(fovy_deg=float(sim.camera.fovy_deg if fovy_deg is None else fovy_deg), far=float(sim.camera.far),
-                   position=tuple(float(x) for x in model.cam_pos[cam]),
-                   rotation=tuple(tuple(float(x) for x in row) for row in R.reshape(3, 3)))
+        return cls(
+            fovy_deg=float(sim.camera.fovy_deg if fovy_deg is None else fovy_deg),
+            far=float(sim.camera.far),
+            position=tuple(float(x) for x in model.cam_pos[cam]),
+            rotation=tuple(tuple(float(x) for x in row) for row in R.reshape(3, 3)),
+        )
 
     def cell_rays(self, side: int = DEPTH_LOW_SIDE) -> np.ndarray:
         """(side, side, 3) body-frame vectors through the cell centres, scaled to unit z-depth.
@@ -93,13 +96,19 @@ def supported_cells(depth: np.ndarray, near: np.ndarray, support: int, tolerance
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
             if dy or dx:
-                other = padded[1 + dy:1 + dy + rows, 1 + dx:1 + dx + cols]
+                other = padded[1 + dy : 1 + dy + rows, 1 + dx : 1 + dx + cols]
                 count += np.abs(other - d) <= tolerance * d  # NaN compares False
     return near & (count >= support)
 
 
-def depth_to_points(depth: np.ndarray, state: np.ndarray, camera: Camera, max_range: float = 20.0,
-                    footprint: float = 1.0, support: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def depth_to_points(
+    depth: np.ndarray,
+    state: np.ndarray,
+    camera: Camera,
+    max_range: float = 20.0,
+    footprint: float = 1.0,
+    support: int = 0,
+) -> tuple[np.ndarray, np.ndarray]:
     """Back-project a (16, 16) z-depth map (metres) seen from ``state`` into world points.
 
     Cells at or beyond ``min(max_range, 0.99 far)`` (no return, or too far to matter) and
@@ -170,8 +179,9 @@ class PointMemory:
     def cloud(self, reach: float = 2.0) -> PointCloud:
         if not self._frames:
             return PointCloud(np.zeros((0, 3)), np.zeros(0), reach)
-        return PointCloud(np.concatenate([p for p, _ in self._frames]), np.concatenate([r for _, r in self._frames]),
-                          reach)
+        return PointCloud(
+            np.concatenate([p for p, _ in self._frames]), np.concatenate([r for _, r in self._frames]), reach
+        )
 
 
 def _quat_matrix(quat) -> torch.Tensor:

@@ -81,8 +81,16 @@ class PlannerPilot(Pilot):
     privileged = False
     needs_images = True
 
-    def __init__(self, variant: Variant, dynamics, depth: DepthSource | None, camera: Camera,
-                 config: PlannerConfig = PlannerConfig(), sim: SimConfig = SimConfig(), timings: Timings | None = None):
+    def __init__(
+        self,
+        variant: Variant,
+        dynamics,
+        depth: DepthSource | None,
+        camera: Camera,
+        config: PlannerConfig = PlannerConfig(),
+        sim: SimConfig = SimConfig(),
+        timings: Timings | None = None,
+    ):
         if variant.privileged != type(self).privileged:
             raise ValueError(f"variant {variant.value} needs {'OraclePilot' if variant.privileged else 'PlannerPilot'}")
         if (depth is None) != (variant.obstacles == "true"):
@@ -162,8 +170,9 @@ class PlannerPilot(Pilot):
             return self._true
         depth = self.depth(obs)  # (16, 16) metres; the depth head times itself
         with self.timings("points"):
-            points, radii = depth_to_points(depth, obs["state"], self.camera, self.config.max_range,
-                                            self.config.footprint, self.config.support)
+            points, radii = depth_to_points(
+                depth, obs["state"], self.camera, self.config.max_range, self.config.footprint, self.config.support
+            )
             self.memory.add(points, radii)
             cloud = self.memory.cloud(self.config.reach)
         self.cloud_sizes.append(len(cloud))

@@ -20,8 +20,11 @@ class Variant(str, Enum):
     @property
     def obstacles(self) -> str:
         """'depth-head', 'sensor' (the rendered depth_low) or 'true' (the scenario's)."""
-        return {Variant.ORACLE_TRUE: "true", Variant.ORACLE_LEARNED_DYN: "true",
-                Variant.ORACLE_TRUE_DYN_SENSOR: "sensor"}.get(self, "depth-head")
+        return {
+            Variant.ORACLE_TRUE: "true",
+            Variant.ORACLE_LEARNED_DYN: "true",
+            Variant.ORACLE_TRUE_DYN_SENSOR: "sensor",
+        }.get(self, "depth-head")
 
     @property
     def privileged(self) -> bool:

@@ -29,8 +29,10 @@ class StateDynamics(NormalisedStates, nn.Module):
     def __init__(self, config: ProbeConfig):
         super().__init__()
         if config.kind != "state" or config.latent_dim != STATE_ACTION_DIM:
-            raise ValueError(f"StateDynamics takes a 'state' probe config with latent_dim {STATE_ACTION_DIM}, "
-                             f"got kind {config.kind!r}, latent_dim {config.latent_dim}")
+            raise ValueError(
+                f"StateDynamics takes a 'state' probe config with latent_dim {STATE_ACTION_DIM}, "
+                f"got kind {config.kind!r}, latent_dim {config.latent_dim}"
+            )
         self.config = config
         self.increments = Increments(config)
         self.register_state_stats(S.STATE_DIM)

@@ -50,11 +50,18 @@ class TensorWindows(Dataset):
         idx = torch.as_tensor(list(indices), dtype=torch.long)
         return WindowBatch({k: v[idx] for k, v in self.tensors.items()})
 
-    def sampler(self, shuffle: bool = True, seed: int = 0, drop_last: bool = False, rank: int | None = None,
-                world_size: int | None = None) -> DistributedSampler:
+    def sampler(
+        self,
+        shuffle: bool = True,
+        seed: int = 0,
+        drop_last: bool = False,
+        rank: int | None = None,
+        world_size: int | None = None,
+    ) -> DistributedSampler:
         """Order a pure function of (seed, epoch), as ``WindowDataset.sampler``."""
-        return DistributedSampler(self, num_replicas=world_size or 1, rank=rank or 0, shuffle=shuffle, seed=seed,
-                                  drop_last=drop_last)
+        return DistributedSampler(
+            self, num_replicas=world_size or 1, rank=rank or 0, shuffle=shuffle, seed=seed, drop_last=drop_last
+        )
 
 
 def subset(n: int, count: int, seed: int) -> list[int]:
@@ -67,7 +74,7 @@ def subset(n: int, count: int, seed: int) -> list[int]:
 
 def gather(windows, indices: list[int], keys: tuple[str, ...]) -> dict[str, torch.Tensor]:
     """The ``keys`` of these windows, stacked (N, T, ...)."""
-    parts = [collate_windows(windows.__getitems__(indices[i:i + 1024])) for i in range(0, len(indices), 1024)]
+    parts = [collate_windows(windows.__getitems__(indices[i : i + 1024])) for i in range(0, len(indices), 1024)]
     return {k: torch.cat([p[k] for p in parts]) for k in keys}
 
 
@@ -80,7 +87,7 @@ def imagine(world_model, windows, indices: list[int], context: int, device: torc
     started = time.perf_counter()
     try:
         for i in range(0, len(indices), IMAGINE_BATCH):
-            batch = collate_windows(windows.__getitems__(indices[i:i + IMAGINE_BATCH]))
+            batch = collate_windows(windows.__getitems__(indices[i : i + IMAGINE_BATCH]))
             states, actions = batch[S.STATE], batch[S.ACTION]
             z = world_model.encode(batch[S.IMAGE][:, :context].to(device), states[:, :context].to(device))
             out[LATENT].append(world_model.rollout(z, actions[:, :-1].to(device)).float().cpu())  # (b, n, D)

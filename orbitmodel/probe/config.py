@@ -50,8 +50,9 @@ class ProbeConfig:
         if self.kind not in KINDS:
             raise ValueError(f"probe kind {self.kind!r}: choose one of {', '.join(KINDS)}")
         if self.inputs not in INPUTS or (self.kind == "state" and self.inputs != "latent"):
-            raise ValueError(f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)} "
-                             "(the state kind reads its own)")
+            raise ValueError(
+                f"inputs {self.inputs!r}: choose one of {', '.join(INPUTS)} (the state kind reads its own)"
+            )
         if self.integrator not in INTEGRATORS:
             raise ValueError(f"integrator {self.integrator!r}: choose one of {', '.join(INTEGRATORS)}")
         if self.layers < 1 or self.hidden < 1:

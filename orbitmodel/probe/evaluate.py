@@ -22,7 +22,7 @@ import torch
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
 from orbitmodel.data import group_actions, read_dataset_meta, split_selection
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, rot6d_to_matrix
+from orbitmodel.kinematics import FUEL, ROT, P, V, W, geodesic_angle, rot6d_to_matrix
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.probe.train import load_stage1
@@ -31,10 +31,15 @@ from orbitmodel.train.loop import resolve_device
 
 QUANTITIES = {"position": "m", "velocity": "m/s", "rotation": "rad", "angular_velocity": "rad/s", "fuel": "ratio"}
 # Table I of the paper (MAE at h = 25 and h = 50 steps of 0.04 s).
-PAPER = {25: {"position": 0.0394, "velocity": 0.0636, "rotation": 0.0676, "angular_velocity": 0.0883, "fuel": 0.0019},
-         50: {"position": 0.0813, "velocity": 0.1191, "rotation": 0.2034, "angular_velocity": 0.1557, "fuel": 0.0033}}
-ROWS = {"probe": "ours: probe on imagined latents", "state_mlp": "state-only MLP (state, action)",
-        "constant_velocity": "constant velocity (coasting)"}
+PAPER = {
+    25: {"position": 0.0394, "velocity": 0.0636, "rotation": 0.0676, "angular_velocity": 0.0883, "fuel": 0.0019},
+    50: {"position": 0.0813, "velocity": 0.1191, "rotation": 0.2034, "angular_velocity": 0.1557, "fuel": 0.0033},
+}
+ROWS = {
+    "probe": "ours: probe on imagined latents",
+    "state_mlp": "state-only MLP (state, action)",
+    "constant_velocity": "constant velocity (coasting)",
+}
 TABLE_JSON, TABLE_MD = "probe_table.json", "probe_table.md"
 BATCH = 25  # windows per forward pass
 
@@ -56,18 +61,22 @@ class EvalRequest:
 def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tensor]:
     """Per-step absolute errors (K, n) of states (K, n, 16), per quantity."""
     d = (pred - true).abs()
-    return {"position": d[..., P].mean(-1), "velocity": d[..., V].mean(-1),
-            "rotation": geodesic_angle(rot6d_to_matrix(true[..., ROT]), rot6d_to_matrix(pred[..., ROT])),
-            "angular_velocity": d[..., W].mean(-1), "fuel": d[..., FUEL].mean(-1)}
+    return {
+        "position": d[..., P].mean(-1),
+        "velocity": d[..., V].mean(-1),
+        "rotation": geodesic_angle(rot6d_to_matrix(true[..., ROT]), rot6d_to_matrix(pred[..., ROT])),
+        "angular_velocity": d[..., W].mean(-1),
+        "fuel": d[..., FUEL].mean(-1),
+    }
 
 
-def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int, split: str = "test",
-                   episodes=None):
+def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int, split: str = "test", episodes=None):
     """(collision-free window indices, a window ending on a collision or None) into the windows of
     ``context + horizon`` frames (stride 1) of ``split`` (``episodes`` of it); one window per
     episode, seeded."""
-    flags = load_windows(dataset, split=split, context=context, horizon=horizon, stride=1, columns=[S.COLLISION],
-                         episodes=episodes)
+    flags = load_windows(
+        dataset, split=split, context=context, horizon=horizon, stride=1, columns=[S.COLLISION], episodes=episodes
+    )
     episode = flags.index.episode  # (N,) episode_index of each window
     rng = np.random.default_rng(seed)
     chosen, collided = [], []
@@ -82,14 +91,17 @@ def select_windows(dataset: str, context: int, horizon: int, count: int, seed: i
                     break
     if len(chosen) < count:
         which = f"{split} episodes" if episodes is None else f"held-out validation episodes ({split} split)"
-        raise RunError(f"only {len(chosen)} {which} of {dataset} hold a collision-free window of "
-                       f"{context} + {horizon} frames; ask for --windows {len(chosen)} or fewer, or shorter horizons")
+        raise RunError(
+            f"only {len(chosen)} {which} of {dataset} hold a collision-free window of "
+            f"{context} + {horizon} frames; ask for --windows {len(chosen)} or fewer, or shorter horizons"
+        )
     return chosen, (collided[0] if collided else None)
 
 
 @torch.no_grad()
-def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, device,
-            history: int | None = None) -> dict[str, torch.Tensor]:
+def predict(
+    world_model, probe, state_mlp, batch: dict, context: int, n: int, device, history: int | None = None
+) -> dict[str, torch.Tensor]:
     """Every row's states (K, n, 16) for windows (K, context + n, ...) of frames, and the truth.
 
     A world model with ``frame_step`` s > 1 encodes every s-th context frame (``context`` = its
@@ -98,13 +110,15 @@ def predict(world_model, probe, state_mlp, batch: dict, context: int, n: int, de
     m, s = context, world_model.config.frame_step
     images, states, actions = (batch[k].to(device) for k in (S.IMAGE, S.STATE, S.ACTION))
     z = world_model.encode(images[:, :m:s], states[:, :m:s])  # (K, context steps, D)
-    steps = group_actions(actions[:, :m - 1 + n], s)  # (K, context steps - 1 + n / s, 8 s): taken, then imagined
+    steps = group_actions(actions[:, : m - 1 + n], s)  # (K, context steps - 1 + n / s, 8 s): taken, then imagined
     z_future = world_model.rollout(z, steps, history)  # (K, n / s, D)
-    out = {"truth": states[:, m:m + n].float(),
-           "probe": probe.per_frame(z_future, states[:, m - 1], z[:, -1], s, steps[:, -(n // s):]),  # (K, n, 16)
-           "constant_velocity": constant_velocity(states[:, m - 1], n, S.DT)}
+    out = {
+        "truth": states[:, m : m + n].float(),
+        "probe": probe.per_frame(z_future, states[:, m - 1], z[:, -1], s, steps[:, -(n // s) :]),  # (K, n, 16)
+        "constant_velocity": constant_velocity(states[:, m - 1], n, S.DT),
+    }
     if state_mlp is not None:
-        out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1:m - 1 + n])
+        out["state_mlp"] = state_mlp(states[:, m - 1], actions[:, m - 1 : m - 1 + n])
     return {k: v.cpu() for k, v in out.items()}
 
 
@@ -114,8 +128,10 @@ def summarise(errors: dict[str, dict[str, torch.Tensor]], horizons) -> dict:
     for row, per_q in errors.items():
         table[row] = {}
         for q, e in per_q.items():
-            entry = {f"h{h}": {"mean": float(e[:, :h].mean(1).mean()), "std": float(e[:, :h].mean(1).std(unbiased=False))}
-                     for h in horizons}
+            entry = {
+                f"h{h}": {"mean": float(e[:, :h].mean(1).mean()), "std": float(e[:, :h].mean(1).std(unbiased=False))}
+                for h in horizons
+            }
             entry["per_step"] = [float(x) for x in e.mean(0)]
             table[row][q] = entry
     return table
@@ -131,25 +147,34 @@ def _cell(row: dict | None, q: str, h: int) -> str:
 def markdown(result: dict) -> str:
     """The table: ours beside the paper and the reference rows, one line per quantity and horizon."""
     t = result["table"]
-    lines = [f"Physics probe, {result['windows']} collision-free {result.get('split', 'test')} windows (seed "
-             f"{result['seed']}), "
-             f"context {result['context']}"
-             + (f", the world model seeing {result['history']} latents per imagined step" if "history" in result else "")
-             + ", MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
-             + (f"; the world model steps {result['frame_step']} frames at a time and its probe's states are "
-                + ("predicted for every frame" if result.get("per_frame") else "interpolated to every frame")
-                + ", as the planner reads them." if result.get("frame_step", 1) > 1 else "."),
-             f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
-             f"probe inputs: {result['probe_inputs']}; "
-             f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.", "",
-             "| quantity | h | ours | paper | state-only MLP | constant velocity |",
-             "|---|---|---|---|---|---|"]
+    lines = [
+        f"Physics probe, {result['windows']} collision-free {result.get('split', 'test')} windows (seed "
+        f"{result['seed']}), "
+        f"context {result['context']}"
+        + (f", the world model seeing {result['history']} latents per imagined step" if "history" in result else "")
+        + ", MAE ± std over windows, averaged over steps 1..h (dt = 0.04 s)"
+        + (
+            f"; the world model steps {result['frame_step']} frames at a time and its probe's states are "
+            + ("predicted for every frame" if result.get("per_frame") else "interpolated to every frame")
+            + ", as the planner reads them."
+            if result.get("frame_step", 1) > 1
+            else "."
+        ),
+        f"World model: `{result['run']}` (preset {result['preset']}); dataset `{result['dataset']}`; "
+        f"probe inputs: {result['probe_inputs']}; "
+        f"integrator: {', '.join(f'{k} {v}' for k, v in result['integrators'].items())}.",
+        "",
+        "| quantity | h | ours | paper | state-only MLP | constant velocity |",
+        "|---|---|---|---|---|---|",
+    ]
     for q, unit in QUANTITIES.items():
         for h in result["horizons"]:
             paper = PAPER.get(h, {}).get(q)
-            lines.append(f"| {q.replace('_', ' ')} ({unit}) | {h} | {_cell(t['probe'], q, h)} | "
-                         f"{'-' if paper is None else f'{paper:.4f}'} | {_cell(t.get('state_mlp'), q, h)} | "
-                         f"{_cell(t['constant_velocity'], q, h)} |")
+            lines.append(
+                f"| {q.replace('_', ' ')} ({unit}) | {h} | {_cell(t['probe'], q, h)} | "
+                f"{'-' if paper is None else f'{paper:.4f}'} | {_cell(t.get('state_mlp'), q, h)} | "
+                f"{_cell(t['constant_velocity'], q, h)} |"
+            )
     if t.get("state_mlp") is None and result.get("frame_step", 1) > 1:
         lines += ["", "No state-only row: that reference is per frame and is not trained for a frame-step run."]
     elif t.get("state_mlp") is None:
@@ -175,41 +200,65 @@ def evaluate_probe(req: EvalRequest) -> dict:
     state_mlp = state_mlp.to(device) if state_mlp is not None else None
     s = world_model.config.frame_step
     if req.history is not None and not 1 <= req.history <= world_model.config.history:
-        raise RunError(f"--history {req.history}: the world model of {req.run} rolls out from 1 to "
-                       f"{world_model.config.history} latents")
+        raise RunError(
+            f"--history {req.history}: the world model of {req.run} rolls out from 1 to "
+            f"{world_model.config.history} latents"
+        )
     if any(h % s for h in req.horizons):
-        raise RunError(f"{req.run} predicts {s} frames per step; give horizons that are multiples of {s} "
-                       f"(got {', '.join(map(str, req.horizons))})")
+        raise RunError(
+            f"{req.run} predicts {s} frames per step; give horizons that are multiples of {s} "
+            f"(got {', '.join(map(str, req.horizons))})"
+        )
     # the context frames: every s-th of (steps - 1) s + 1, the last one where the probe starts
     context, n = (int(probe_config["train"]["context"]) - 1) * s + 1, max(req.horizons)
     split, episodes = split_selection(req.split, world_model.run.validation)
     chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed, split, episodes)
-    windows = load_windows(req.dataset, split=split, context=context, horizon=n, stride=1, episodes=episodes,
-                           columns=[S.IMAGE, S.STATE, S.ACTION])
+    windows = load_windows(
+        req.dataset,
+        split=split,
+        context=context,
+        horizon=n,
+        stride=1,
+        episodes=episodes,
+        columns=[S.IMAGE, S.STATE, S.ACTION],
+    )
     errors: dict[str, dict[str, list]] = {}
     first, first_frames = None, []
     for i in range(0, len(chosen), BATCH):
-        batch = collate_windows(windows.__getitems__(chosen[i:i + BATCH]))
+        batch = collate_windows(windows.__getitems__(chosen[i : i + BATCH]))
         states = predict(world_model, probe, state_mlp, batch, context, n, device, req.history)
         first = first or {"batch": batch, "states": states}
         first_frames += [int(f) for f in batch[S.FRAME_INDEX][:, 0]]
         for row in (r for r in ROWS if r in states):
             for q, e in step_errors(states[row], states["truth"]).items():
                 errors.setdefault(row, {}).setdefault(q, []).append(e)
-    table = summarise({r: {q: torch.cat(v) for q, v in per_q.items()} for r, per_q in errors.items()},
-                      req.horizons)
+    table = summarise({r: {q: torch.cat(v) for q, v in per_q.items()} for r, per_q in errors.items()}, req.horizons)
     table.setdefault("state_mlp", None)
     history = req.history or world_model.config.history
-    result = {"run": str(req.run), "dataset": str(req.dataset), "preset": world_model.run.preset.name,
-              "windows": len(chosen), "split": req.split, "seed": req.seed, "context": context, "frame_step": s,
-              "history": history,
-              "horizons": list(req.horizons),
-              "dt": S.DT, "paper": {f"h{h}": v for h, v in PAPER.items()}, "rows": ROWS,
-              "probe_inputs": probe.config.inputs, "per_frame": probe.config.substeps > 1,
-              "integrators": {"probe": probe.config.integrator,
-                              **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {})},
-              "episodes": [int(windows.index.episode[c]) for c in chosen],
-              "first_frames": first_frames, "table": table}
+    result = {
+        "run": str(req.run),
+        "dataset": str(req.dataset),
+        "preset": world_model.run.preset.name,
+        "windows": len(chosen),
+        "split": req.split,
+        "seed": req.seed,
+        "context": context,
+        "frame_step": s,
+        "history": history,
+        "horizons": list(req.horizons),
+        "dt": S.DT,
+        "paper": {f"h{h}": v for h, v in PAPER.items()},
+        "rows": ROWS,
+        "probe_inputs": probe.config.inputs,
+        "per_frame": probe.config.substeps > 1,
+        "integrators": {
+            "probe": probe.config.integrator,
+            **({"state-only": state_mlp.config.integrator} if state_mlp is not None else {}),
+        },
+        "episodes": [int(windows.index.episode[c]) for c in chosen],
+        "first_frames": first_frames,
+        "table": table,
+    }
     out = Path(req.out) if req.out is not None else local_run_folder(req.run, "eval probe without --out") / "eval"
     out.mkdir(parents=True, exist_ok=True)
     (out / TABLE_JSON).write_text(json.dumps(result, indent=2) + "\n")
@@ -221,7 +270,9 @@ def evaluate_probe(req: EvalRequest) -> dict:
         crash = None
         if collided is not None:
             batch = collate_windows(windows.__getitems__([collided]))
-            crash = {"batch": batch, "states": predict(world_model, probe, state_mlp, batch, context, n, device,
-                                                       req.history)}
+            crash = {
+                "batch": batch,
+                "states": predict(world_model, probe, state_mlp, batch, context, n, device, req.history),
+            }
         result["files"] += figure5(first, crash, req.dataset, context, S.DT, out, split)
     return result

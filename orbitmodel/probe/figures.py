@@ -14,10 +14,12 @@ from orbitmodel.extras import pyplot
 from orbitmodel.kinematics import P
 
 FIG_STATES, FIG_3D = "probe_fig5_states.png", "probe_fig5_3d.png"
-STYLE = {"truth": dict(color="black", lw=1.8, label="true"),
-         "probe": dict(color="tab:red", lw=1.4, label="ours (probe on imagined latents)"),
-         "state_mlp": dict(color="tab:blue", lw=1.1, ls="--", label="state-only MLP"),
-         "constant_velocity": dict(color="tab:gray", lw=1.1, ls=":", label="constant velocity")}
+STYLE = {
+    "truth": dict(color="black", lw=1.8, label="true"),
+    "probe": dict(color="tab:red", lw=1.4, label="ours (probe on imagined latents)"),
+    "state_mlp": dict(color="tab:blue", lw=1.1, ls="--", label="state-only MLP"),
+    "constant_velocity": dict(color="tab:gray", lw=1.1, ls=":", label="constant velocity"),
+}
 NEAR = 2.0  # metres: obstacles drawn when within this of the window's path
 
 
@@ -46,8 +48,14 @@ def plot_states(context_states: np.ndarray, states: dict[str, np.ndarray], dt: f
 
 def _sphere(ax, center, radius: float) -> None:
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 16), np.linspace(0, np.pi, 9))
-    ax.plot_wireframe(center[0] + radius * np.cos(u) * np.sin(v), center[1] + radius * np.sin(u) * np.sin(v),
-                      center[2] + radius * np.cos(v), color="tab:orange", lw=0.4, alpha=0.6)
+    ax.plot_wireframe(
+        center[0] + radius * np.cos(u) * np.sin(v),
+        center[1] + radius * np.sin(u) * np.sin(v),
+        center[2] + radius * np.cos(v),
+        color="tab:orange",
+        lw=0.4,
+        alpha=0.6,
+    )
 
 
 def plot_3d(panels: list[dict], path: Path) -> None:
@@ -100,20 +108,29 @@ def _panel(window: dict, j: int, context: int, dataset: str, title: str, split: 
     episode = int(window["batch"][S.EPISODE_INDEX][j, 0])
     first = int(window["batch"][S.FRAME_INDEX][j, 0])
     path_xyz = np.concatenate([ctx, states["truth"][:, P]])
-    return {"title": f"{title}: episode {episode}, frames {first}..{first + len(path_xyz) - 1}", "context": ctx,
-            "paths": {row: s[:, P] for row, s in states.items()},
-            "obstacles": _obstacles(dataset, episode, path_xyz, split)}
+    return {
+        "title": f"{title}: episode {episode}, frames {first}..{first + len(path_xyz) - 1}",
+        "context": ctx,
+        "paths": {row: s[:, P] for row, s in states.items()},
+        "obstacles": _obstacles(dataset, episode, path_xyz, split),
+    }
 
 
-def figure5(first: dict, crash: dict | None, dataset: str, context: int, dt: float, out: Path,
-            split: str = "test") -> list[str]:
+def figure5(
+    first: dict, crash: dict | None, dataset: str, context: int, dt: float, out: Path, split: str = "test"
+) -> list[str]:
     """Write Figure 5 into ``out``: the states of the first evaluated window, and 3-D views of it
     and of the collision window (when the test split has one). Returns the files written."""
     states = {k: v[0].numpy() for k, v in first["states"].items()}
     episode = int(first["batch"][S.EPISODE_INDEX][0, 0])
     n = len(states["truth"])
-    plot_states(first["batch"][S.STATE][0, :context].numpy(), states, dt, out / FIG_STATES,
-                f"Predicted vs true state over {n} steps ({n * dt:.1f} s), {split} episode {episode}")
+    plot_states(
+        first["batch"][S.STATE][0, :context].numpy(),
+        states,
+        dt,
+        out / FIG_STATES,
+        f"Predicted vs true state over {n} steps ({n * dt:.1f} s), {split} episode {episode}",
+    )
     panels = [_panel(first, 0, context, dataset, "collision-free", split)]
     if crash is not None:
         panels.append(_panel(crash, 0, context, dataset, "ends in a collision", split))

@@ -22,7 +22,7 @@ from __future__ import annotations
 import torch
 
 from orbitdata import schema as S
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, matrix_to_rot6d, rot6d_to_matrix, rotate, so3_exp
+from orbitmodel.kinematics import FUEL, ROT, P, V, W, matrix_to_rot6d, rot6d_to_matrix, rotate, so3_exp
 
 INCREMENT_DIM = 10
 D_P, D_V, D_W, D_FUEL = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 10)

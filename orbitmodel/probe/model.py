@@ -95,8 +95,13 @@ class PhysicsProbe(nn.Module):
         std = torch.as_tensor(std, dtype=torch.float32)
         self.thrust_std.copy_(torch.where(std > 1e-6, std, torch.ones_like(std)).repeat(reps))
 
-    def forward(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None = None,
-                actions: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self,
+        z_future: torch.Tensor,
+        state0: torch.Tensor,
+        z_last: torch.Tensor | None = None,
+        actions: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """z_future (B, n, D) imagined latents of frames t+1..t+n, state0 (B, 16) the state at
         frame t -> states (B, n substeps, 16) after each integration step (float32). A probe
         that reads latent changes (``config.inputs`` "latent+change...") also needs z_last (B, D),
@@ -105,8 +110,9 @@ class PhysicsProbe(nn.Module):
         inc = self.step_increments(z_future, z_last, actions)
         return integrate(state0, inc, self.config.dt, self.config.coasting)
 
-    def step_increments(self, z_future: torch.Tensor, z_last: torch.Tensor | None = None,
-                        actions: torch.Tensor | None = None) -> torch.Tensor:
+    def step_increments(
+        self, z_future: torch.Tensor, z_last: torch.Tensor | None = None, actions: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """The increments (B, n substeps, 10), in physical units, that :meth:`forward` integrates."""
         D = self.config.latent_dim
         if z_future.shape[-1] != D or z_future.ndim != 3:
@@ -115,21 +121,31 @@ class PhysicsProbe(nn.Module):
         if self.config.reads_change:
             if z_last is None or z_last.shape != (len(z_future), D):
                 got = None if z_last is None else tuple(z_last.shape)
-                raise ValueError(f"this probe reads latent changes: pass z_last ({len(z_future)}, {D}), the last "
-                                 f"context latent (got {got})")
+                raise ValueError(
+                    f"this probe reads latent changes: pass z_last ({len(z_future)}, {D}), the last "
+                    f"context latent (got {got})"
+                )
             previous = torch.cat([z_last[:, None].to(z_future), z_future[:, :-1]], dim=1)  # (B, n, D)
             x = torch.cat([z_future, z_future - previous], dim=-1)  # (B, n, 2D)
         if self.config.reads_thrust:
             want = (*z_future.shape[:2], self.config.action_dim)
             if actions is None or tuple(actions.shape) != want:
                 got = None if actions is None else tuple(actions.shape)
-                raise ValueError(f"this probe reads each step's thrusts: pass actions {want}, the action that led to "
-                                 f"each imagined latent (got {got})")
+                raise ValueError(
+                    f"this probe reads each step's thrusts: pass actions {want}, the action that led to "
+                    f"each imagined latent (got {got})"
+                )
             return self.increments(x, (actions.to(x) - self.thrust_mean) / self.thrust_std)
         return self.increments(x)
 
-    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor | None,
-                  frame_step: int, actions: torch.Tensor | None = None) -> torch.Tensor:
+    def per_frame(
+        self,
+        z_future: torch.Tensor,
+        state0: torch.Tensor,
+        z_last: torch.Tensor | None,
+        frame_step: int,
+        actions: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """Every frame's state (B, n frame_step, 16) from the latents of a world model stepping
         ``frame_step`` frames: the probe's own states when it predicts each frame (substeps ==
         frame_step), else its states at the latents interpolated linearly between them
@@ -143,8 +159,13 @@ class PhysicsProbe(nn.Module):
         return interpolate_frames(state0.float(), states, frame_step)
 
     @classmethod
-    def from_pretrained(cls, run_dir: str | Path, device: str | torch.device = "cpu",
-                        world_model: str | None = None, revision: str | None = None) -> "PhysicsProbe":
+    def from_pretrained(
+        cls,
+        run_dir: str | Path,
+        device: str | torch.device = "cpu",
+        world_model: str | None = None,
+        revision: str | None = None,
+    ) -> "PhysicsProbe":
         """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/`` of a run folder or a Hub
         model repo id (``orbitmodel push``), in eval mode; ``world_model``: the fingerprint of the
         world model it must have been trained on."""
@@ -155,7 +176,9 @@ def probe_folder(run_dir: str | Path, kind: str) -> Path:
     return Path(run_dir) / PROBE_FOLDER[kind]
 
 
-def load_probe(run_dir: str | Path, kind: str, world_model: str | None = None) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
+def load_probe(
+    run_dir: str | Path, kind: str, world_model: str | None = None
+) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
     """(config, weights) of a Stage I run's probe of ``kind``; RunError with the fix if it is
     absent, or if ``world_model`` (a weights fingerprint) is not the one it was trained on."""
     folder = probe_folder(run_dir, kind)
@@ -167,11 +190,14 @@ def load_probe(run_dir: str | Path, kind: str, world_model: str | None = None) -
     try:
         config = ProbeConfig(**raw["probe"])
     except (KeyError, TypeError) as err:
-        raise RunError(f"{folder / CONFIG} is not a probe config ({err}); train it again with `{command} "
-                       "--overwrite`") from None
+        raise RunError(
+            f"{folder / CONFIG} is not a probe config ({err}); train it again with `{command} --overwrite`"
+        ) from None
     if world_model is not None and kind == "latent" and raw.get("world_model") != world_model:
-        raise RunError(f"{folder} was trained on another world model than {run_dir} holds now; train it again "
-                       f"with `{command} --overwrite`")
+        raise RunError(
+            f"{folder} was trained on another world model than {run_dir} holds now; train it again "
+            f"with `{command} --overwrite`"
+        )
     try:
         weights = load_weights(folder)
     except RunError:
@@ -179,8 +205,14 @@ def load_probe(run_dir: str | Path, kind: str, world_model: str | None = None) -
     return config, weights
 
 
-def from_run(cls, run_dir: str | Path, kind: str, device: str | torch.device = "cpu", world_model: str | None = None,
-             revision: str | None = None):
+def from_run(
+    cls,
+    run_dir: str | Path,
+    kind: str,
+    device: str | torch.device = "cpu",
+    world_model: str | None = None,
+    revision: str | None = None,
+):
     """A probe module of class ``cls`` (built from a ProbeConfig) with the weights of ``run_dir``'s
     ``kind`` probe, in eval mode (see :func:`load_probe`); ``run_dir`` may be a Hub repo id."""
     config, weights = load_probe(resolve_run(run_dir, revision), kind, world_model)

@@ -34,16 +34,34 @@ from orbitdata import schema as S
 from orbitdata.load import collate_windows
 from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig, reads_thrust
 from orbitmodel.data import FRAME_STATES, DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
-from orbitmodel.kinematics import FUEL, P, ROT, V, W
+from orbitmodel.kinematics import FUEL, ROT, P, V, W
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
-from orbitmodel.probe.cache import (CACHE_FILE, LAST, LATENT, TensorWindows, cache_key, gather, imagine, load_cache,
-                                    save_cache, subset)
+from orbitmodel.probe.cache import (
+    CACHE_FILE,
+    LAST,
+    LATENT,
+    TensorWindows,
+    cache_key,
+    gather,
+    imagine,
+    load_cache,
+    save_cache,
+    subset,
+)
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import increments_of, integrate
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
-from orbitmodel.runs import (PROBE, RunDir, RunError, check_image_size, local_run_folder, read_run_config, resolve_run,
-                             run_config)
+from orbitmodel.runs import (
+    PROBE,
+    RunDir,
+    RunError,
+    check_image_size,
+    local_run_folder,
+    read_run_config,
+    resolve_run,
+    run_config,
+)
 from orbitmodel.train.loop import FitResult, fit, resolve_device
 
 COLUMNS = {"latent": (S.IMAGE, S.STATE, S.ACTION), "state": (S.STATE, S.ACTION)}
@@ -85,14 +103,14 @@ class LatentObjective(nn.Module):
                 z = self.world_model.encode(images, states[:, :m])  # (B, m, D)
                 z_future = self.world_model.rollout(z, actions[:, :-1])  # (B, n, D)
                 z_last = z[:, -1]  # (B, D)
-        taken = actions[:, m - 1:-1].float()  # (B, n, 8 s): the action that led to each imagined latent
+        taken = actions[:, m - 1 : -1].float()  # (B, n, 8 s): the action that led to each imagined latent
         c = self.probe.config
         inc = self.probe.step_increments(z_future.float(), None if z_last is None else z_last.float(), taken)
         pred = integrate(states[:, m - 1], inc, c.dt, c.coasting)  # (B, n s, 16)
-        target = states[:, m:] if s == 1 else frame_states[:, (m - 1) * s + 1:(m - 1) * s + 1 + pred.shape[1]]
+        target = states[:, m:] if s == 1 else frame_states[:, (m - 1) * s + 1 : (m - 1) * s + 1 + pred.shape[1]]
         loss, parts = state_loss(pred, target, self.weights)
         if self.increment_weight:
-            true_inc = increments_of(torch.cat([states[:, m - 1:m], target], 1).float(), c.dt, c.coasting)
+            true_inc = increments_of(torch.cat([states[:, m - 1 : m], target], 1).float(), c.dt, c.coasting)
             scale = self.probe.increments.scale
             parts["increments"] = F.mse_loss(inc / scale, true_inc / scale)
             loss = loss + self.increment_weight * parts["increments"]
@@ -110,7 +128,7 @@ class StateObjective(nn.Module):
 
     def forward(self, states, actions):
         m = self.context
-        pred = self.model(states[:, m - 1], actions[:, m - 1:-1])  # (B, n, 16)
+        pred = self.model(states[:, m - 1], actions[:, m - 1 : -1])  # (B, n, 16)
         return state_loss(pred, states[:, m:], self.weights)
 
 
@@ -126,7 +144,7 @@ class ProbeJob:
             out["z_future"] = batch[LATENT].to(device)
             out["z_last"] = batch[LAST].to(device)
         elif self.kind == "latent":
-            out["images"] = batch[S.IMAGE][:, :self.context].to(device)  # only the context frames are seen
+            out["images"] = batch[S.IMAGE][:, : self.context].to(device)  # only the context frames are seen
         return out
 
 
@@ -148,8 +166,9 @@ def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
     run = resolve_run(run)  # a folder, or a Hub repo id downloaded once
     if meta is not None:  # before loading weights that may not fit this dataset's images
         config = read_run_config(run)
-        check_image_size(meta, config.preset.model.image_size,
-                         f"the world model of {run} (trained on {config.dataset.source})")
+        check_image_size(
+            meta, config.preset.model.image_size, f"the world model of {run} (trained on {config.dataset.source})"
+        )
     return WorldModel.from_pretrained(run).requires_grad_(False)
 
 
@@ -158,33 +177,59 @@ def run_recipe(run: str | Path) -> ProbeRecipe:
     return read_run_config(run).preset.probe
 
 
-def increment_scale(dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1,
-                    episodes=None) -> torch.Tensor:
+def increment_scale(
+    dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1, episodes=None
+) -> torch.Tensor:
     """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
     (a seeded draw), the probe's output units; a step is ``frame_step`` frames, or one frame
     for a per-frame probe (``config.substeps == frame_step``)."""
     per_frame = config.substeps > 1
-    windows = load_model_windows(dataset, frame_step, split="train", context=train.context, horizon=train.horizon,
-                                 stride=train.window_stride, columns=[S.STATE], episodes=episodes,
-                                 frame_states=per_frame)
+    windows = load_model_windows(
+        dataset,
+        frame_step,
+        split="train",
+        context=train.context,
+        horizon=train.horizon,
+        stride=train.window_stride,
+        columns=[S.STATE],
+        episodes=episodes,
+        frame_states=per_frame,
+    )
     g = torch.Generator().manual_seed(train.loop.seed)
-    chosen = torch.randperm(len(windows), generator=g)[:train.scale_windows].tolist()
+    chosen = torch.randperm(len(windows), generator=g)[: train.scale_windows].tolist()
     states = collate_windows(windows.__getitems__(chosen))[FRAME_STATES if per_frame else S.STATE]  # (N, T, 16)
     inc = increments_of(states, config.dt, config.coasting)  # (N, T-1, 10)
     return inc.flatten(0, 1).pow(2).mean(0).sqrt()  # (10,)
 
 
-def imagined(world_model, windows, chosen, req: ProbeRequest, wm_print: str, meta: DatasetMeta, device,
-             folder: Path, held_out: tuple[int, ...] = ()) -> dict:
+def imagined(
+    world_model,
+    windows,
+    chosen,
+    req: ProbeRequest,
+    wm_print: str,
+    meta: DatasetMeta,
+    device,
+    folder: Path,
+    held_out: tuple[int, ...] = (),
+) -> dict:
     """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
     # The rollout depends on the weights, the model's config (its history) and the code that
     # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
     # and so does --overwrite.
     t = req.recipe.train
-    key = cache_key(world_model=wm_print, config=asdict(world_model.config), package=version("orbitdata"),
-                    dataset=meta.to_dict(), windows=chosen, context=t.context, horizon=t.horizon,
-                    stride=t.window_stride, **({"held_out": list(held_out)} if held_out else {}),
-                    **({"frame_states": True} if getattr(windows, "frame_states", False) else {}))
+    key = cache_key(
+        world_model=wm_print,
+        config=asdict(world_model.config),
+        package=version("orbitdata"),
+        dataset=meta.to_dict(),
+        windows=chosen,
+        context=t.context,
+        horizon=t.horizon,
+        stride=t.window_stride,
+        **({"held_out": list(held_out)} if held_out else {}),
+        **({"frame_states": True} if getattr(windows, "frame_states", False) else {}),
+    )
     cached = load_cache(folder, key)
     if cached is None:
         cached = imagine(world_model.to(device), windows, chosen, t.context, device)
@@ -212,10 +257,17 @@ def probe_config(recipe: ProbeRecipe, kind: str, latent_dim: int, frame_step: in
     a per-frame recipe predicts each of the ``frame_step`` frames of a latent step."""
     latent = kind == "latent"
     substeps = frame_step if latent and recipe.per_frame else 1
-    return ProbeConfig(kind=kind, latent_dim=latent_dim if latent else STATE_ACTION_DIM, hidden=recipe.hidden,
-                       layers=recipe.layers, dt=S.DT * frame_step / substeps,
-                       inputs=recipe.inputs if latent else "latent", integrator=recipe.integrator, substeps=substeps,
-                       action_dim=S.ACTION_DIM * frame_step if latent and reads_thrust(recipe.inputs) else 0)
+    return ProbeConfig(
+        kind=kind,
+        latent_dim=latent_dim if latent else STATE_ACTION_DIM,
+        hidden=recipe.hidden,
+        layers=recipe.layers,
+        dt=S.DT * frame_step / substeps,
+        inputs=recipe.inputs if latent else "latent",
+        integrator=recipe.integrator,
+        substeps=substeps,
+        action_dim=S.ACTION_DIM * frame_step if latent and reads_thrust(recipe.inputs) else 0,
+    )
 
 
 def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
@@ -231,12 +283,16 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     latent = req.kind == "latent"
     frame_step = stage1.preset.model.frame_step
     if not latent and frame_step > 1:
-        raise RunError(f"{req.run} steps {frame_step} frames per prediction; the state-only reference reads "
-                       "one frame's state and action, so train it on a per-frame run (`orbitmodel train` "
-                       "without --frame-step)")
+        raise RunError(
+            f"{req.run} steps {frame_step} frames per prediction; the state-only reference reads "
+            "one frame's state and action, so train it on a per-frame run (`orbitmodel train` "
+            "without --frame-step)"
+        )
     if not latent and t.increment_weight:
-        raise RunError(f"--increment-weight {t.increment_weight:g}: the state-only reference is scored on its states "
-                       "only; pass --increment-weight 0 with --state-only")
+        raise RunError(
+            f"--increment-weight {t.increment_weight:g}: the state-only reference is scored on its states "
+            "only; pass --increment-weight 0 with --state-only"
+        )
     config = probe_config(req.recipe, req.kind, stage1.preset.model.latent_dim, frame_step)
     out = probe_folder(req.run, req.kind)
     if req.overwrite:
@@ -249,15 +305,24 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         parts["world_model"] = wm_print  # a probe reads one world model's latents only
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
-    windows = load_model_windows(req.dataset, frame_step, split="train", context=t.context, horizon=t.horizon,
-                                 stride=t.window_stride, columns=list(COLUMNS[req.kind]), episodes=episodes,
-                                 frame_states=config.substeps > 1)
+    windows = load_model_windows(
+        req.dataset,
+        frame_step,
+        split="train",
+        context=t.context,
+        horizon=t.horizon,
+        stride=t.window_stride,
+        columns=list(COLUMNS[req.kind]),
+        episodes=episodes,
+        frame_states=config.substeps > 1,
+    )
     data = windows
     if t.cache_windows:
         chosen = subset(len(windows), t.cache_windows, t.loop.seed)
         if latent:
-            data = TensorWindows(imagined(world_model, windows, chosen, req, wm_print, meta, device, out,
-                                          stage1.validation.episodes))
+            data = TensorWindows(
+                imagined(world_model, windows, chosen, req, wm_print, meta, device, out, stage1.validation.episodes)
+            )
         else:
             data = TensorWindows(gather(windows, chosen, (S.STATE, S.ACTION)))
     torch.manual_seed(t.loop.seed)  # initialisation
@@ -273,5 +338,6 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         if latent and config.reads_thrust:
             model.set_thrust_stats(meta.action_mean, meta.action_std)
     job = ProbeJob(module, model, req.kind, t.context)
-    return fit(job, data, t.loop, run, device, resume=req.resume,
-               label="probe" if latent else "state-only", on_log=on_log)
+    return fit(
+        job, data, t.loop, run, device, resume=req.resume, label="probe" if latent else "state-only", on_log=on_log
+    )

@@ -26,10 +26,15 @@ def _dataset(raw: dict, dataset_repo: str | None) -> tuple[list[str], str]:
     meta = raw["dataset"]
     source = dataset_repo or meta["source"]
     episodes = ", ".join(f"{n} {split}" for split, n in meta["episodes"].items())
-    made = (f"`orbitdata generate DATA --episodes {sum(meta['episodes'].values())} --image-size {meta['image_size']} "
-            f"--seed {meta['root_seed']}`")
+    made = (
+        f"`orbitdata generate DATA --episodes {sum(meta['episodes'].values())} --image-size {meta['image_size']} "
+        f"--seed {meta['root_seed']}`"
+    )
     if REPO_ID.match(str(source)) and not Path(str(source)).exists():
-        return [str(source)], f"the dataset [{source}](https://huggingface.co/datasets/{source}) ({episodes} episodes, {meta['image_size']} px)"
+        return (
+            [str(source)],
+            f"the dataset [{source}](https://huggingface.co/datasets/{source}) ({episodes} episodes, {meta['image_size']} px)",
+        )
     return [], f"a dataset made by {made} (root seed {meta['root_seed']}; {episodes} episodes, {meta['image_size']} px)"
 
 
@@ -39,8 +44,11 @@ def _training(run: Path, label: str) -> str:
         return f"- {label}: time and hardware not recorded (trained before orbitmodel recorded them)."
     segments = json.loads(path.read_text())["segments"]
     total = sum(s["seconds"] for s in segments)
-    parts = "; ".join(f"steps {s['from_step']}-{s['to_step']} in {s['seconds'] / 60:.1f} min on {s['hardware']} "
-                      f"({s['device']}, {s['windows_per_s']} windows/s)" for s in segments)
+    parts = "; ".join(
+        f"steps {s['from_step']}-{s['to_step']} in {s['seconds'] / 60:.1f} min on {s['hardware']} "
+        f"({s['device']}, {s['windows_per_s']} windows/s)"
+        for s in segments
+    )
     return f"- {label}: {total / 60:.1f} min of training ({parts})."
 
 
@@ -71,17 +79,24 @@ def _grids(files: list[RunFile]) -> str:
     for f in files:
         if f.rel.startswith(GRID + "/") and f.rel.endswith(".json"):
             report = read_report(f.path)
-            key = (report.get("seed"), report.get("max_steps", DEFAULT_MAX_STEPS),
-                   tuple((s["obstacles"], s["speed"], s["episodes"]) for s in report["settings"]))
+            key = (
+                report.get("seed"),
+                report.get("max_steps", DEFAULT_MAX_STEPS),
+                tuple((s["obstacles"], s["speed"], s["episodes"]) for s in report["settings"]),
+            )
             groups[key].append((f.rel, report))
     if not groups:
-        return ("No closed-loop results: fly the grid (`orbitmodel eval closed-loop RUN ... --json DIR/NAME.json`) "
-                "and push with `--grid DIR`.\n")
+        return (
+            "No closed-loop results: fly the grid (`orbitmodel eval closed-loop RUN ... --json DIR/NAME.json`) "
+            "and push with `--grid DIR`.\n"
+        )
     out = []
     for (seed, frames, settings), rows in sorted(groups.items(), key=lambda kv: str(kv[0])):
         per = {e for *_, e in settings}
-        out.append(f"Grid seed {seed}, {'/'.join(map(str, sorted(per)))} episodes per setting; success means "
-                   f"entering the 0.5 m goal sphere within {frames * DT:g} s ({frames} frames):\n")
+        out.append(
+            f"Grid seed {seed}, {'/'.join(map(str, sorted(per)))} episodes per setting; success means "
+            f"entering the 0.5 m goal sphere within {frames * DT:g} s ({frames} frames):\n"
+        )
         out.append(markdown_table([r for _, r in rows], [rel for rel, _ in rows]))
     return "\n".join(out)
 
@@ -96,19 +111,27 @@ def _policy_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_
     title = f"Diffusion Policy ({preset['name']} preset) for CubeSat obstacle avoidance"
     return dict(
         title=title,
-        summary=(f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, {params / 1e6:.2f} M "
-                 f"parameters, trained on {data_sentence}."),
+        summary=(
+            f"A Diffusion Policy baseline (Chi et al. 2023), preset `{preset['name']}`, {params / 1e6:.2f} M "
+            f"parameters, trained on {data_sentence}."
+        ),
         contents="`config.json` and `model.safetensors` (with the EMA weights), and its evaluations",
-        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20"
-                   f"   # the flight preset the reported grids fly\n"
-                   f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --pilot-option preset=cpu "
-                   f"--image-size {raw['dataset']['image_size']}"),
-        python_usage=(f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot, policy_sampling\n"
-                      f"policy = DiffusionPolicy.from_pretrained(\"{repo_id}\")\n"
-                      f"pilot = load_policy_pilot(\"{repo_id}\", policy_sampling(\"cpu\"), preset=\"cpu\")  "
-                      f"# an orbitdata.fly pilot: reset(task), act(obs)"),
-        training=_training(run, "policy"), results=_grids(files),
-        reproduce=policy_command(raw))
+        cli_usage=(
+            f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20"
+            f"   # the flight preset the reported grids fly\n"
+            f"orbitdata fly --pilot diffusion --pilot-option run={repo_id} --pilot-option preset=cpu "
+            f"--image-size {raw['dataset']['image_size']}"
+        ),
+        python_usage=(
+            f"from orbitmodel.baselines.diffusion import DiffusionPolicy, load_policy_pilot, policy_sampling\n"
+            f'policy = DiffusionPolicy.from_pretrained("{repo_id}")\n'
+            f'pilot = load_policy_pilot("{repo_id}", policy_sampling("cpu"), preset="cpu")  '
+            f"# an orbitdata.fly pilot: reset(task), act(obs)"
+        ),
+        training=_training(run, "policy"),
+        results=_grids(files),
+        reproduce=policy_command(raw),
+    )
 
 
 def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], data_sentence: str) -> dict:
@@ -123,29 +146,44 @@ def _world_model_card(run: Path, repo_id: str, raw: dict, files: list[RunFile], 
     refit = ", the depth head refitted for the planner" if any(f.rel.startswith("depth/") for f in files) else ""
     return dict(
         title=f"Orbit-Planner world model ({preset['name']} preset)",
-        summary=(f"A latent world model of a free-floating 1U CubeSat (the Stage I model of Orbit-Planner), preset "
-                 f"`{preset['name']}`: {params / 1e6:.2f} M parameters, {model.image_size} px images, a "
-                 f"{model.latent_dim}-dimensional latent, {model.frame_step} frame(s) per prediction; trained on "
-                 f"{data_sentence}. With it: its physics probe (Stage II){refit}, and the evaluations below."),
+        summary=(
+            f"A latent world model of a free-floating 1U CubeSat (the Stage I model of Orbit-Planner), preset "
+            f"`{preset['name']}`: {params / 1e6:.2f} M parameters, {model.image_size} px images, a "
+            f"{model.latent_dim}-dimensional latent, {model.frame_step} frame(s) per prediction; trained on "
+            f"{data_sentence}. With it: its physics probe (Stage II){refit}, and the evaluations below."
+        ),
         contents=f"the Stage I run (`config.json`, `model.safetensors`) and its sub-runs ({', '.join(subs)}), with `eval/`",
-        cli_usage=(f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
-                   f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option preset=cpu "
-                   f"--image-size {size}"),
-        python_usage=(f"from orbitmodel import PhysicsProbe, WorldModel\n"
-                      f"model = WorldModel.from_pretrained(\"{repo_id}\")\n"
-                      f"probe = PhysicsProbe.from_pretrained(\"{repo_id}\", world_model=model.fingerprint)\n\n"
-                      f"from orbitmodel.plan import build_pilot, planner_config\n"
-                      f"pilot, sim = build_pilot(\"planner\", \"{repo_id}\", planner_config(\"cpu\"))   # an orbitdata.fly pilot"),
+        cli_usage=(
+            f"orbitmodel eval closed-loop {repo_id} --preset cpu --obstacles 1,3,5 --speeds 1,2 --episodes 20\n"
+            f"orbitdata fly --pilot planner --pilot-option run={repo_id} --pilot-option preset=cpu "
+            f"--image-size {size}"
+        ),
+        python_usage=(
+            f"from orbitmodel import PhysicsProbe, WorldModel\n"
+            f'model = WorldModel.from_pretrained("{repo_id}")\n'
+            f'probe = PhysicsProbe.from_pretrained("{repo_id}", world_model=model.fingerprint)\n\n'
+            f"from orbitmodel.plan import build_pilot, planner_config\n"
+            f'pilot, sim = build_pilot("planner", "{repo_id}", planner_config("cpu"))   # an orbitdata.fly pilot'
+        ),
         training="\n".join([_training(run, "Stage I"), _training(run / "probe", "physics probe")]),
-        results=("### Table I: the physics probe (`eval/probe_table.json`)\n\n" + _table1(files)
-                 + "\n### Stage I: latent rollout (`eval/rollout.json`)\n\n" + _rollout(files)
-                 + "\n### Closed loop (`eval/grid/`)\n\n" + _grids(files)),
-        reproduce="\n".join([
-            f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
-            f"--seed {raw['dataset']['root_seed']}",
-            *stage1_commands(run, raw),  # with every setting that differs from the preset
-            "orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA",
-            "bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)"]))
+        results=(
+            "### Table I: the physics probe (`eval/probe_table.json`)\n\n"
+            + _table1(files)
+            + "\n### Stage I: latent rollout (`eval/rollout.json`)\n\n"
+            + _rollout(files)
+            + "\n### Closed loop (`eval/grid/`)\n\n"
+            + _grids(files)
+        ),
+        reproduce="\n".join(
+            [
+                f"orbitdata generate DATA --episodes {sum(raw['dataset']['episodes'].values())} --image-size {size} "
+                f"--seed {raw['dataset']['root_seed']}",
+                *stage1_commands(run, raw),  # with every setting that differs from the preset
+                "orbitmodel eval rollout RUN DATA && orbitmodel eval probe RUN DATA",
+                "bash scripts/reproduce_model.sh OUT    # the whole chain, grids included (the project's repository)",
+            ]
+        ),
+    )
 
 
 def model_card(run: Path, repo_id: str, stage: str, files: list[RunFile], dataset_repo: str | None = None):
@@ -155,6 +193,7 @@ def model_card(run: Path, repo_id: str, stage: str, files: list[RunFile], datase
     raw = RunDir(run).read_config()
     datasets, data_sentence = _dataset(raw, dataset_repo)
     parts = (_policy_card if stage == POLICY else _world_model_card)(run, repo_id, raw, files, data_sentence)
-    data = ModelCardData(license="apache-2.0", library_name="orbitmodel", tags=TAGS, datasets=datasets or None,
-                         model_name=parts["title"])
+    data = ModelCardData(
+        license="apache-2.0", library_name="orbitmodel", tags=TAGS, datasets=datasets or None, model_name=parts["title"]
+    )
     return ModelCard.from_template(data, template_path=str(TEMPLATE), repo_id=repo_id, **parts)

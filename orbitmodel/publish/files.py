@@ -14,8 +14,18 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from orbitmodel.runs import (CHECKPOINTS, CONFIG, MAKES, METRICS, POLICY, TRAINING, WEIGHTS, WORLD_MODEL, RunError,
-                             stage_of)
+from orbitmodel.runs import (
+    CHECKPOINTS,
+    CONFIG,
+    MAKES,
+    METRICS,
+    POLICY,
+    TRAINING,
+    WEIGHTS,
+    WORLD_MODEL,
+    RunError,
+    stage_of,
+)
 
 SUB_RUNS = ("probe", "probe-state", "depth")  # a Stage I run's sub-run folders
 SUB_RUN_FILES = (CONFIG, WEIGHTS, METRICS, TRAINING, "eval.json")
@@ -36,14 +46,17 @@ def check_complete(run: Path) -> str:
     weights (not just checkpoints), and for a Stage I run a probe trained on these weights."""
     run = Path(run)
     if not (run / CONFIG).is_file():
-        raise RunError(f"{run} is not an orbitmodel run (no {CONFIG}); push a folder made by `orbitmodel train` "
-                       "or `orbitmodel train-policy`")
+        raise RunError(
+            f"{run} is not an orbitmodel run (no {CONFIG}); push a folder made by `orbitmodel train` "
+            "or `orbitmodel train-policy`"
+        )
     stage = stage_of(run)
     if stage not in (WORLD_MODEL, POLICY):
         raise RunError(f"{run} holds a {stage!r} sub-run; push the run folder above it")
     if not (run / WEIGHTS).is_file():
-        state = "has only checkpoints: its training has not finished" if (run / CHECKPOINTS).is_dir() else \
-            "has no weights"
+        state = (
+            "has only checkpoints: its training has not finished" if (run / CHECKPOINTS).is_dir() else "has no weights"
+        )
         raise RunError(f"{run} {state}; finish it (`{MAKES[stage]} --resume`) before pushing")
     if stage == WORLD_MODEL:
         from orbitmodel.model.world_model import WorldModel
@@ -89,8 +102,10 @@ def run_files(run: Path, grids: tuple[Path, ...] = ()) -> list[RunFile]:
     for grid in map(Path, grids):
         results = sorted(p for p in grid.glob("*.json") if is_grid_result(p)) if grid.is_dir() else []
         if not results:
-            raise RunError(f"--grid {grid}: no grid results there (the --json tables of eval closed-loop / orbitdata "
-                           "fly); give the folder that holds them")
+            raise RunError(
+                f"--grid {grid}: no grid results there (the --json tables of eval closed-loop / orbitdata "
+                "fly); give the folder that holds them"
+            )
         for path in results:
             found[f"{GRID}/{grid.resolve().name}/{path.name}"] = path
     weights_last = sorted(found, key=lambda rel: (rel.endswith(WEIGHTS), rel))  # configs and evals first

@@ -77,8 +77,10 @@ def check_model_repo_id(repo_id: str) -> str:
         check_repo_id(repo_id)
     except ValueError:
         branch = "; a branch goes in --branch" if "@" in repo_id else ""
-        raise RunError(f"REPO_ID {repo_id!r} cannot name a Hub model repo: give it as owner/name, each part of "
-                       f"letters, digits, '-', '_' and '.' (e.g. user/orbit-wm-cpu-step5){branch}") from None
+        raise RunError(
+            f"REPO_ID {repo_id!r} cannot name a Hub model repo: give it as owner/name, each part of "
+            f"letters, digits, '-', '_' and '.' (e.g. user/orbit-wm-cpu-step5){branch}"
+        ) from None
     return repo_id
 
 
@@ -93,8 +95,12 @@ def plan_push(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOp
     return PushPlan(run, repo_id, stage, files, scrub_paths(str(card.content)))
 
 
-def push_run(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOptions(),
-             log: Callable[[str], None] = lambda line: None) -> RunPushResult:
+def push_run(
+    run: str | Path,
+    repo_id: str,
+    options: RunPushOptions = RunPushOptions(),
+    log: Callable[[str], None] = lambda line: None,
+) -> RunPushResult:
     """Upload ``run`` (see :func:`plan_push`) to the model repo ``repo_id``. Raises RunError for an
     incomplete run, ``orbitdata.publish.hub.HubError`` when the Hub cannot be reached or refuses."""
     from huggingface_hub import CommitOperationAdd, HfApi, constants, get_token
@@ -118,6 +124,7 @@ def push_run(run: str | Path, repo_id: str, options: RunPushOptions = RunPushOpt
         ops = [CommitOperationAdd(path_in_repo=f.rel, path_or_fileobj=published_bytes(f)) for f in plan.files]
         ops.append(CommitOperationAdd(path_in_repo=CARD, path_or_fileobj=plan.card.encode()))
         log(f"commit: {len(ops)} file(s), {plan.bytes / 1e6:.1f} MB")
-        info = api.create_commit(repo_id, operations=ops, commit_message=options.message, revision=revision,
-                                 repo_type="model")
+        info = api.create_commit(
+            repo_id, operations=ops, commit_message=options.message, revision=revision, repo_type="model"
+        )
     return RunPushResult(repo_id, str(url), revision, info.oid, [f.rel for f in plan.files] + [CARD], plan.bytes)

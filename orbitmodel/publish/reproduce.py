@@ -37,19 +37,43 @@ def repeated(name: str) -> Flag:
     return lambda values: [f"{name} {v}" for v in values]
 
 
-LOOP = {"train.loop.epochs": option("--epochs"), "train.loop.max_steps": option("--max-steps"),
-        "train.loop.batch_size": option("--batch-size"), "train.loop.lr": option("--lr"),
-        "train.loop.num_workers": option("--workers"), "train.loop.seed": option("--seed")}
+LOOP = {
+    "train.loop.epochs": option("--epochs"),
+    "train.loop.max_steps": option("--max-steps"),
+    "train.loop.batch_size": option("--batch-size"),
+    "train.loop.lr": option("--lr"),
+    "train.loop.num_workers": option("--workers"),
+    "train.loop.seed": option("--seed"),
+}
 DATA = {"levels": repeated("--level"), "outcomes": repeated("--outcome")}
-STAGE1 = {"model.frame_step": option("--frame-step"), "model.lambda_sigreg": option("--lambda-sigreg"),
-          "model.sigreg_pool": switch("sigreg-pool"), **LOOP, "train.val_fraction": option("--val-fraction"), **DATA}
-PROBE = {"inputs": option("--inputs"), "integrator": option("--integrator"), "per_frame": switch("per-frame"),
-         **LOOP, "train.weights": option("--loss-weights"), "train.increment_weight": option("--increment-weight"),
-         "train.cache_windows": option("--cache-windows")}
-DEPTH = {name: option("--" + name.replace("_", "-")) for name in
-         ("frames", "test_frames", "epochs", "lr", "near_weight", "near_m", "seed", "eval_split")}
-POLICY = {**LOOP, "train.pad_before": option("--pad-before"), "train.mask_padding": switch("mask-padding"),
-          "train.val_fraction": option("--val-fraction"), **DATA}
+STAGE1 = {
+    "model.frame_step": option("--frame-step"),
+    "model.lambda_sigreg": option("--lambda-sigreg"),
+    "model.sigreg_pool": switch("sigreg-pool"),
+    **LOOP,
+    "train.val_fraction": option("--val-fraction"),
+    **DATA,
+}
+PROBE = {
+    "inputs": option("--inputs"),
+    "integrator": option("--integrator"),
+    "per_frame": switch("per-frame"),
+    **LOOP,
+    "train.weights": option("--loss-weights"),
+    "train.increment_weight": option("--increment-weight"),
+    "train.cache_windows": option("--cache-windows"),
+}
+DEPTH = {
+    name: option("--" + name.replace("_", "-"))
+    for name in ("frames", "test_frames", "epochs", "lr", "near_weight", "near_m", "seed", "eval_split")
+}
+POLICY = {
+    **LOOP,
+    "train.pad_before": option("--pad-before"),
+    "train.mask_padding": switch("mask-padding"),
+    "train.val_fraction": option("--val-fraction"),
+    **DATA,
+}
 NOT_SETTINGS = ("name", "description")  # a preset's text, not how it trains
 
 
@@ -70,8 +94,9 @@ def command(base: str, run: dict, default: dict, flags: dict[str, Flag]) -> str:
     changed = {k: v for k, v in got.items() if k in given and given[k] != v}
     words = [base] + [w for key, flag in flags.items() if key in changed for w in flag(changed[key])]
     unflagged = [f"{k}={_text(v)}" for k, v in changed.items() if k not in flags]
-    return " ".join(words) + (f"   # no flag sets {', '.join(unflagged)} (config.json records every setting)"
-                              if unflagged else "")
+    return " ".join(words) + (
+        f"   # no flag sets {', '.join(unflagged)} (config.json records every setting)" if unflagged else ""
+    )
 
 
 def _read(path: Path) -> dict | None:
@@ -85,7 +110,7 @@ def train_command(raw: dict) -> str:
     preset = Preset.from_dict(raw["preset"])
     base = f"orbitmodel train DATA --preset {preset.name} --out RUN"
     if preset.name not in PRESETS:
-        return base + f"   # {preset.name!r} is no built-in preset: config.json's \"preset\" holds its settings"
+        return base + f'   # {preset.name!r} is no built-in preset: config.json\'s "preset" holds its settings'
     if raw["dataset"]["image_size"] != preset.model.image_size:
         base += " --resize"
     run = {**preset.to_dict(), "levels": raw.get("levels", []), "outcomes": raw.get("outcomes", [])}
@@ -101,8 +126,12 @@ def probe_command(raw: dict, probe: dict, kind: str) -> str:
     probe = upgrade_probe_config(probe)
     net = probe["probe"]
     run = {"integrator": net["integrator"], "hidden": net["hidden"], "layers": net["layers"], "train": probe["train"]}
-    default = {"integrator": recipe.integrator, "hidden": recipe.hidden, "layers": recipe.layers,
-               "train": recipe.train.to_dict()}
+    default = {
+        "integrator": recipe.integrator,
+        "hidden": recipe.hidden,
+        "layers": recipe.layers,
+        "train": recipe.train.to_dict(),
+    }
     if kind == "latent":
         run.update(inputs=net["inputs"], per_frame=net["substeps"] > 1)
         default.update(inputs=recipe.inputs, per_frame=recipe.per_frame and raw["preset"]["model"]["frame_step"] > 1)
@@ -138,7 +167,7 @@ def policy_command(raw: dict) -> str:
     preset = PolicyPreset.from_dict(raw["preset"])
     base = f"orbitmodel train-policy DATA --preset {preset.name} --out RUN"
     if preset.name not in POLICY_PRESETS:
-        return base + f"   # {preset.name!r} is no built-in preset: config.json's \"preset\" holds its settings"
+        return base + f'   # {preset.name!r} is no built-in preset: config.json\'s "preset" holds its settings'
     run = {**preset.to_dict(), "levels": raw.get("levels", list(DEFAULT_LEVELS)), "outcomes": raw.get("outcomes", [])}
     default = {**POLICY_PRESETS[preset.name]().to_dict(), "levels": list(DEFAULT_LEVELS), "outcomes": []}
     return command(base, run, default, POLICY)

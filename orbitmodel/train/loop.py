@@ -107,8 +107,11 @@ def step_generator(seed: int, step: int, stream: int, rank: int = 0) -> torch.Ge
 def _optimizer(params: list[nn.Parameter], s: LoopSettings) -> torch.optim.AdamW:
     decay = [p for p in params if p.ndim >= 2]  # matrices; no decay on biases, norms, embeddings' 1-D parts
     rest = [p for p in params if p.ndim < 2]
-    return torch.optim.AdamW([{"params": decay, "weight_decay": s.weight_decay},
-                              {"params": rest, "weight_decay": 0.0}], lr=s.lr, betas=s.betas)
+    return torch.optim.AdamW(
+        [{"params": decay, "weight_decay": s.weight_decay}, {"params": rest, "weight_decay": 0.0}],
+        lr=s.lr,
+        betas=s.betas,
+    )
 
 
 def _rng_state() -> dict:
@@ -135,8 +138,8 @@ class _Metrics:
             return
         path = run.path / METRICS
         if path.exists():  # drop lines past the checkpoint we resume from
-            lines = [l for l in path.read_text().splitlines() if l and json.loads(l)["step"] <= start_step]
-            path.write_text("".join(l + "\n" for l in lines))
+            lines = [r for r in path.read_text().splitlines() if r and json.loads(r)["step"] <= start_step]
+            path.write_text("".join(r + "\n" for r in lines))
         self.file = path.open("a")
         try:
             from torch.utils.tensorboard import SummaryWriter
@@ -179,9 +182,16 @@ class _Tally:
     def record(self, step: int, epoch: int, lr: float) -> dict:
         """The metrics line for ``step`` (the averages since the last one), then start averaging again."""
         elapsed = time.perf_counter() - self.started
-        record = {"step": step, "epoch": epoch, "lr": lr, **{k: v / self.count for k, v in self.sums.items()},
-                  "windows_per_s": self.windows / max(elapsed, 1e-9), "data_wait": self.data_wait,
-                  "elapsed_s": elapsed, "world_size": self.world}
+        record = {
+            "step": step,
+            "epoch": epoch,
+            "lr": lr,
+            **{k: v / self.count for k, v in self.sums.items()},
+            "windows_per_s": self.windows / max(elapsed, 1e-9),
+            "data_wait": self.data_wait,
+            "elapsed_s": elapsed,
+            "world_size": self.world,
+        }
         self.sums, self.count = {}, 0
         return record
 
@@ -191,23 +201,42 @@ class _Tally:
 
     def result(self, steps: int) -> FitResult:
         elapsed = time.perf_counter() - self.started
-        return FitResult(steps=steps, seconds=elapsed, windows_per_s=self.windows / max(elapsed, 1e-9),
-                         data_wait=self.data_wait)
+        return FitResult(
+            steps=steps, seconds=elapsed, windows_per_s=self.windows / max(elapsed, 1e-9), data_wait=self.data_wait
+        )
 
 
-def _batches(dataset, sampler, step: int, per_epoch: int, total: int, s: LoopSettings, device: torch.device,
-             rank: int, tally: _Tally):
+def _batches(
+    dataset,
+    sampler,
+    step: int,
+    per_epoch: int,
+    total: int,
+    s: LoopSettings,
+    device: torch.device,
+    rank: int,
+    tally: _Tally,
+):
     """(epoch, batch) from ``step`` to ``total``; a resumed run skips the batches it already took
     without reading them. The time spent waiting for each batch goes to ``tally.wait``."""
     while step < total:
         epoch, offset = divmod(step, per_epoch)
         sampler.set_epoch(epoch)
         order = list(sampler)
-        batches = [order[i * s.batch_size:(i + 1) * s.batch_size] for i in range(offset, min(per_epoch, offset + total - step))]
+        batches = [
+            order[i * s.batch_size : (i + 1) * s.batch_size]
+            for i in range(offset, min(per_epoch, offset + total - step))
+        ]
         # Its own generator: a DataLoader draws its workers' base seed from the global RNG
         # otherwise, and a resumed run (a new loader mid-epoch) would shift the dropout masks.
-        loader = DataLoader(dataset, batch_sampler=batches, num_workers=s.num_workers, collate_fn=collate_windows,
-                            pin_memory=device.type == "cuda", generator=step_generator(s.seed, step, stream=99, rank=rank))
+        loader = DataLoader(
+            dataset,
+            batch_sampler=batches,
+            num_workers=s.num_workers,
+            collate_fn=collate_windows,
+            pin_memory=device.type == "cuda",
+            generator=step_generator(s.seed, step, stream=99, rank=rank),
+        )
         tick = time.perf_counter()
         for batch in loader:
             tally.wait += time.perf_counter() - tick
@@ -225,24 +254,39 @@ def _restore(job: Job, optimizer, run: RunDir, rank: int) -> int:
     return ckpt.step
 
 
-def fit(job: Job, dataset, settings: LoopSettings, run: RunDir, device: torch.device, resume: bool = False,
-        label: str = "train", on_log: Callable[[dict], None] | None = None) -> FitResult:
+def fit(
+    job: Job,
+    dataset,
+    settings: LoopSettings,
+    run: RunDir,
+    device: torch.device,
+    resume: bool = False,
+    label: str = "train",
+    on_log: Callable[[dict], None] | None = None,
+) -> FitResult:
     """Train ``job`` on map-style window ``dataset`` until ``epochs`` or ``max_steps``."""
     s = settings
     rank, world = distributed(device)
     sampler = dataset.sampler(seed=s.seed, drop_last=True, rank=rank, world_size=world)
     per_epoch = len(sampler) // s.batch_size
     if per_epoch == 0:
-        raise RunError(f"{len(dataset)} windows give no batch of {s.batch_size} per process; "
-                       "use a larger dataset or a smaller --batch-size")
+        raise RunError(
+            f"{len(dataset)} windows give no batch of {s.batch_size} per process; "
+            "use a larger dataset or a smaller --batch-size"
+        )
     total = per_epoch * s.epochs if not s.max_steps else min(per_epoch * s.epochs, s.max_steps)
     params = [p for p in job.module.parameters() if p.requires_grad]
     optimizer = _optimizer(params, s)
     torch.manual_seed(s.seed + rank)
     step = start = _restore(job, optimizer, run, rank) if resume else 0
     job.module.to(device)
-    model = job.module if world == 1 else nn.parallel.DistributedDataParallel(
-        job.module, device_ids=[device.index] if device.type == "cuda" else None)
+    model = (
+        job.module
+        if world == 1
+        else nn.parallel.DistributedDataParallel(
+            job.module, device_ids=[device.index] if device.type == "cuda" else None
+        )
+    )
     autocast = torch.autocast("cuda", dtype=torch.bfloat16) if device.type == "cuda" else nullcontext()
     after_step = getattr(job, "after_step", None)
     main = rank == 0
@@ -288,9 +332,17 @@ def _segment(start: int, step: int, total: int, tally: _Tally, world: int, devic
     """training.json's record of this process's part of the run: steps, the schedule's length
     (a run extended with ``--resume --extend`` changes it), wall time, hardware."""
     result = tally.result(step)
-    return {"from_step": start, "to_step": step, "schedule_steps": total, "seconds": round(result.seconds, 1),
-            "windows_per_s": round(result.windows_per_s, 2), "world_size": world, "device": str(device),
-            "hardware": hardware(device), "torch": torch.__version__}
+    return {
+        "from_step": start,
+        "to_step": step,
+        "schedule_steps": total,
+        "seconds": round(result.seconds, 1),
+        "windows_per_s": round(result.windows_per_s, 2),
+        "world_size": world,
+        "device": str(device),
+        "hardware": hardware(device),
+        "torch": torch.__version__,
+    }
 
 
 def _save(run: RunDir, job: Job, optimizer, step: int, world: int, main: bool) -> None:
@@ -302,5 +354,6 @@ def _save(run: RunDir, job: Job, optimizer, step: int, world: int, main: bool) -
         dist.all_gather_object(gathered, rng)
         rng = gathered
     if main:
-        run.save_checkpoint(step, job.saved.state_dict(),
-                            {"step": step, "optimizer": optimizer.state_dict(), "rng": rng})
+        run.save_checkpoint(
+            step, job.saved.state_dict(), {"step": step, "optimizer": optimizer.state_dict(), "rng": rng}
+        )

@@ -18,10 +18,17 @@ class Progress:
         self.t0 = time.perf_counter()
         self.bar = None
         if enabled and sys.stderr.isatty():
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress as Bar, TextColumn, TimeRemainingColumn
+            from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
+            from rich.progress import Progress as Bar
 
-            self.bar = Bar(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                           TextColumn("ETA"), TimeRemainingColumn(), TextColumn("{task.fields[losses]}"))
+            self.bar = Bar(
+                TextColumn("{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("ETA"),
+                TimeRemainingColumn(),
+                TextColumn("{task.fields[losses]}"),
+            )
             self.task = self.bar.add_task(label, total=total, completed=start, losses="")
             self.bar.start()
         elif enabled:
@@ -38,8 +45,12 @@ class Progress:
         done = step - self.start
         rate = done / max(time.perf_counter() - self.t0, 1e-9)
         eta = (self.total - step) / rate if rate > 0 else float("inf")
-        print(f"{self.label} {step}/{self.total}  {_fmt(record, keys)}  {record.get('windows_per_s', 0):.1f} win/s  "
-              f"ETA {int(eta // 60)}:{int(eta % 60):02d}", file=sys.stderr, flush=True)
+        print(
+            f"{self.label} {step}/{self.total}  {_fmt(record, keys)}  {record.get('windows_per_s', 0):.1f} win/s  "
+            f"ETA {int(eta // 60)}:{int(eta % 60):02d}",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def close(self) -> None:
         if self.bar is not None:

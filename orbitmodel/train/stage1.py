@@ -10,8 +10,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitmodel.config import PRESETS, Preset
-from orbitmodel.data import (DatasetMeta, load_model_windows, read_dataset_meta, training_episodes,
-                             validation_split)
+from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config, upgrade_preset_config
 from orbitmodel.train.loop import FitResult, fit, resolve_device, step_generator
@@ -44,9 +43,13 @@ class Stage1Job:
         images = batch[S.IMAGE].float().div_(255.0)  # (B, T, 3, H, W)
         if t.jitter_p > 0:
             images = jitter(images, t.jitter_p, t.jitter, step_generator(t.loop.seed, step, STREAM_JITTER, self.rank))
-        return {"images": images.to(device), "states": batch[S.STATE].to(device),
-                "actions": batch[S.ACTION].to(device), "depth_low": batch[S.DEPTH_LOW].to(device),
-                "generator": step_generator(t.loop.seed, step, STREAM_SIGREG)}
+        return {
+            "images": images.to(device),
+            "states": batch[S.STATE].to(device),
+            "actions": batch[S.ACTION].to(device),
+            "depth_low": batch[S.DEPTH_LOW].to(device),
+            "generator": step_generator(t.loop.seed, step, STREAM_SIGREG),
+        }
 
 
 @dataclass(frozen=True)
@@ -89,14 +92,36 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     rank = int(os.environ.get("RANK", 0))
     held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
     if rank == 0:
-        config = run_config(WORLD_MODEL, preset=req.preset.to_dict(), dataset=meta.to_dict(), levels=list(req.levels),
-                            outcomes=list(req.outcomes), validation=held_out.to_dict())
+        config = run_config(
+            WORLD_MODEL,
+            preset=req.preset.to_dict(),
+            dataset=meta.to_dict(),
+            levels=list(req.levels),
+            outcomes=list(req.outcomes),
+            validation=held_out.to_dict(),
+        )
         run.start(config, resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_config)
-    windows = load_model_windows(req.dataset, req.preset.model.frame_step, split="train", context=t.window,
-                                 horizon=0, stride=t.window_stride, image_size=image_size, columns=list(COLUMNS),
-                                 episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out))
+    windows = load_model_windows(
+        req.dataset,
+        req.preset.model.frame_step,
+        split="train",
+        context=t.window,
+        horizon=0,
+        stride=t.window_stride,
+        image_size=image_size,
+        columns=list(COLUMNS),
+        episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out),
+    )
     torch.manual_seed(t.loop.seed)  # initialisation
     model = WorldModel(req.preset.model)
     model.set_normalisation(meta.state_mean, meta.state_std, meta.depth_max)
-    return fit(Stage1Job(model, req.preset, rank), windows, t.loop, run, device, resume=req.resume, label="train",
-               on_log=on_log)
+    return fit(
+        Stage1Job(model, req.preset, rank),
+        windows,
+        t.loop,
+        run,
+        device,
+        resume=req.resume,
+        label="train",
+        on_log=on_log,
+    )

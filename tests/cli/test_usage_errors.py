@@ -26,13 +26,16 @@ def run(args: list[str], capsys, application: typer.Typer = app) -> tuple[int, s
     return exit_.value.code, out.out, out.err
 
 
-@pytest.mark.parametrize("args, line", [
-    (["--episodes", "-3"], "error: --episodes -3: must be greater than or equal to 1"),
-    (["--test-fraction", "2"], "error: --test-fraction 2: must be less than or equal to 1"),
-    (["--episodes", "many"], "error: --episodes many: must be a valid integer"),
-    (["--executor", "dask"], "error: --executor dask: 'dask' is not one of 'local', 'ray'"),
-    (["--bogus"], "error: No such option: --bogus"),
-])
+@pytest.mark.parametrize(
+    "args, line",
+    [
+        (["--episodes", "-3"], "error: --episodes -3: must be greater than or equal to 1"),
+        (["--test-fraction", "2"], "error: --test-fraction 2: must be less than or equal to 1"),
+        (["--episodes", "many"], "error: --episodes many: must be a valid integer"),
+        (["--executor", "dask"], "error: --executor dask: 'dask' is not one of 'local', 'ray'"),
+        (["--bogus"], "error: No such option: --bogus"),
+    ],
+)
 def test_a_bad_flag_is_one_line_naming_it(tmp_path, capsys, args, line):
     code, out, err = run(["generate", str(tmp_path / "out"), *args], capsys)
     assert code == 2 and out == ""
@@ -69,16 +72,28 @@ def test_help_and_a_commands_own_exit_code_are_kept(capsys):
 def test_the_program_runs_through_it(tmp_path):
     paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
-    res = subprocess.run([sys.executable, "-m", "orbitdata", "generate", str(tmp_path / "out"), "--episodes", "-3"],
-                         env=env, capture_output=True, text=True, timeout=120)
+    res = subprocess.run(
+        [sys.executable, "-m", "orbitdata", "generate", str(tmp_path / "out"), "--episodes", "-3"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert res.returncode == 2 and res.stderr.startswith("error: --episodes -3: must be greater than or equal to 1")
     assert len(res.stderr.strip().splitlines()) == 1
 
 
-@pytest.mark.parametrize("command", [
-    ["info", "{file}"], ["generate", "{file}", "--episodes", "1"], ["validate", "{file}"], ["shard", "{file}"],
-    ["show", "{file}", "--episode", "0", "--out", "{tmp}/x.png"], ["push", "{file}", "user/orbit", "--dry-run"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["info", "{file}"],
+        ["generate", "{file}", "--episodes", "1"],
+        ["validate", "{file}"],
+        ["shard", "{file}"],
+        ["show", "{file}", "--episode", "0", "--out", "{tmp}/x.png"],
+        ["push", "{file}", "user/orbit", "--dry-run"],
+    ],
+)
 def test_a_file_where_a_folder_belongs_exits_2_everywhere(tmp_path, command):
     f = tmp_path / "file"
     f.write_text("x")
@@ -87,9 +102,14 @@ def test_a_file_where_a_folder_belongs_exits_2_everywhere(tmp_path, command):
     assert len(res.output.strip().splitlines()) == 1 and "Traceback" not in res.output
 
 
-@pytest.mark.parametrize("command", [
-    ["info", "{tmp}"], ["shard", "{tmp}"], ["show", "{tmp}", "--episode", "0", "--out", "x.png"],
-])
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["info", "{tmp}"],
+        ["shard", "{tmp}"],
+        ["show", "{tmp}", "--episode", "0", "--out", "x.png"],
+    ],
+)
 def test_a_folder_that_is_no_dataset_exits_2(tmp_path, command):
     res = runner.invoke(app, [a.format(tmp=tmp_path) for a in command])
     assert res.exit_code == 2, res.output

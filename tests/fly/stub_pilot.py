@@ -40,8 +40,18 @@ class SeeingPilot(Pilot):
         self.episodes: list[dict] = []
 
     def reset(self, task: Task) -> None:  # not privileged: there is no scenario argument to fill
-        self.episodes.append({"task": dataclasses.asdict(task), "ground_truth": ground_truth_in(task),
-                              "steps": 0, "keys": [], "image": [], "depth": [], "depth_low": [], "mean_rgb": []})
+        self.episodes.append(
+            {
+                "task": dataclasses.asdict(task),
+                "ground_truth": ground_truth_in(task),
+                "steps": 0,
+                "keys": [],
+                "image": [],
+                "depth": [],
+                "depth_low": [],
+                "mean_rgb": [],
+            }
+        )
         self.goal = np.asarray(task.goal, dtype=np.float64)
 
     def act(self, obs: dict) -> np.ndarray:

@@ -19,7 +19,9 @@ def test_the_expert_succeeds_where_straight_flight_collides():
     for cell in expert:
         assert cell.success_rate >= 0.95, cell
     hard = next(c for c in expert if (c.obstacles, c.speed) == (5, 2.0))
-    print(f"\nexpert: {sum(c.success for c in expert)}/{len(expert) * EPISODES} successes on the grid, "
-          f"{hard.success}/{EPISODES} at 5 obstacles and 2 m/s; straight flight (risky) there: "
-          f"{risky.collision}/{EPISODES} collisions")
+    print(
+        f"\nexpert: {sum(c.success for c in expert)}/{len(expert) * EPISODES} successes on the grid, "
+        f"{hard.success}/{EPISODES} at 5 obstacles and 2 m/s; straight flight (risky) there: "
+        f"{risky.collision}/{EPISODES} collisions"
+    )
     assert risky.collision / risky.episodes > 0.5, risky

@@ -12,8 +12,24 @@ runner = CliRunner()
 
 def test_fly_writes_the_json_grid(tmp_path):
     out = tmp_path / "grid.json"
-    res = runner.invoke(app, ["fly", "--pilot", "risky", "--obstacles", "0,5", "--speeds", "2",
-                              "--episodes", "2", "--seed", "0", "--json", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "fly",
+            "--pilot",
+            "risky",
+            "--obstacles",
+            "0,5",
+            "--speeds",
+            "2",
+            "--episodes",
+            "2",
+            "--seed",
+            "0",
+            "--json",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["pilot"] == "risky"
@@ -27,8 +43,26 @@ def test_fly_writes_the_json_grid(tmp_path):
 
 
 def test_fly_writes_videos(tmp_path):
-    res = runner.invoke(app, ["fly", "--pilot", "risky", "--obstacles", "5", "--speeds", "2", "--episodes", "1",
-                              "--video", str(tmp_path / "v"), "--video-format", "gif", "--image-size", "32"])
+    res = runner.invoke(
+        app,
+        [
+            "fly",
+            "--pilot",
+            "risky",
+            "--obstacles",
+            "5",
+            "--speeds",
+            "2",
+            "--episodes",
+            "1",
+            "--video",
+            str(tmp_path / "v"),
+            "--video-format",
+            "gif",
+            "--image-size",
+            "32",
+        ],
+    )
     assert res.exit_code == 0, res.output
     (video,) = (tmp_path / "v").glob("*.gif")
     from PIL import Image

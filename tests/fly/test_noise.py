@@ -49,8 +49,26 @@ def test_noise_is_redrawn_every_hold_steps_and_seeded_by_the_episode():
 
 def test_orbitdata_fly_flies_the_noisy_expert(tmp_path):
     out = tmp_path / "noisy.json"
-    res = CliRunner().invoke(app, ["fly", "--pilot", "expert", "--obstacles", "1", "--speeds", "1", "--episodes", "1",
-                                   "--thrust-noise", "0.05", "--noise-hold", "8", "--json", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "fly",
+            "--pilot",
+            "expert",
+            "--obstacles",
+            "1",
+            "--speeds",
+            "1",
+            "--episodes",
+            "1",
+            "--thrust-noise",
+            "0.05",
+            "--noise-hold",
+            "8",
+            "--json",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["pilot"] == "expert+noise0.05x8" and report["settings"][0]["episodes"] == 1

@@ -93,7 +93,9 @@ def _task(scn: Scenario, seed: int):
 def test_other_draws_of_the_expert_plan_the_same_task_anew(env):
     scn = _rock_between()
     own = fly_episode(env, make_pilot("expert"), seed=3, scenario=scn)
-    assert _digest(fly_episode(env, make_pilot("expert", plan_draw=0, noise_draw=0), seed=3, scenario=scn)) == _digest(own)
+    assert _digest(fly_episode(env, make_pilot("expert", plan_draw=0, noise_draw=0), seed=3, scenario=scn)) == _digest(
+        own
+    )
     plans = {}
     for name, options in {"own": {}, "plan": {"plan_draw": 1}, "noise": {"noise_draw": 1}}.items():
         pilot = make_pilot("expert", **options)
@@ -124,7 +126,7 @@ def test_the_expert_takes_its_plan_up_again_at_a_recorded_state(env):
     for t in range(0, flown.length - 8, 7):  # taken up at frame t, it acts as it did at t .. t+7
         assert pilot.rejoin(flown.states[t]) is not None
         acts = [pilot.act({"state": flown.states[k]}) for k in range(t, t + 8)]
-        assert np.allclose(acts, flown.actions[t:t + 8], atol=1e-6), t
+        assert np.allclose(acts, flown.actions[t : t + 8], atol=1e-6), t
     middle = flown.states[flown.length // 2]
     assert all(d < limit for d, limit in zip(pilot.deviation(middle), (0.1, 0.1, 27.0)))
     assert pilot.could_be_at(middle, 0.1, 0.1, 27.0)

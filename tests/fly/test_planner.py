@@ -108,8 +108,9 @@ def test_subprocess_gives_the_same_path():
         "    print(seed, hashlib.sha256(np.ascontiguousarray(r.path).tobytes()).hexdigest())\n"
     )
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")]))
-    out = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
-                         timeout=120, check=True).stdout
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, timeout=120, check=True
+    ).stdout
     there = dict(line.split() for line in out.splitlines() if line[:1].isdigit())
     assert [there["2"], there["6"]] == here
 

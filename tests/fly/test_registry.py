@@ -74,6 +74,7 @@ def test_a_registered_pilot_flies_the_grid_with_rendering(stub_registered, tmp_p
 
 def test_only_a_pilot_that_declares_it_sees_the_rendered_depth(tmp_path):
     """The rendered depth is a perfect sensor: a camera-only pilot is not handed it."""
+
     class DepthSensing(SeeingPilot):
         sees_depth = True
 
@@ -124,8 +125,26 @@ def test_only_a_privileged_pilot_gets_the_scenario():
 
 def test_orbitdata_fly_flies_a_registered_pilot_that_sees(stub_registered, tmp_path):
     log = tmp_path / "seen.json"
-    res = runner.invoke(app, ["fly", "--pilot", "stub", "--obstacles", "1", "--speeds", "2", "--episodes", "1",
-                              "--image-size", "32", "--pilot-option", f"log={log}", "--json", str(tmp_path / "g.json")])
+    res = runner.invoke(
+        app,
+        [
+            "fly",
+            "--pilot",
+            "stub",
+            "--obstacles",
+            "1",
+            "--speeds",
+            "2",
+            "--episodes",
+            "1",
+            "--image-size",
+            "32",
+            "--pilot-option",
+            f"log={log}",
+            "--json",
+            str(tmp_path / "g.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
     assert json.loads((tmp_path / "g.json").read_text())["pilot"] == "stub"
@@ -144,13 +163,32 @@ def test_an_entry_point_pilot_flies_the_real_command(tmp_path):
     paths = [str(dist.parent), str(HERE), str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
     cmd = [sys.executable, "-m", "orbitdata", "fly"]
-    help_text = subprocess.run([*cmd, "--help"], env=env, capture_output=True, text=True, timeout=120,
-                               check=True).stdout
+    help_text = subprocess.run(
+        [*cmd, "--help"], env=env, capture_output=True, text=True, timeout=120, check=True
+    ).stdout
     assert "stub" in help_text
     log = tmp_path / "seen.json"
-    res = subprocess.run([*cmd, "--pilot", "stub", "--obstacles", "1", "--speeds", "2", "--episodes", "1",
-                          "--image-size", "32", "--pilot-option", f"log={log}"], env=env, capture_output=True,
-                         text=True, timeout=300)
+    res = subprocess.run(
+        [
+            *cmd,
+            "--pilot",
+            "stub",
+            "--obstacles",
+            "1",
+            "--speeds",
+            "2",
+            "--episodes",
+            "1",
+            "--image-size",
+            "32",
+            "--pilot-option",
+            f"log={log}",
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert res.returncode == 0, res.stderr
     check_sees_images_not_obstacles(json.loads(log.read_text()), 32)
 
@@ -169,8 +207,15 @@ def test_image_quality_hands_the_pilot_the_datasets_jpeg_of_its_camera():
         pilot, raw = Recorder(), []
         pilot.images = []
         quality = TINY.dataset.jpeg_quality
-        fly_grid(lambda config: pilot, [1], [1.0], 1, config=TINY.replace(sim={"max_steps": 4}).flight,
-                 image_quality=quality if codec else None, frame_sink=lambda t, rgb, *_: raw.append(rgb.copy()))
-        expected = [decode_rgb(encode_rgb(r, quality)) if codec else r for r in raw[:len(pilot.images)]]
+        fly_grid(
+            lambda config: pilot,
+            [1],
+            [1.0],
+            1,
+            config=TINY.replace(sim={"max_steps": 4}).flight,
+            image_quality=quality if codec else None,
+            frame_sink=lambda t, rgb, *_: raw.append(rgb.copy()),
+        )
+        expected = [decode_rgb(encode_rgb(r, quality)) if codec else r for r in raw[: len(pilot.images)]]
         assert len(pilot.images) == 3 and all(np.array_equal(a, b) for a, b in zip(pilot.images, expected))
         assert codec == any(not np.array_equal(a, r) for a, r in zip(pilot.images, raw))

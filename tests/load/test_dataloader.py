@@ -22,8 +22,9 @@ def windows(tiny_dataset_master, tmp_path_factory) -> WindowDataset:
 def run(ds: WindowDataset, seed: int, epoch: int, workers: int, collate=collate_windows, batches: int = 4) -> list:
     sampler = ds.sampler(seed=seed)
     sampler.set_epoch(epoch)
-    loader = DataLoader(ds, batch_size=8, sampler=sampler, num_workers=workers, collate_fn=collate,
-                        timeout=60 if workers else 0)
+    loader = DataLoader(
+        ds, batch_size=8, sampler=sampler, num_workers=workers, collate_fn=collate, timeout=60 if workers else 0
+    )
     out = []
     for i, batch in enumerate(loader):
         if i == batches:

@@ -14,8 +14,9 @@ from orbitdata.load.rows import read_cells, read_rows
 
 def _all_steps(root):
     files = sorted((root / S.DATA_DIR).glob("*.parquet"))
-    return pa.concat_tables([pq.read_table(f, columns=[S.EPISODE_INDEX, S.FRAME_INDEX, S.STATE, S.ACTION])
-                             for f in files])
+    return pa.concat_tables(
+        [pq.read_table(f, columns=[S.EPISODE_INDEX, S.FRAME_INDEX, S.STATE, S.ACTION]) for f in files]
+    )
 
 
 def test_each_episode_reads_exactly_its_rows(tiny_dataset_master):

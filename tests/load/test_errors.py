@@ -30,8 +30,9 @@ def rewrite(path, change) -> None:
 def test_missing_column(tiny_dataset_master, cache):
     for streaming in (False, True):
         with pytest.raises(ValueError, match=r"\['observation.segmentation'\] not in the dataset; available"):
-            load_windows(tiny_dataset_master, columns=[S.IMAGE, "observation.segmentation"], streaming=streaming,
-                         cache_dir=cache)
+            load_windows(
+                tiny_dataset_master, columns=[S.IMAGE, "observation.segmentation"], streaming=streaming, cache_dir=cache
+            )
 
 
 def test_unknown_schema_version(tiny_dataset, cache):
@@ -80,8 +81,12 @@ def test_a_steps_table_with_an_index_mapping_is_refused(tiny_dataset_master, cac
 
 def test_inconsistent_episodes_table(tiny_dataset, cache):
     path = next((tiny_dataset / S.EPISODES_DIR).glob("train-*.parquet"))
-    rewrite(path, lambda t: t.set_column(t.schema.get_field_index(S.LENGTH), S.LENGTH,
-                                         pc.add(t.column(S.LENGTH), pa.scalar(1, pa.int32()))))
+    rewrite(
+        path,
+        lambda t: t.set_column(
+            t.schema.get_field_index(S.LENGTH), S.LENGTH, pc.add(t.column(S.LENGTH), pa.scalar(1, pa.int32()))
+        ),
+    )
     with pytest.raises(ValueError, match=r"episode \d+: the episodes table says \d+ frames but split 'train'"):
         load_windows(tiny_dataset, cache_dir=cache)
 

@@ -53,8 +53,16 @@ def test_the_summary_agrees_with_the_episodes_table(tiny_dataset_master):
 def test_info_prints_tables(tiny_dataset_master):
     res = runner.invoke(app, ["info", str(tiny_dataset_master)], env={"COLUMNS": "160"})
     assert res.exit_code == 0, res.output
-    for text in ("Episodes per split, level and outcome", "Episode length", "Sizes", "How it was made",
-                 "expert", "success %", f"schema {S.SCHEMA_VERSION}", "shapes=[sphere"):
+    for text in (
+        "Episodes per split, level and outcome",
+        "Episode length",
+        "Sizes",
+        "How it was made",
+        "expert",
+        "success %",
+        f"schema {S.SCHEMA_VERSION}",
+        "shapes=[sphere",
+    ):
         assert text in res.output, text
 
 
@@ -78,10 +86,13 @@ def test_a_repo_id_offline_is_one_clear_line(tmp_path, monkeypatch):
     assert "'nobody/orbit'" in line and "HF_HUB_OFFLINE" in line and "local dataset folder" in line
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda p: p / "missing", "no dataset folder at"),
-    (lambda p: p, "meta/info.json is missing"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda p: p / "missing", "no dataset folder at"),
+        (lambda p: p, "meta/info.json is missing"),
+    ],
+)
 def test_info_on_something_that_is_not_a_dataset(tmp_path, make, message):
     res = runner.invoke(app, ["info", str(make(tmp_path))])
     assert res.exit_code == 2 and message in res.output  # a usage error
@@ -95,10 +106,19 @@ def test_an_unreachable_hub_is_said_to_be_unreachable_without_retrying(tmp_path)
         port = sock.getsockname()[1]
     paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
     env = {k: v for k, v in os.environ.items() if not k.startswith("HF_")}
-    env.update(PYTHONPATH=os.pathsep.join(p for p in paths if p), HF_ENDPOINT=f"http://127.0.0.1:{port}",
-               HF_HOME=str(tmp_path / "hf"))
-    res = subprocess.run([sys.executable, "-m", "orbitdata", "info", "owner/name"], env=env, capture_output=True,
-                         text=True, timeout=120, cwd=tmp_path)  # a guard: a second normally
+    env.update(
+        PYTHONPATH=os.pathsep.join(p for p in paths if p),
+        HF_ENDPOINT=f"http://127.0.0.1:{port}",
+        HF_HOME=str(tmp_path / "hf"),
+    )
+    res = subprocess.run(
+        [sys.executable, "-m", "orbitdata", "info", "owner/name"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        cwd=tmp_path,
+    )  # a guard: a second normally
     assert res.returncode == 1 and res.stdout == ""
     assert res.stderr.strip().splitlines() == [res.stderr.strip()]  # one line: no retry warnings, no traceback
     assert f"the Hugging Face Hub at http://127.0.0.1:{port} could not be reached" in res.stderr
@@ -121,7 +141,9 @@ def test_read_meta_gives_the_typed_info_and_the_stats(tiny_dataset_master, tmp_p
     info, stats = read_meta(tiny_dataset_master)
     raw = json.loads((tiny_dataset_master / S.INFO_PATH).read_text())
     assert isinstance(info, Info) and info.to_dict() == raw
-    assert info.image_size == 64 and info.counts["episodes"] == 6 and info.generation_config().sim.camera.image_size == 64
+    assert (
+        info.image_size == 64 and info.counts["episodes"] == 6 and info.generation_config().sim.camera.image_size == 64
+    )
     assert stats == json.loads((tiny_dataset_master / S.STATS_PATH).read_text())
     assert len(stats[S.STATE]["mean"]) == S.STATE_DIM and len(stats[S.IMAGE]["std"]) == 3
     from huggingface_hub import constants

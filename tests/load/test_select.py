@@ -32,8 +32,14 @@ def test_filter_by_level_and_outcome_keeps_only_those_episodes(tiny_dataset_mast
     level = rows(episodes)[0][S.LEVEL]
     outcome = rows(episodes)[0][S.OUTCOME]
     want = sorted(r[S.EPISODE_INDEX] for r in rows(episodes) if r[S.LEVEL] == level and r[S.OUTCOME] == outcome)
-    ds = load_windows(tiny_dataset_master, context=2, horizon=2, episodes={S.LEVEL: [level], S.OUTCOME: outcome},
-                      columns=[S.ACTION], cache_dir=cache)
+    ds = load_windows(
+        tiny_dataset_master,
+        context=2,
+        horizon=2,
+        episodes={S.LEVEL: [level], S.OUTCOME: outcome},
+        columns=[S.ACTION],
+        cache_dir=cache,
+    )
     assert ds.episodes.tolist() == want
     assert set(np.unique(ds.index.episode).tolist()) == set(want)
     for i in (0, len(ds) - 1):
@@ -41,8 +47,14 @@ def test_filter_by_level_and_outcome_keeps_only_those_episodes(tiny_dataset_mast
 
 
 def test_callable_filter_gives_collision_free_windows(tiny_dataset_master, cache, episodes):
-    ds = load_windows(tiny_dataset_master, context=2, horizon=2, columns=[S.COLLISION], cache_dir=cache,
-                      episodes=lambda ep: ep[S.OUTCOME] != "collision")
+    ds = load_windows(
+        tiny_dataset_master,
+        context=2,
+        horizon=2,
+        columns=[S.COLLISION],
+        cache_dir=cache,
+        episodes=lambda ep: ep[S.OUTCOME] != "collision",
+    )
     want = sorted(r[S.EPISODE_INDEX] for r in rows(episodes) if r[S.OUTCOME] != "collision")
     assert ds.episodes.tolist() == want
     assert not any(ds[i][S.COLLISION].any() for i in range(0, len(ds), 10))

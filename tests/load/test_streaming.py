@@ -11,8 +11,8 @@ from torch.utils.data import DataLoader
 
 from orbitdata import schema as S
 from orbitdata.config import DatasetConfig
-from orbitdata.write.shard import write_shards
 from orbitdata.load import IS_PAD, StreamingWindowDataset, load_windows
+from orbitdata.write.shard import write_shards
 
 LIGHT = [S.IMAGE, S.STATE, S.ACTION, S.SUCCESS]  # no full-res depth: faster, same code paths
 
@@ -61,8 +61,15 @@ def test_streaming_yields_exactly_the_map_style_windows(tiny_dataset_master, cac
 
 
 def test_streaming_with_filter_and_padding_matches_map_style(tiny_dataset_master, cache):
-    kwargs = dict(columns=[S.ACTION, S.IMAGE], context_only=[S.IMAGE], pad=True, context=4, horizon=30,
-                  cache_dir=cache, episodes=lambda ep: ep[S.LEVEL] != "expert")
+    kwargs = dict(
+        columns=[S.ACTION, S.IMAGE],
+        context_only=[S.IMAGE],
+        pad=True,
+        context=4,
+        horizon=30,
+        cache_dir=cache,
+        episodes=lambda ep: ep[S.LEVEL] != "expert",
+    )
     mapped = load_windows(tiny_dataset_master, **kwargs)
     streamed = list(load_windows(tiny_dataset_master, streaming=True, **kwargs))
     assert sorted(map(key, streamed)) == sorted(key(mapped[i]) for i in range(len(mapped)))
@@ -75,8 +82,9 @@ def test_streaming_with_filter_and_padding_matches_map_style(tiny_dataset_master
 
 def test_shuffle_is_a_pure_function_of_seed_and_epoch(tiny_dataset_master, cache):
     def order(seed: int, epoch: int) -> list:
-        stream = load_windows(tiny_dataset_master, columns=[S.ACTION], streaming=True, shuffle_buffer=3, seed=seed,
-                              cache_dir=cache)
+        stream = load_windows(
+            tiny_dataset_master, columns=[S.ACTION], streaming=True, shuffle_buffer=3, seed=seed, cache_dir=cache
+        )
         stream.set_epoch(epoch)
         return [key(item) for item in stream]
 

@@ -73,8 +73,17 @@ def test_every_key_equals_the_stored_rows(windows, reference):
     T = 20
     item = windows[0]
     assert set(item) == set(EVERY_COLUMN) | {IS_PAD}
-    shapes = {S.IMAGE: (T, 3, 64, 64), S.DEPTH: (T, 64, 64), S.DEPTH_LOW: (T, 16, 16), S.STATE: (T, 16),
-              S.ACTION: (T, 8), S.COLLISION: (T,), S.SUCCESS: (T,), S.EPISODE_INDEX: (T,), IS_PAD: (T,)}
+    shapes = {
+        S.IMAGE: (T, 3, 64, 64),
+        S.DEPTH: (T, 64, 64),
+        S.DEPTH_LOW: (T, 16, 16),
+        S.STATE: (T, 16),
+        S.ACTION: (T, 8),
+        S.COLLISION: (T,),
+        S.SUCCESS: (T,),
+        S.EPISODE_INDEX: (T,),
+        IS_PAD: (T,),
+    }
     for name, shape in shapes.items():
         assert tuple(item[name].shape) == shape, name
     assert item[S.IMAGE].dtype == torch.uint8 and item[S.DEPTH_LOW].dtype == torch.float32
@@ -135,10 +144,18 @@ def test_columns_select_the_keys(tiny_dataset_master, cache, reference):
 
 
 def test_context_only_columns_hold_the_context_frames_alone(tiny_dataset_master, cache, reference):
-    full = load_windows(tiny_dataset_master, context=2, horizon=14, pad=True, columns=[S.IMAGE, S.ACTION],
-                        cache_dir=cache)
-    cut = load_windows(tiny_dataset_master, context=2, horizon=14, pad=True, columns=[S.IMAGE, S.ACTION],
-                       context_only=[S.IMAGE], cache_dir=cache)
+    full = load_windows(
+        tiny_dataset_master, context=2, horizon=14, pad=True, columns=[S.IMAGE, S.ACTION], cache_dir=cache
+    )
+    cut = load_windows(
+        tiny_dataset_master,
+        context=2,
+        horizon=14,
+        pad=True,
+        columns=[S.IMAGE, S.ACTION],
+        context_only=[S.IMAGE],
+        cache_dir=cache,
+    )
     assert len(cut) == len(full)
     last = len(cut) - 1  # a padded window: the horizon runs past the episode's end
     for items in ([cut[i] for i in (0, 9, last)], [cut.__getitems__([0, 9, last]).stacked]):
@@ -147,9 +164,11 @@ def test_context_only_columns_hold_the_context_frames_alone(tiny_dataset_master,
             assert item[S.IMAGE].shape[-4] == 2  # the observed frames, no more
             assert torch.equal(item[S.IMAGE], ref[S.IMAGE][..., :2, :, :, :])
             assert torch.equal(item[S.ACTION], ref[S.ACTION]) and torch.equal(item[IS_PAD], ref[IS_PAD])
-    for bad, match in [(dict(context_only=[S.FRAME_INDEX]), "every frame"),
-                       (dict(columns=[S.ACTION], context_only=[S.IMAGE]), "not in columns"),
-                       (dict(context_only=["observation.nothing"]), "not in the dataset")]:
+    for bad, match in [
+        (dict(context_only=[S.FRAME_INDEX]), "every frame"),
+        (dict(columns=[S.ACTION], context_only=[S.IMAGE]), "not in columns"),
+        (dict(context_only=["observation.nothing"]), "not in the dataset"),
+    ]:
         with pytest.raises(ValueError, match=match):
             load_windows(tiny_dataset_master, cache_dir=cache, **bad)
 
@@ -181,7 +200,12 @@ def test_index_errors_and_config_validation(windows):
     with pytest.raises(IndexError, match="out of range"):
         windows[len(windows)]
     assert torch.equal(windows[-1][S.FRAME_INDEX], windows[len(windows) - 1][S.FRAME_INDEX])
-    for bad, match in [(dict(context=0), "context"), (dict(horizon=-1), "horizon"), (dict(stride=0), "stride"),
-                       (dict(image_size=0), "image_size"), (dict(columns="action"), "list of column")]:
+    for bad, match in [
+        (dict(context=0), "context"),
+        (dict(horizon=-1), "horizon"),
+        (dict(stride=0), "stride"),
+        (dict(image_size=0), "image_size"),
+        (dict(columns="action"), "list of column"),
+    ]:
         with pytest.raises(ValueError, match=match):
             WindowConfig(**bad)

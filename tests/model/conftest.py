@@ -13,6 +13,9 @@ def tiny_run(tiny_dataset_master, tmp_path_factory):
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 
     out = tmp_path_factory.mktemp("stage1") / "run"
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2),
-                                    out=out, device="cpu"))
+    train_world_model(
+        Stage1Request(
+            dataset=str(tiny_dataset_master), preset=get_preset("tiny").with_train(max_steps=2), out=out, device="cpu"
+        )
+    )
     return out

@@ -21,8 +21,17 @@ print(json.dumps({"code": code, "heavy": sorted(m for m in ("torch", "mujoco", "
 """
 
 
-@pytest.mark.parametrize("args", [["--help"], ["eval", "closed-loop", "--help"], ["depth", "--help"],
-                                  ["train-policy", "--help"], ["eval", "policy", "--help"], ["probe", "--help"]])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--help"],
+        ["eval", "closed-loop", "--help"],
+        ["depth", "--help"],
+        ["train-policy", "--help"],
+        ["eval", "policy", "--help"],
+        ["probe", "--help"],
+    ],
+)
 def test_help_loads_no_heavy_module(args):
     res = subprocess.run([sys.executable, "-c", SCRIPT, *args], capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr

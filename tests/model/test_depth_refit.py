@@ -12,8 +12,8 @@ from typer.testing import CliRunner
 from orbitmodel.cli.app import app
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import planner_config
-from orbitmodel.plan.factory import build_pilot
 from orbitmodel.plan.depth_refit import DepthRefitConfig, load_refit_head, refit_depth_head
+from orbitmodel.plan.factory import build_pilot
 from orbitmodel.runs import RunError
 
 torch.set_num_threads(1)
@@ -41,7 +41,9 @@ def test_the_refit_writes_its_head_and_the_before_after_table(refit_run):
     assert len(losses) == 12 and losses[-1] < losses[0]  # the near-weighted loss goes down
     model = WorldModel.from_pretrained(run)
     head = load_refit_head(run, model)
-    assert any(not torch.equal(a, b) for a, b in zip(head.state_dict().values(), model.depth_head.state_dict().values()))
+    assert any(
+        not torch.equal(a, b) for a, b in zip(head.state_dict().values(), model.depth_head.state_dict().values())
+    )
     # The Stage I weights are untouched: the latents (and so the dynamics and the probe) do not move.
     assert torch.equal(WorldModel.from_pretrained(run).depth_head.net[0].weight, model.depth_head.net[0].weight)
 

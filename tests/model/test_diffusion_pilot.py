@@ -169,8 +169,9 @@ def test_noise_scale_gathers_the_draws(policy):
     images, goal = images.expand(64, -1, -1, -1, -1), torch.tensor([[2.0, 1.0, 0.0]]).expand(64, -1)
 
     def draws(scale, seed):
-        return policy.sample_actions(images, states, goal, torch.Generator().manual_seed(seed),
-                                     sampling=PolicySampling(noise_scale=scale))
+        return policy.sample_actions(
+            images, states, goal, torch.Generator().manual_seed(seed), sampling=PolicySampling(noise_scale=scale)
+        )
 
     zero = draws(0.0, 1)
     torch.testing.assert_close(zero, draws(0.0, 2), rtol=0, atol=0)
@@ -195,9 +196,18 @@ def test_errors(policy):
 
 def save_policy_run(policy, path, preset=PRESET) -> RunDir:
     """``policy`` (of ``preset``) as a policy run folder of a 64 px dataset (root seed 0, one episode)."""
-    meta = DatasetMeta(source="x", image_size=64, state_mean=(0.0,) * 16, state_std=(1.0,) * 16,
-                       action_mean=(0.1,) * 8, action_std=(0.1,) * 8, depth_max=50.1, fovy_deg=100.0, root_seed=0,
-                       episodes={"train": 1})
+    meta = DatasetMeta(
+        source="x",
+        image_size=64,
+        state_mean=(0.0,) * 16,
+        state_std=(1.0,) * 16,
+        action_mean=(0.1,) * 8,
+        action_std=(0.1,) * 8,
+        depth_max=50.1,
+        fovy_deg=100.0,
+        root_seed=0,
+        episodes={"train": 1},
+    )
     run = RunDir(path)
     run.start(policy_run_config(preset, meta, ["expert"], []), resume=False, overwrite=False)
     run.save_final(policy.state_dict(), step=0)
@@ -218,9 +228,17 @@ def test_loads_from_a_run_folder(policy, tmp_path):
     assert make_diffusion_pilot(None, run=str(run.path), noise_scale="0.5", draws="2").metadata()["noise_scale"] == 0.5
     assert make_diffusion_pilot(None, run=str(run.path), draws="3", pick="central").metadata()["pick"] == "central"
     flown = make_diffusion_pilot(None, run=str(run.path))
-    assert flown.metadata() == {"preset": "cpu", "action_steps": 8, "ensemble": None, "draws": 1, "pick": "mean",
-                                "noise_scale": 1.0, "timestep_spacing": "trailing",
-                                "inference_steps": PRESET.model.inference_steps, "image_codec": True}
+    assert flown.metadata() == {
+        "preset": "cpu",
+        "action_steps": 8,
+        "ensemble": None,
+        "draws": 1,
+        "pick": "mean",
+        "noise_scale": 1.0,
+        "timestep_spacing": "trailing",
+        "inference_steps": PRESET.model.inference_steps,
+        "image_codec": True,
+    }
     assert flown.image_codec and int(flown.policy.sampler_for(flown.sampling).timesteps[0]) == 99
     reference = make_diffusion_pilot(None, run=str(run.path), preset="reference")
     assert reference.metadata()["timestep_spacing"] == "leading" and reference.metadata()["preset"] == "reference"
@@ -238,8 +256,9 @@ def test_orbitdata_fly_hands_a_policy_its_camera_through_the_codec(policy, tmp_p
     """`orbitdata fly --pilot diffusion` flies the flight preset's codec without --image-codec
     (the cpu preset sees the camera as the dataset stored it); `reference --set`-style options
     that turn it off fly raw renders."""
-    from orbitdata.cli.app import app as orbitdata_app
     from typer.testing import CliRunner
+
+    from orbitdata.cli.app import app as orbitdata_app
 
     run = save_policy_run(policy, tmp_path / "run")
     grid = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--image-size", "64", "--config"]
@@ -247,8 +266,21 @@ def test_orbitdata_fly_hands_a_policy_its_camera_through_the_codec(policy, tmp_p
     toml.write_text("[sim]\nmax_steps = 4\n")
     for options, codec in (([], True), (["--pilot-option", "image_codec=false"], False)):
         out = tmp_path / f"fly-{codec}.json"
-        res = CliRunner().invoke(orbitdata_app, ["fly", "--pilot", "diffusion", "--pilot-option", f"run={run.path}",
-                                                 *options, *grid, str(toml), "--json", str(out)])
+        res = CliRunner().invoke(
+            orbitdata_app,
+            [
+                "fly",
+                "--pilot",
+                "diffusion",
+                "--pilot-option",
+                f"run={run.path}",
+                *options,
+                *grid,
+                str(toml),
+                "--json",
+                str(out),
+            ],
+        )
         assert res.exit_code == 0, res.output
         assert json.loads(out.read_text())["flight"]["image_codec"] is codec
 
@@ -287,28 +319,53 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
     assert res.exit_code == 2 and "unknown policy setting 'samples'" in res.output and "Traceback" not in res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--preset", "paper", *grid])
     assert res.exit_code == 2 and "flight presets are cpu, reference" in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "action_steps=2", "--set",
-                                   "ensemble=0.1", *grid, "--json", str(out)])
+    res = CliRunner().invoke(
+        app,
+        [
+            "eval",
+            "closed-loop",
+            str(run.path),
+            "--set",
+            "action_steps=2",
+            "--set",
+            "ensemble=0.1",
+            *grid,
+            "--json",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     report = json.loads(out.read_text())
     assert report["episodes"][0]["action_steps"] == 2
-    assert report["pilot_settings"] == {"preset": "cpu", "action_steps": 2, "ensemble": 0.1, "draws": 1,
-                                        "pick": "mean", "noise_scale": 1.0, "timestep_spacing": "trailing",
-                                        "inference_steps": PRESET.model.inference_steps, "image_codec": True}
+    assert report["pilot_settings"] == {
+        "preset": "cpu",
+        "action_steps": 2,
+        "ensemble": 0.1,
+        "draws": 1,
+        "pick": "mean",
+        "noise_scale": 1.0,
+        "timestep_spacing": "trailing",
+        "inference_steps": PRESET.model.inference_steps,
+        "image_codec": True,
+    }
     assert report["threads"] >= 1
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "draws=2", "--set", "pick=central",
-                                   *grid, "--json", str(out)])
+    res = CliRunner().invoke(
+        app,
+        ["eval", "closed-loop", str(run.path), "--set", "draws=2", "--set", "pick=central", *grid, "--json", str(out)],
+    )
     assert res.exit_code == 0, res.output
     assert json.loads(out.read_text())["pilot_settings"]["draws"] == 2
     assert json.loads(out.read_text())["episodes"][0]["pick"] == "central"
     res = CliRunner().invoke(app, ["eval", "closed-loop", "--pilot", "oracle-true", "--set", "draws=2", *grid])
     assert res.exit_code == 2 and "unknown planner option 'draws'" in res.output and "Traceback" not in res.output
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--preset", "reference", *grid,
-                                   "--json", str(out)])
+    res = CliRunner().invoke(
+        app, ["eval", "closed-loop", str(run.path), "--preset", "reference", *grid, "--json", str(out)]
+    )
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["timestep_spacing"] == "leading"
     assert json.loads(out.read_text())["preset"] == "reference"
-    res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "noise_scale=0", *grid,
-                                   "--json", str(out)])
+    res = CliRunner().invoke(
+        app, ["eval", "closed-loop", str(run.path), "--set", "noise_scale=0", *grid, "--json", str(out)]
+    )
     assert res.exit_code == 0 and json.loads(out.read_text())["pilot_settings"]["noise_scale"] == 0, res.output
     res = CliRunner().invoke(app, ["eval", "closed-loop", str(run.path), "--set", "noise_scale=-1", *grid])
     assert res.exit_code == 2 and "noise_scale=-1" in res.output and "Traceback" not in res.output
@@ -337,8 +394,11 @@ class ChunkPolicy(torch.nn.Module):
         self.noise_scales.append(sampling.noise_scale)
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)
         self.samples += 1
-        rows = (10 * torch.arange(len(states), dtype=torch.float32) if self.rows is None
-                else torch.as_tensor(self.rows, dtype=torch.float32)[:len(states)])
+        rows = (
+            10 * torch.arange(len(states), dtype=torch.float32)
+            if self.rows is None
+            else torch.as_tensor(self.rows, dtype=torch.float32)[: len(states)]
+        )
         rows = rows[:, None].expand(-1, c.horizon) if rows.ndim == 1 else rows  # (B, H)
         return (chunk[None, :, None] + rows[:, :, None]).expand(len(states), c.horizon, c.action_dim)
 
@@ -357,10 +417,20 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     got = _fly_steps(ensembled, 3)
     w = np.exp(-0.5 * np.arange(3))  # frame 2: chunk 0's offset 2, chunk 1's offset 1, chunk 2's offset 0
     assert got[2] == pytest.approx(float(w @ np.array([2, 101, 200]) / w.sum()), rel=1e-6)
-    assert ensembled.metadata() == {"preset": None, "action_steps": 1, "ensemble": 0.5, "draws": 1, "pick": "mean",
-                                    "noise_scale": 1.0, "timestep_spacing": "leading",
-                                    "inference_steps": PRESET.model.inference_steps, "image_codec": False}
-    averaged = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=2, draws=3))  # rows 0, 10, 20 of one call: their mean
+    assert ensembled.metadata() == {
+        "preset": None,
+        "action_steps": 1,
+        "ensemble": 0.5,
+        "draws": 1,
+        "pick": "mean",
+        "noise_scale": 1.0,
+        "timestep_spacing": "leading",
+        "inference_steps": PRESET.model.inference_steps,
+        "image_codec": False,
+    }
+    averaged = DiffusionPilot(
+        ChunkPolicy(), PolicySampling(action_steps=2, draws=3)
+    )  # rows 0, 10, 20 of one call: their mean
     assert _fly_steps(averaged, 3) == [10, 11, 110] and averaged.policy.samples == 2
     assert averaged.metadata()["draws"] == 3
     with pytest.raises(ValueError, match="draws=0"):
@@ -368,7 +438,7 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     # the central draw: the one nearest the draws' mean over the actions it executes (2 here: rows 0, 10 and
     # 40, mean 16.7, nearest 10), flown as drawn, though row 1 strays past them (1000 from frame t+2 on)
     rows = torch.tensor([0.0, 10.0, 40.0])[:, None].repeat(1, PRESET.model.horizon)
-    rows[1, PRESET.model.action_start + 2:] = 1000.0
+    rows[1, PRESET.model.action_start + 2 :] = 1000.0
     central = DiffusionPilot(ChunkPolicy(rows=rows), PolicySampling(action_steps=2, draws=3, pick="central"))
     assert _fly_steps(central, 3) == [10, 11, 110] and central.metadata()["pick"] == "central"
     with pytest.raises(ValueError, match="draws=N with N >= 2"):
@@ -377,7 +447,9 @@ def test_action_steps_and_temporal_ensembling_are_honoured():
     assert _fly_steps(averaged, 1)[0] == pytest.approx(50 / 3)
     with pytest.raises(ValueError, match="pick='median'"):
         DiffusionPilot(ChunkPolicy(), PolicySampling(draws=3, pick="median"))
-    cooled = DiffusionPilot(ChunkPolicy(), PolicySampling(action_steps=2, noise_scale=0.25))  # every chunk at that scale
+    cooled = DiffusionPilot(
+        ChunkPolicy(), PolicySampling(action_steps=2, noise_scale=0.25)
+    )  # every chunk at that scale
     _fly_steps(cooled, 5)
     assert cooled.policy.noise_scales == [0.25] * 3 and cooled.metadata()["noise_scale"] == 0.25
     with pytest.raises(ValueError, match="noise_scale=-1"):

@@ -10,8 +10,8 @@ import torch
 
 from orbitdata.state import make_state
 from orbitmodel.baselines.diffusion.config import PolicyConfig, get_policy_preset
-from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy, denoise, ema_decay, goal_in_body, make_schedulers
+from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.baselines.diffusion.unet import ConditionalUnet1D
 
 torch.set_num_threads(1)
@@ -27,9 +27,12 @@ def batch(config: PolicyConfig, B: int = 3, seed: int = 0) -> dict[str, torch.Te
     To, S = config.n_obs_steps, config.image_size
     states = torch.randn(B, To, 16, generator=g)
     states[..., 6:12] = torch.tensor([1.0, 0, 0, 1, 0, 0])  # identity rotation
-    return {"images": torch.randint(0, 256, (B, To, 3, S, S), generator=g, dtype=torch.uint8), "states": states,
-            "goal": torch.randn(B, 3, generator=g) * 3,
-            "actions": torch.rand(B, config.horizon, 8, generator=g)}
+    return {
+        "images": torch.randint(0, 256, (B, To, 3, S, S), generator=g, dtype=torch.uint8),
+        "states": states,
+        "goal": torch.randn(B, 3, generator=g) * 3,
+        "actions": torch.rand(B, config.horizon, 8, generator=g),
+    }
 
 
 def test_shapes(config):
@@ -74,7 +77,7 @@ def test_config_errors():
 
 
 def test_timestep_spacing_decides_where_ddim_starts(config):
-    """"leading" (the reference's) visits 90 .. 0 with 10 of 100 levels, "trailing" 99 .. 9, starting
+    """ "leading" (the reference's) visits 90 .. 0 with 10 of 100 levels, "trailing" 99 .. 9, starting
     where the unit noise it draws belongs; a policy samples with either, whatever its config says."""
     leading = make_schedulers(PolicyConfig())[1].timesteps.tolist()
     trailing = make_schedulers(PolicyConfig(timestep_spacing="trailing"))[1].timesteps.tolist()
@@ -89,8 +92,9 @@ def test_timestep_spacing_decides_where_ddim_starts(config):
     after = policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0), sampling=trailing)
     assert not torch.equal(before, after)
     assert policy.config == config  # sampling another way never changes the policy
-    torch.testing.assert_close(policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0)), before,
-                               rtol=0, atol=0)
+    torch.testing.assert_close(
+        policy.sample_actions(images, states, goal, torch.Generator().manual_seed(0)), before, rtol=0, atol=0
+    )
     two = PolicySampling(timestep_spacing="trailing", inference_steps=2)
     assert policy.sampler_for(two).timesteps.tolist() == [99, 49]
     with pytest.raises(ValueError, match="inference_steps=101"):

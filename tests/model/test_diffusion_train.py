@@ -56,8 +56,8 @@ def test_run_folder(trained):
     assert all(np.isfinite(r["loss"]) for r in logs)
     assert (out / "model.safetensors").is_file()
     weights = load_file(out / "model.safetensors")
-    ema = {k[len("ema."):]: v for k, v in weights.items() if k.startswith("ema.")}
-    net = {k[len("net."):]: v for k, v in weights.items() if k.startswith("net.")}
+    ema = {k[len("ema.") :]: v for k, v in weights.items() if k.startswith("ema.")}
+    net = {k[len("net.") :]: v for k, v in weights.items() if k.startswith("net.")}
     assert ema.keys() == net.keys()
     assert any(not torch.equal(ema[k], net[k]) for k in net)  # the EMA trails the weights
 
@@ -81,8 +81,21 @@ def test_resume_is_exact(trained, tiny_dataset_master, tmp_path):
     """Killed after the checkpoint at step 2 and resumed: the same weights and EMA as straight through."""
     out = tmp_path / "run"
     kill_after = Path(__file__).with_name("kill_after.py")  # SIGKILL right after the step-2 checkpoint
-    cmd = [sys.executable, str(kill_after), "2", "train-policy", str(tiny_dataset_master), "--out", str(out),
-           "--preset", "tiny", "--max-steps", str(STEPS), "--device", "cpu"]
+    cmd = [
+        sys.executable,
+        str(kill_after),
+        "2",
+        "train-policy",
+        str(tiny_dataset_master),
+        "--out",
+        str(out),
+        "--preset",
+        "tiny",
+        "--max-steps",
+        str(STEPS),
+        "--device",
+        "cpu",
+    ]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     # the CLI's tiny preset saves every 2 steps, as PRESET does
     assert get_policy_preset("tiny").train.loop.save_every == 2
@@ -107,8 +120,12 @@ def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny
     shutil.copytree(trained[0], out)
     longer = PRESET.with_train(max_steps=STEPS + 2)
     logs = []
-    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu",
-                                   resume=True, extend=True), on_log=logs.append)
+    T.train_policy(
+        T.PolicyRequest(
+            dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu", resume=True, extend=True
+        ),
+        on_log=logs.append,
+    )
     assert [r["step"] for r in logs] == [STEPS + 1, STEPS + 2]
     settings = longer.train.loop
     assert [r["lr"] for r in logs] == pytest.approx([lr_at(s, STEPS + 2, settings) for s in (STEPS, STEPS + 1)])
@@ -116,10 +133,12 @@ def test_extend_trains_a_finished_run_on_under_the_longer_schedule(trained, tiny
     assert config["preset"]["train"]["loop"]["max_steps"] == STEPS + 2
     segments = json.loads((out / "training.json").read_text())["segments"]
     assert [(s["from_step"], s["to_step"], s["schedule_steps"]) for s in segments] == [
-        (0, STEPS, STEPS), (STEPS, STEPS + 2, STEPS + 2)]
+        (0, STEPS, STEPS),
+        (STEPS, STEPS + 2, STEPS + 2),
+    ]
     extended, ended = load_file(out / "model.safetensors"), load_file(trained[0] / "model.safetensors")
     assert any(not torch.equal(extended[k], ended[k]) for k in ended)  # trained on past the old end
-    steps = [json.loads(l)["step"] for l in (out / "metrics.jsonl").read_text().splitlines()]
+    steps = [json.loads(r)["step"] for r in (out / "metrics.jsonl").read_text().splitlines()]
     assert steps == list(range(1, STEPS + 3))
 
 
@@ -138,8 +157,11 @@ def test_a_policy_run_with_a_flat_training_config_reads_back_and_extends(trained
     (out / "config.json").write_text(json.dumps({**config, "preset": {**config["preset"], "train": flat}}))
     assert read_policy_run(out).preset == PRESET
     longer = PRESET.with_train(max_steps=STEPS + 1)
-    T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu",
-                                   resume=True, extend=True))
+    T.train_policy(
+        T.PolicyRequest(
+            dataset=str(tiny_dataset_master), preset=longer, out=out, device="cpu", resume=True, extend=True
+        )
+    )
     rewritten = json.loads((out / "config.json").read_text())["preset"]["train"]
     assert rewritten == json.loads(json.dumps(longer.train.to_dict())) and rewritten["loop"]["max_steps"] == STEPS + 1
     assert json.loads((out / "training.json").read_text())["segments"][-1]["to_step"] == STEPS + 1
@@ -160,8 +182,10 @@ def test_extend_refuses_what_is_not_a_longer_run(trained, tiny_dataset_master, t
         ("--max-steps", "10000000", "--resume", "--extend"): "epochs end at step",  # past the run's epochs
     }
     for args, says in cases.items():
-        result = runner.invoke(app, ["train-policy", str(tiny_dataset_master), "--out", str(out), "--preset", "tiny",
-                                     "--device", "cpu", *args])
+        result = runner.invoke(
+            app,
+            ["train-policy", str(tiny_dataset_master), "--out", str(out), "--preset", "tiny", "--device", "cpu", *args],
+        )
         assert result.exit_code == 2, (args, result.output)
         assert says in result.output and "Traceback" not in result.output, (args, result.output)
     assert (out / "model.safetensors").read_bytes() == before  # nothing written is lost
@@ -192,11 +216,13 @@ def test_the_privileged_diagnostic_reads_the_true_obstacles_and_cannot_fly(train
     lookup = T.episode_obstacles(tiny_dataset_master, "train", 5)
     table = T.load_episode_table(tiny_dataset_master, "train", {})
     for idx, row in zip(table.column(S.EPISODE_INDEX).to_pylist(), table.column(S.OBSTACLES).to_pylist()):
-        want = [[*o["center"], Obstacle(o["shape"], tuple(o["center"]), tuple(o["size"])).bounding_radius]
-                for o in row[:5]]
-        np.testing.assert_allclose(lookup[idx, :len(want)].numpy(), np.asarray(want, np.float32).reshape(-1, 4),
-                                   rtol=1e-6)
-        assert not lookup[idx, len(want):].any()  # empty slots
+        want = [
+            [*o["center"], Obstacle(o["shape"], tuple(o["center"]), tuple(o["size"])).bounding_radius] for o in row[:5]
+        ]
+        np.testing.assert_allclose(
+            lookup[idx, : len(want)].numpy(), np.asarray(want, np.float32).reshape(-1, 4), rtol=1e-6
+        )
+        assert not lookup[idx, len(want) :].any()  # empty slots
     out = tmp_path / "run"
     T.train_policy(T.PolicyRequest(dataset=str(tiny_dataset_master), preset=told, out=out, device="cpu"))
     policy = DiffusionPolicy.from_pretrained(out)
@@ -271,15 +297,20 @@ def test_evaluate(trained, tiny_dataset_master):
     # several draws: the first is the one scored alone; over the draws, a draw's error is the error of
     # their mean plus (N-1)/N of their variance, in every band
     three = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=replace(REFERENCE, draws=3))
-    assert three.samples == 3 and three.policy == result.policy and three.per_band[0]["policy"] == result.per_band[0]["policy"]
+    assert (
+        three.samples == 3
+        and three.policy == result.policy
+        and three.per_band[0]["policy"] == result.per_band[0]["policy"]
+    )
     for r in three.per_band + three.per_index:
         if r["frames"]:
             assert r["draws"] == pytest.approx(r["sample_mean"] + 2 / 3 * r["variance"], rel=1e-5)
             assert r["variance"] > 0
     assert three.draws == pytest.approx(three.sample_mean + 2 / 3 * three.variance, rel=1e-5)
     # draws started from zero noise are one deterministic chunk: no variance, whatever the seed
-    still = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8,
-                            sampling=replace(REFERENCE, draws=3, noise_scale=0.0))
+    still = evaluate_policy(
+        out, tiny_dataset_master, stride=8, batch_size=8, sampling=replace(REFERENCE, draws=3, noise_scale=0.0)
+    )
     assert still.variance == 0 and still.noise_scale == 0 and still.draws == pytest.approx(still.policy, rel=1e-6)
     assert still.central == pytest.approx(still.policy, rel=1e-6)  # every draw is central when all are one chunk
     # the default is the reported flight preset (cpu: trailing spacing), recorded and sampled with
@@ -289,19 +320,58 @@ def test_evaluate(trained, tiny_dataset_master):
     two = evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, sampling=PolicySampling(inference_steps=2))
     assert two.inference_steps == 2
     assert three.central is not None and all(r["central_ratio"] is not None for r in three.per_band if r["frames"])
-    assert still.policy == evaluate_policy(out, tiny_dataset_master, stride=8, batch_size=8, seed=5,
-                                           sampling=replace(REFERENCE, noise_scale=0.0)).policy
+    assert (
+        still.policy
+        == evaluate_policy(
+            out, tiny_dataset_master, stride=8, batch_size=8, seed=5, sampling=replace(REFERENCE, noise_scale=0.0)
+        ).policy
+    )
     for bad in ("inf", "-1", "cold"):
         cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--set", f"noise_scale={bad}"])
         assert cli.exit_code == 2 and "noise_scale" in cli.output and "Traceback" not in cli.output, cli.output
-    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
-                              "--device", "cpu", "--max-windows", "3", "--set", "noise_scale=0.5"])
+    cli = runner.invoke(
+        app,
+        [
+            "eval",
+            "policy",
+            str(out),
+            str(tiny_dataset_master),
+            "--stride",
+            "8",
+            "--json",
+            "--device",
+            "cpu",
+            "--max-windows",
+            "3",
+            "--set",
+            "noise_scale=0.5",
+        ],
+    )
     assert cli.exit_code == 0, cli.output
     reported = json.loads(cli.stdout.strip().splitlines()[-1])
     assert reported["windows"] == 3 and reported["noise_scale"] == 0.5 and reported["preset"] == "cpu"
-    cli = runner.invoke(app, ["eval", "policy", str(out), str(tiny_dataset_master), "--stride", "8", "--json",
-                              "--device", "cpu", "--max-windows", "3", "--preset", "reference",
-                              "--set", "inference_steps=2", "--set", "draws=2"])
+    cli = runner.invoke(
+        app,
+        [
+            "eval",
+            "policy",
+            str(out),
+            str(tiny_dataset_master),
+            "--stride",
+            "8",
+            "--json",
+            "--device",
+            "cpu",
+            "--max-windows",
+            "3",
+            "--preset",
+            "reference",
+            "--set",
+            "inference_steps=2",
+            "--set",
+            "draws=2",
+        ],
+    )
     assert cli.exit_code == 0, cli.output
     reported = json.loads(cli.stdout.strip().splitlines()[-1])
     assert (reported["timestep_spacing"], reported["inference_steps"], reported["samples"]) == ("leading", 2, 2)
@@ -346,25 +416,67 @@ def test_expert_floor_scores_other_plans_where_the_policy_is_scored(trained, tin
     # the episode's own plan taken up at its recorded states differs from the record by thrust noise only
     assert 0 < floor.own < 0.25 * floor.mean_action
     assert 0.5 <= floor.own_plan_could <= 1
-    assert expert_floor(out, tiny_dataset_master, stride=8, plans=4, position_m=0.5, speed_mps=0.5, angle_deg=60.0) == floor
-    cli = runner.invoke(app, ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--stride", "8", "--plans",
-                              "4", "--position-m", "0.5", "--speed-mps", "0.5", "--angle-deg", "60", "--json",
-                              "--device", "cpu"])
+    assert (
+        expert_floor(out, tiny_dataset_master, stride=8, plans=4, position_m=0.5, speed_mps=0.5, angle_deg=60.0)
+        == floor
+    )
+    cli = runner.invoke(
+        app,
+        [
+            "eval",
+            "expert-floor",
+            str(out),
+            str(tiny_dataset_master),
+            "--stride",
+            "8",
+            "--plans",
+            "4",
+            "--position-m",
+            "0.5",
+            "--speed-mps",
+            "0.5",
+            "--angle-deg",
+            "60",
+            "--json",
+            "--device",
+            "cpu",
+        ],
+    )
     assert cli.exit_code == 0, cli.output
     assert json.loads(cli.stdout.strip().splitlines()[-1]) == json.loads(json.dumps(floor.to_dict()))
-    cli = runner.invoke(app, ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--stride", "8", "--plans",
-                              "4", "--position-m", "0.5", "--speed-mps", "0.5", "--angle-deg", "60", "--no-policy"])
+    cli = runner.invoke(
+        app,
+        [
+            "eval",
+            "expert-floor",
+            str(out),
+            str(tiny_dataset_master),
+            "--stride",
+            "8",
+            "--plans",
+            "4",
+            "--position-m",
+            "0.5",
+            "--speed-mps",
+            "0.5",
+            "--angle-deg",
+            "60",
+            "--no-policy",
+        ],
+    )
     assert cli.exit_code == 0 and "another expert" in cli.output and "policy" not in cli.output, cli.output
-    assert "tolerances" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master),
-                                           "--position-m", "0"])
-    assert "drop one" in one_line_error(["eval", "expert-floor", str(out), str(tiny_dataset_master), "--no-policy",
-                                         "--preset", "cpu"])
+    assert "tolerances" in one_line_error(
+        ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--position-m", "0"]
+    )
+    assert "drop one" in one_line_error(
+        ["eval", "expert-floor", str(out), str(tiny_dataset_master), "--no-policy", "--preset", "cpu"]
+    )
 
 
 def one_line_error(args) -> str:
     result = runner.invoke(app, args)
     assert result.exit_code == 2, result.output
-    lines = [l for l in result.stderr.splitlines() if l.startswith("error:")]
+    lines = [r for r in result.stderr.splitlines() if r.startswith("error:")]
     assert len(lines) == 1, result.stderr
     assert "Traceback" not in result.output
     return lines[0]
@@ -373,17 +485,30 @@ def one_line_error(args) -> str:
 def test_clear_errors(trained, tiny_dataset_master, tmp_path):
     out, _ = trained
     assert "no dataset folder" in one_line_error(["train-policy", str(tmp_path / "nope"), "--out", str(tmp_path / "r")])
-    assert "--resume" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(tmp_path / "r2"),
-                                         "--preset", "tiny", "--resume", "--device", "cpu"])
-    assert "another config" in one_line_error(["train-policy", str(tiny_dataset_master), "--out", str(out),
-                                               "--preset", "tiny", "--device", "cpu"])
+    assert "--resume" in one_line_error(
+        [
+            "train-policy",
+            str(tiny_dataset_master),
+            "--out",
+            str(tmp_path / "r2"),
+            "--preset",
+            "tiny",
+            "--resume",
+            "--device",
+            "cpu",
+        ]
+    )
+    assert "another config" in one_line_error(
+        ["train-policy", str(tiny_dataset_master), "--out", str(out), "--preset", "tiny", "--device", "cpu"]
+    )
     world = tmp_path / "wm"
     world.mkdir()
     (world / "config.json").write_text(json.dumps({"stage": "world_model"}))
     assert "not a diffusion policy" in one_line_error(["eval", "policy", str(world), str(tiny_dataset_master)])
     assert "not an orbitmodel run" in one_line_error(["eval", "policy", str(tmp_path), str(tiny_dataset_master)])
-    assert "exploratory" in one_line_error(["eval", "policy", str(out), str(tiny_dataset_master),
-                                            "--level", "exploratory", "--device", "cpu"])
+    assert "exploratory" in one_line_error(
+        ["eval", "policy", str(out), str(tiny_dataset_master), "--level", "exploratory", "--device", "cpu"]
+    )
 
 
 def test_padded_and_terminal_frames_add_no_loss(tiny_dataset_master, monkeypatch):
@@ -398,14 +523,18 @@ def test_padded_and_terminal_frames_add_no_loss(tiny_dataset_master, monkeypatch
     windows = T.policy_windows(tiny_dataset_master, "train", preset, None)
     ends = [i for i in range(len(windows)) if windows[i]["is_pad"].any()][:4]  # windows past an episode's end
     batch = collate_windows(windows.__getitems__(ends))
-    inputs = T.PolicyJob(policy, preset, T.episode_goals(tiny_dataset_master, "train")).inputs(batch, 0,
-                                                                                                 torch.device("cpu"))
+    inputs = T.PolicyJob(policy, preset, T.episode_goals(tiny_dataset_master, "train")).inputs(
+        batch, 0, torch.device("cpu")
+    )
     real = inputs["real"]
     assert ends and (~real).any() and real.any()
 
     def loss(actions):
-        return float(policy.loss(inputs["images"], inputs["states"], inputs["goal"], actions,
-                                 torch.Generator().manual_seed(0), real)[0])
+        return float(
+            policy.loss(
+                inputs["images"], inputs["states"], inputs["goal"], actions, torch.Generator().manual_seed(0), real
+            )[0]
+        )
 
     base = loss(inputs["actions"])
     changed = inputs["actions"].clone()
@@ -439,8 +568,18 @@ def test_a_policy_run_from_before_padding_and_masking_resumes_with_its_own_recip
     """Its config.json lacks pad_before, mask_padding and the validation split: --resume takes it
     for what it was (no padding, no masking), and refuses to continue it with another recipe."""
     out = tmp_path / "old"
-    args = ["train-policy", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "2", "--device", "cpu",
-            "--out", str(out)]
+    args = [
+        "train-policy",
+        str(tiny_dataset_master),
+        "--preset",
+        "tiny",
+        "--max-steps",
+        "2",
+        "--device",
+        "cpu",
+        "--out",
+        str(out),
+    ]
     assert runner.invoke(app, [*args, "--pad-before", "0", "--no-mask-padding"]).exit_code == 0
     config = json.loads((out / "config.json").read_text())
     for key in ("pad_before", "mask_padding", "val_fraction", "val_seed"):

@@ -32,8 +32,21 @@ def test_depth_by_band_counts_misses_and_phantoms_where_the_planner_looks():
 
 def test_eval_rollout_writes_the_curves_the_depth_bands_and_the_figures(tiny_run, tiny_dataset_master, tmp_path):
     out = tmp_path / "eval"
-    res = runner.invoke(app, ["eval", "rollout", str(tiny_run), str(tiny_dataset_master), "--windows", "2",
-                              "--horizon", "5", "--out", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "rollout",
+            str(tiny_run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "5",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "depth by true distance" in res.output and "effective rank" in res.output
     result = json.loads((out / "rollout.json").read_text())

@@ -18,8 +18,23 @@ import orbitdata
 import orbitmodel
 
 ROOT = Path(orbitmodel.__file__).parent
-RANK = {"loop_settings": 0, "config": 1, "data": 1, "extras": 1, "kinematics": 1, "runs": 2, "model": 3, "train": 4,
-        "probe": 5, "baselines": 5, "plan": 6, "evaluate": 7, "publish": 8, "cli": 9, "__init__": 10}
+RANK = {
+    "loop_settings": 0,
+    "config": 1,
+    "data": 1,
+    "extras": 1,
+    "kinematics": 1,
+    "runs": 2,
+    "model": 3,
+    "train": 4,
+    "probe": 5,
+    "baselines": 5,
+    "plan": 6,
+    "evaluate": 7,
+    "publish": 8,
+    "cli": 9,
+    "__init__": 10,
+}
 MODULE_PATH = re.compile(r"^orbitmodel(\.\w+)+$")
 
 
@@ -49,8 +64,15 @@ def imported(path: Path, name: str | None = None) -> list[tuple[int, str]]:
                 anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(anchor + ([base] if base else []))
             if base == "orbitmodel":  # from orbitmodel import config, WorldModel
-                out += [(node.lineno, f"orbitmodel.{a.name}" if (ROOT / a.name).exists() or
-                         (ROOT / f"{a.name}.py").exists() else "orbitmodel") for a in node.names]
+                out += [
+                    (
+                        node.lineno,
+                        f"orbitmodel.{a.name}"
+                        if (ROOT / a.name).exists() or (ROOT / f"{a.name}.py").exists()
+                        else "orbitmodel",
+                    )
+                    for a in node.names
+                ]
             else:
                 out.append((node.lineno, base))
         elif isinstance(node, ast.Constant) and isinstance(node.value, str) and MODULE_PATH.match(node.value):
@@ -75,8 +97,10 @@ def test_the_check_sees_lazy_relative_and_string_imports(tmp_path):
     """The scanner itself: a function-level import, a relative one and an importlib path in a
     table all count (a file standing in for a module of the probe package)."""
     example = tmp_path / "example.py"
-    example.write_text('def f():\n    from orbitmodel.plan.cost import CostConfig\n\n'
-                       'from ..evaluate import rollout\nTABLE = {"x": "orbitmodel.evaluate.figure6"}\n')
+    example.write_text(
+        "def f():\n    from orbitmodel.plan.cost import CostConfig\n\n"
+        'from ..evaluate import rollout\nTABLE = {"x": "orbitmodel.evaluate.figure6"}\n'
+    )
     found = [m for _, m in imported(example, "orbitmodel.probe.example")]
     assert sorted(found) == ["orbitmodel.evaluate", "orbitmodel.evaluate.figure6", "orbitmodel.plan.cost"]
 
@@ -85,7 +109,12 @@ def test_orbitdata_never_imports_orbitmodel():
     offenders = []
     for path in sorted(Path(orbitdata.__file__).parent.rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text(), str(path))):
-            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
-                [node.module or ""] if isinstance(node, ast.ImportFrom) else []
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
             offenders += [f"{path}:{node.lineno}" for n in names if n.split(".")[0] == "orbitmodel"]
     assert not offenders, offenders

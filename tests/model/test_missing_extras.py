@@ -30,16 +30,35 @@ def one_line_hint(res) -> str:
 
 
 def test_figure6_without_matplotlib(no_matplotlib, tmp_path):
-    result = {"pilot": "expert", "seed": 0, "settings": [
-        {"obstacles": 1, "speed": 1.0, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}]}
+    result = {
+        "pilot": "expert",
+        "seed": 0,
+        "settings": [
+            {"obstacles": 1, "speed": 1.0, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}
+        ],
+    }
     (tmp_path / "e.json").write_text(json.dumps(result))
-    assert "matplotlib" in one_line_hint(runner.invoke(app, ["eval", "figure6", str(tmp_path / "e.json"),
-                                                             "--out", str(tmp_path / "f.png")]))
+    assert "matplotlib" in one_line_hint(
+        runner.invoke(app, ["eval", "figure6", str(tmp_path / "e.json"), "--out", str(tmp_path / "f.png")])
+    )
     assert not (tmp_path / "f.png").exists()
 
 
 def test_eval_rollout_without_matplotlib(no_matplotlib, tiny_run, tiny_dataset_master, tmp_path):
-    res = runner.invoke(app, ["eval", "rollout", str(tiny_run), str(tiny_dataset_master), "--windows", "2",
-                              "--horizon", "2", "--out", str(tmp_path / "eval")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "rollout",
+            str(tiny_run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "2",
+            "--out",
+            str(tmp_path / "eval"),
+        ],
+    )
     assert "matplotlib" in one_line_hint(res)
     assert json.loads((tmp_path / "eval" / "rollout.json").read_text())["nmse"]  # the numbers are written

@@ -11,8 +11,14 @@ from typer.testing import CliRunner
 
 from orbitdata.seeding import episode_seed
 from orbitmodel.cli.app import app
-from orbitmodel.evaluate.closed_loop import (ClosedLoopRequest, check_unseen_seeds, closed_loop_report,
-                                             dataset_seeds, fly_closed_loop, grid_seeds)
+from orbitmodel.evaluate.closed_loop import (
+    ClosedLoopRequest,
+    check_unseen_seeds,
+    closed_loop_report,
+    dataset_seeds,
+    fly_closed_loop,
+    grid_seeds,
+)
 from orbitmodel.evaluate.figure6 import plot_figure6, read_report, success_table
 from orbitmodel.plan.config import planner_config
 from orbitmodel.plan.pilot import Variant
@@ -29,8 +35,7 @@ def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
 
     run = tmp_path_factory.mktemp("probed") / "tiny"
     shutil.copytree(tiny_run, run)
-    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe,
-                             device="cpu"))
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
     return run
 
 
@@ -48,9 +53,17 @@ def test_a_colliding_seed_is_refused():
 
 
 def test_a_tiny_closed_loop_episode_runs_end_to_end(probed_run, tmp_path):
-    req = ClosedLoopRequest(variant=Variant.PLANNER, run=probed_run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            settings=planner_config("paper", samples=8, horizon=5), max_steps=6, video_dir=tmp_path / "video",
-                            video_format=".gif")
+    req = ClosedLoopRequest(
+        variant=Variant.PLANNER,
+        run=probed_run,
+        obstacles=(1,),
+        speeds=(1.0,),
+        episodes=1,
+        settings=planner_config("paper", samples=8, horizon=5),
+        max_steps=6,
+        video_dir=tmp_path / "video",
+        video_format=".gif",
+    )
     result = fly_closed_loop(req)
     report = closed_loop_report(req, result)
     (cell,) = report["settings"]
@@ -84,10 +97,36 @@ def test_the_planner_flies_through_orbitdatas_registry(probed_run):
 
 def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path):
     out = tmp_path / "planner.json"
-    res = runner.invoke(app, ["eval", "closed-loop", str(probed_run), "--pilot", "oracle-true-dyn-depth",
-                              "--obstacles", "1", "--speeds", "1,2", "--episodes", "1", "--set", "samples=8",
-                              "--set", "horizon=5", "--max-steps", "4", "--set", "support=3",
-                              "--set", "margin_per_speed=0.15", "--set", "temperature=0.5", "--json", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "closed-loop",
+            str(probed_run),
+            "--pilot",
+            "oracle-true-dyn-depth",
+            "--obstacles",
+            "1",
+            "--speeds",
+            "1,2",
+            "--episodes",
+            "1",
+            "--set",
+            "samples=8",
+            "--set",
+            "horizon=5",
+            "--max-steps",
+            "4",
+            "--set",
+            "support=3",
+            "--set",
+            "margin_per_speed=0.15",
+            "--set",
+            "temperature=0.5",
+            "--json",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     assert "oracle-true-dyn-depth pilot, 1 episodes per setting, seed 0" in res.output and "success %" in res.output
     report = json.loads(out.read_text())
@@ -100,12 +139,18 @@ def test_cli_prints_the_success_table_and_figure6_plots_it(probed_run, tmp_path)
     streamed = read_report(tmp_path / "planner.episodes.jsonl")
     assert streamed["partial"] and streamed["pilot"] == "oracle-true-dyn-depth"
     assert [{k: s[k] for k in streamed["settings"][0]} for s in report["settings"]] == streamed["settings"]
-    expert = {"pilot": "expert", "seed": 0, "settings": [
-        {"obstacles": 1, "speed": v, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}
-        for v in (1.0, 2.0)]}
+    expert = {
+        "pilot": "expert",
+        "seed": 0,
+        "settings": [
+            {"obstacles": 1, "speed": v, "episodes": 1, "success": 1, "collision": 0, "timeout": 0, "out_of_fuel": 0}
+            for v in (1.0, 2.0)
+        ],
+    }
     (tmp_path / "expert.json").write_text(json.dumps(expert))
-    res = runner.invoke(app, ["eval", "figure6", str(tmp_path / "expert.json"), str(out), "--out",
-                              str(tmp_path / "fig6.png")])
+    res = runner.invoke(
+        app, ["eval", "figure6", str(tmp_path / "expert.json"), str(out), "--out", str(tmp_path / "fig6.png")]
+    )
     assert res.exit_code == 0, res.output
     assert (tmp_path / "fig6.png").stat().st_size > 1000
     settings, rates = success_table([expert, report])
@@ -130,12 +175,17 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     base = ["eval", "closed-loop", "--episodes", "1", "--set", "samples=8", "--set", "horizon=5", "--max-steps", "3"]
     assert "no physics probe" in one_line_error(runner.invoke(app, base + [str(tiny_run)]))
     assert "give the run folder" in one_line_error(runner.invoke(app, base))
-    assert "comma-separated" in one_line_error(runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", ","]))
-    assert "obstacle counts" in one_line_error(runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "-1"]))
+    assert "comma-separated" in one_line_error(
+        runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", ","])
+    )
+    assert "obstacle counts" in one_line_error(
+        runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "-1"])
+    )
     toml = tmp_path / "camera.toml"
     toml.write_text("[sim.camera]\nimage_size = 128\n")
-    assert "64 px" in one_line_error(runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth",
-                                                               "--config", str(toml)]))
+    assert "64 px" in one_line_error(
+        runner.invoke(app, base + [str(tiny_run), "--pilot", "oracle-true-dyn-depth", "--config", str(toml)])
+    )
     assert "not an orbitmodel run" in one_line_error(runner.invoke(app, base + [str(tmp_path)]))
     # a run's config.json given for the run: named as a file, with the folder to give instead
     line = one_line_error(runner.invoke(app, base + [str(tiny_run / "config.json")]))
@@ -149,20 +199,52 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
 
 
 def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
-    common = ["eval", "closed-loop", "--pilot", "oracle-true", "--obstacles", "1", "--episodes", "1",
-              "--set", "samples=8", "--set", "horizon=5", "--max-steps", "4"]
+    common = [
+        "eval",
+        "closed-loop",
+        "--pilot",
+        "oracle-true",
+        "--obstacles",
+        "1",
+        "--episodes",
+        "1",
+        "--set",
+        "samples=8",
+        "--set",
+        "horizon=5",
+        "--max-steps",
+        "4",
+    ]
     for name, speeds in (("whole", "1,2"), ("v1", "1"), ("v2", "2")):
         res = runner.invoke(app, [*common, "--speeds", speeds, "--json", str(tmp_path / f"{name}.json")])
         assert res.exit_code == 0, res.output
-    res = runner.invoke(app, ["eval", "merge", str(tmp_path / "v2.json"), str(tmp_path / "v1.json"),
-                              "--json", str(tmp_path / "merged.json")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "merge",
+            str(tmp_path / "v2.json"),
+            str(tmp_path / "v1.json"),
+            "--json",
+            str(tmp_path / "merged.json"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     whole, merged = (json.loads((tmp_path / f"{n}.json").read_text()) for n in ("whole", "merged"))
     assert merged["settings"] == whole["settings"]  # same seeds per setting: the same episodes
     same = lambda e: {k: e[k] for k in ("obstacles", "speed", "seed", "outcome", "frames", "fuel_used")}  # noqa: E731
     assert sorted(map(str, map(same, merged["episodes"]))) == sorted(map(str, map(same, whole["episodes"])))
-    res = runner.invoke(app, ["eval", "merge", str(tmp_path / "v1.json"), str(tmp_path / "whole.json"),
-                              "--json", str(tmp_path / "bad.json")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "merge",
+            str(tmp_path / "v1.json"),
+            str(tmp_path / "whole.json"),
+            "--json",
+            str(tmp_path / "bad.json"),
+        ],
+    )
     assert res.exit_code == 2 and "overlap" in res.output and "Traceback" not in res.output
 
 
@@ -181,8 +263,23 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
     train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
     assert PhysicsProbe.from_pretrained(run).config.dt == pytest.approx(0.08)  # two frames of 0.04 s
     # Table I per frame (the probe's states interpolated between steps), and the latent curves per step
-    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "4",
-                              "--horizon", "6", "--out", str(tmp_path / "eval")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "probe",
+            str(run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "4",
+            "--horizon",
+            "6",
+            "--out",
+            str(tmp_path / "eval"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     table = json.loads((tmp_path / "eval" / "probe_table.json").read_text())
     assert table["frame_step"] == 2 and table["context"] == 7  # 4 latents: frames 0, 2, 4, 6
@@ -191,18 +288,45 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
     assert "not trained for a frame-step run" in note and "--state-only` first" not in note
     odd = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "5"])
     assert odd.exit_code == 2 and "multiples of 2" in odd.output
-    res = runner.invoke(app, ["eval", "rollout", str(run), str(tiny_dataset_master), "--windows", "2",
-                              "--horizon", "3", "--out", str(tmp_path / "rollout")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "rollout",
+            str(run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "3",
+            "--out",
+            str(tmp_path / "rollout"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     curves = json.loads((tmp_path / "rollout" / "rollout.json").read_text())
     assert curves["frame_step"] == 2 and len(curves["nmse"]) == 3  # 3 steps of 2 frames
-    req = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            settings=planner_config("paper", samples=8, horizon=6), max_steps=6)
+    req = ClosedLoopRequest(
+        variant=Variant.PLANNER,
+        run=run,
+        obstacles=(1,),
+        speeds=(1.0,),
+        episodes=1,
+        settings=planner_config("paper", samples=8, horizon=6),
+        max_steps=6,
+    )
     report = closed_loop_report(req, fly_closed_loop(req))
     (episode,) = report["episodes"]
     assert episode["replans"] == episode["frames"] - 1 and episode["nonfinite_actions"] == 0
-    bad = ClosedLoopRequest(variant=Variant.PLANNER, run=run, obstacles=(1,), speeds=(1.0,), episodes=1,
-                            settings=planner_config("paper", samples=8, horizon=5), max_steps=6)
+    bad = ClosedLoopRequest(
+        variant=Variant.PLANNER,
+        run=run,
+        obstacles=(1,),
+        speeds=(1.0,),
+        episodes=1,
+        settings=planner_config("paper", samples=8, horizon=5),
+        max_steps=6,
+    )
     with pytest.raises(RunError, match="multiple of 2"):
         fly_closed_loop(bad)
 

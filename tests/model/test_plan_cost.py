@@ -23,8 +23,9 @@ def states_along(positions: torch.Tensor, velocity=(1.0, 0.0, 0.0)) -> torch.Ten
 
 def test_collision_ramp():
     c = CostConfig()
-    clearance = torch.tensor([10.0, c.hull_radius + c.margin + 1e-3, c.hull_radius + c.margin / 2, c.hull_radius,
-                              0.0, -1.0])
+    clearance = torch.tensor(
+        [10.0, c.hull_radius + c.margin + 1e-3, c.hull_radius + c.margin / 2, c.hull_radius, 0.0, -1.0]
+    )
     ramp = collision_ramp(clearance, c)
     assert ramp[0] == 0 and ramp[1] == 0
     assert 0 < ramp[2] < 1 and ramp[3] == 1 and ramp[4] == 1 and ramp[5] == 1
@@ -70,7 +71,9 @@ def test_effort_spin_heading_and_speed_terms():
     fast = states_along(pos[:1], (c.max_speed + 1, 0, 0))
     fast[..., 12] = 2.0  # spinning
     _, terms = trajectory_cost(fast, torch.ones(1, 5, 8), torch.ones(3), 0.5, empty, c)
-    assert terms["speed"][0] > 0 and terms["spin"][0] > 0 and torch.isclose(terms["effort"][0], torch.tensor(8 * c.effort))
+    assert (
+        terms["speed"][0] > 0 and terms["spin"][0] > 0 and torch.isclose(terms["effort"][0], torch.tensor(8 * c.effort))
+    )
 
 
 def test_a_speed_scaled_margin_and_urgency_make_fast_and_soon_contacts_costlier():

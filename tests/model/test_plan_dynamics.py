@@ -11,17 +11,21 @@ from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitdata.state import so3_log
 from orbitmodel.config import get_preset
+from orbitmodel.kinematics import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
-from orbitmodel.kinematics import matrix_to_rot6d, rot6d_to_matrix, so3_exp
 
 torch.set_num_threads(1)
 
 
 def _scenario() -> Scenario:
     q = np.array([0.9, 0.1, 0.3, -0.2])
-    return Scenario(obstacles=(), goal=(10.0, 0.0, 0.0), initial_velocity=(1.0, 0.3, -0.2),
-                    initial_quat=tuple(q / np.linalg.norm(q)))
+    return Scenario(
+        obstacles=(),
+        goal=(10.0, 0.0, 0.0),
+        initial_velocity=(1.0, 0.3, -0.2),
+        initial_quat=tuple(q / np.linalg.norm(q)),
+    )
 
 
 def fly_mujoco(actions: np.ndarray, sim: SimConfig) -> tuple[np.ndarray, np.ndarray]:
@@ -39,9 +43,13 @@ def fly_mujoco(actions: np.ndarray, sim: SimConfig) -> tuple[np.ndarray, np.ndar
 def errors(pred: np.ndarray, true: np.ndarray) -> dict:
     Rp, Rt = rot6d_to_matrix(torch.tensor(pred[:, 6:12])).numpy(), rot6d_to_matrix(torch.tensor(true[:, 6:12])).numpy()
     angle = max(np.linalg.norm(so3_log(a.T @ b)) for a, b in zip(Rp, Rt))
-    return {"p": np.abs(pred[:, 0:3] - true[:, 0:3]).max(), "v": np.abs(pred[:, 3:6] - true[:, 3:6]).max(),
-            "angle": angle, "w": np.abs(pred[:, 12:15] - true[:, 12:15]).max(),
-            "fuel": np.abs(pred[:, 15] - true[:, 15]).max()}
+    return {
+        "p": np.abs(pred[:, 0:3] - true[:, 0:3]).max(),
+        "v": np.abs(pred[:, 3:6] - true[:, 3:6]).max(),
+        "angle": angle,
+        "w": np.abs(pred[:, 12:15] - true[:, 12:15]).max(),
+        "fuel": np.abs(pred[:, 15] - true[:, 15]).max(),
+    }
 
 
 def random_thrusts(rng: np.random.Generator, steps: int, high: float) -> np.ndarray:
@@ -52,8 +60,9 @@ def test_rigid_body_with_the_simulators_substeps_is_mujoco():
     sim = SimConfig(render=False)
     actions = random_thrusts(np.random.default_rng(0), 25, 1.0)  # up to ~15 rad/s spins
     start, true = fly_mujoco(actions, sim)
-    pred = RigidBodyDynamics(sim, substeps=sim.substeps).rollout(torch.tensor(start),
-                                                                 torch.tensor(actions, dtype=torch.float32)[None])[0]
+    pred = RigidBodyDynamics(sim, substeps=sim.substeps).rollout(
+        torch.tensor(start), torch.tensor(actions, dtype=torch.float32)[None]
+    )[0]
     e = errors(pred.numpy(), true)
     # float32 against MuJoCo's float64: the same scheme, rounding only.
     assert e["p"] < 1e-4 and e["v"] < 1e-4 and e["angle"] < 2e-3 and e["w"] < 1e-4 and e["fuel"] < 1e-5, e
@@ -66,8 +75,9 @@ def test_rigid_body_one_substep_is_close_to_mujoco():
     sim = SimConfig(render=False)
     actions = random_thrusts(np.random.default_rng(0), 25, 0.3)
     start, true = fly_mujoco(actions, sim)
-    pred = RigidBodyDynamics(sim, substeps=1).rollout(torch.tensor(start),
-                                                      torch.tensor(actions, dtype=torch.float32)[None])[0]
+    pred = RigidBodyDynamics(sim, substeps=1).rollout(
+        torch.tensor(start), torch.tensor(actions, dtype=torch.float32)[None]
+    )[0]
     e = errors(pred.numpy(), true)
     assert e["p"] < 5e-3 and e["v"] < 2e-2 and e["angle"] < 1e-2 and e["w"] < 1e-4 and e["fuel"] < 1e-5, e
 
@@ -77,11 +87,14 @@ def test_rigid_body_empties_the_tank_as_the_simulator_does():
 
     # A 3 g tank, the top ring at full thrust (29 g/s): two full steps, then a third scaled to
     # the 0.67 step of fuel left; the env ends the episode there, the model coasts on.
-    sim = dataclasses.replace(SimConfig(render=False), cubesat=dataclasses.replace(SimConfig().cubesat, fuel_mass=0.003))
+    sim = dataclasses.replace(
+        SimConfig(render=False), cubesat=dataclasses.replace(SimConfig().cubesat, fuel_mass=0.003)
+    )
     actions = np.tile([1.0, 1, 1, 1, 0, 0, 0, 0], (6, 1))
     start, true = fly_mujoco(actions[:3], sim)
-    pred = RigidBodyDynamics(sim, substeps=sim.substeps).rollout(torch.tensor(start),
-                                                                 torch.tensor(actions, dtype=torch.float32)[None])[0]
+    pred = RigidBodyDynamics(sim, substeps=sim.substeps).rollout(
+        torch.tensor(start), torch.tensor(actions, dtype=torch.float32)[None]
+    )[0]
     e = errors(pred[:3].numpy(), true)
     assert e["v"] < 1e-4 and e["fuel"] < 1e-5, e
     assert true[2, 15] == 0 and pred[2, 15] == 0
@@ -114,8 +127,14 @@ class StandInProbe:
     """The probe's API (``per_frame``): the initial state held, shifted by the latent mean, at each
     latent, and interpolated between them."""
 
-    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor, frame_step: int,
-                  actions: torch.Tensor | None = None):
+    def per_frame(
+        self,
+        z_future: torch.Tensor,
+        state0: torch.Tensor,
+        z_last: torch.Tensor,
+        frame_step: int,
+        actions: torch.Tensor | None = None,
+    ):
         from orbitmodel.kinematics import interpolate_frames
 
         self.actions = actions  # what the planner hands a probe that reads thrusts
@@ -184,8 +203,9 @@ def test_learned_dynamics_with_a_frame_step_sees_every_step_th_frame_and_grouped
         obs = {"image": rng.integers(0, 255, (64, 64, 3), dtype=np.uint8), "state": np.zeros(16, np.float32)}
         dyn.observe(obs, None if t == 0 else taken[-1])
         with torch.no_grad():
-            latents.append(model.encode(torch.from_numpy(obs["image"]).permute(2, 0, 1)[None, None],
-                                        torch.zeros(1, 1, 16))[0, 0])
+            latents.append(
+                model.encode(torch.from_numpy(obs["image"]).permute(2, 0, 1)[None, None], torch.zeros(1, 1, 16))[0, 0]
+            )
         taken.append(rng.uniform(0, 1, 8).astype(np.float32))
     plan = torch.rand(4, 6, 8)  # H = 6 frames = 2 predictor steps
     states = dyn.rollout(torch.zeros(16), plan)
@@ -202,8 +222,10 @@ def test_learned_dynamics_with_a_frame_step_sees_every_step_th_frame_and_grouped
     # at the start of an episode the context holds the frames one step apart that exist: frame 3, not 1..3
     dyn.reset()
     for t in range(4):
-        dyn.observe({"image": np.zeros((64, 64, 3), np.uint8), "state": np.zeros(16, np.float32)},
-                    None if t == 0 else taken[t - 1])
+        dyn.observe(
+            {"image": np.zeros((64, 64, 3), np.uint8), "state": np.zeros(16, np.float32)},
+            None if t == 0 else taken[t - 1],
+        )
     dyn.rollout(torch.zeros(16), plan)
     assert model.seen[0].shape[1] == 2 and model.seen[1].shape[1] == 1 + 2  # frames 0 and 3
 

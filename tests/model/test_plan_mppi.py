@@ -17,8 +17,7 @@ def converge(target: torch.Tensor, rounds: int = 60, smoothing: float = 0.0) -> 
     # A temperature that keeps ~150 of 256 samples effective: each round is then close to a
     # gradient step of size noise_std^2 / temperature (0.05 of the way), with little noise.
     H, A = target.shape
-    mppi = MPPI(MPPIConfig(samples=256, horizon=H, noise_std=0.1, temperature=0.2, smoothing=smoothing),
-                action_dim=A)
+    mppi = MPPI(MPPIConfig(samples=256, horizon=H, noise_std=0.1, temperature=0.2, smoothing=smoothing), action_dim=A)
     g = torch.Generator().manual_seed(0)
     for _ in range(rounds):
         mppi.optimize(quadratic(target), g)

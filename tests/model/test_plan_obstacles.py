@@ -13,8 +13,7 @@ from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitdata.state import make_state
-from orbitmodel.plan.obstacles import Camera, PointCloud, PointMemory, TrueObstacles, depth_to_points
-from orbitmodel.plan.obstacles import signed_distance
+from orbitmodel.plan.obstacles import Camera, PointCloud, PointMemory, TrueObstacles, depth_to_points, signed_distance
 
 torch.set_num_threads(1)
 
@@ -56,8 +55,15 @@ def test_rendered_sphere_back_projects_onto_its_surface(quat):
     sim = SimConfig(camera=CameraConfig(image_size=64))
     centre, radius = np.array([4.0, 1.5, -0.5]), 1.2
     env = CubeSatEnv(sim)
-    obs, _ = env.reset(options={"scenario": Scenario(obstacles=(Obstacle("sphere", tuple(centre), (radius, 0, 0)),),
-                                                     goal=(10.0, 0, 0), initial_quat=_quat(quat))})
+    obs, _ = env.reset(
+        options={
+            "scenario": Scenario(
+                obstacles=(Obstacle("sphere", tuple(centre), (radius, 0, 0)),),
+                goal=(10.0, 0, 0),
+                initial_quat=_quat(quat),
+            )
+        }
+    )
     env.close()
     points, _ = depth_to_points(obs["depth_low"], obs["state"], Camera.from_sim(sim), max_range=50.0)
     # Cells whose 4x4 pixels all hit the sphere are means of its z-depth over the cell: they lie
@@ -76,8 +82,9 @@ def test_far_cells_are_dropped():
     depth[3, 4] = 5.0
     depth[5, 5] = 15.0  # beyond max_range
     depth[6, 6] = np.nan
-    points, _ = depth_to_points(depth, make_state(np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), 1.0), cam,
-                                max_range=10.0)
+    points, _ = depth_to_points(
+        depth, make_state(np.zeros(3), np.zeros(3), np.eye(3), np.zeros(3), 1.0), cam, max_range=10.0
+    )
     assert len(points) == 1
 
 

@@ -10,19 +10,19 @@ import numpy as np
 import pytest
 import torch
 
+from orbitdata.fly.pilot import Task
+from orbitdata.fly.rollout import fly_episode
 from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.seeding import grid_seed
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitmodel.config import get_preset
-from orbitdata.fly.pilot import Task
-from orbitdata.fly.rollout import fly_episode
 from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.config import PlannerConfig
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.factory import PredictedDepth, sensor_depth
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera
-from orbitmodel.plan.config import PlannerConfig
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 
 torch.set_num_threads(1)
@@ -35,8 +35,14 @@ AT_REST = np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32
 class StandInProbe:
     """The probe's API for a per-frame world model: the state held, nudged by the latents."""
 
-    def per_frame(self, z_future: torch.Tensor, state0: torch.Tensor, z_last: torch.Tensor, frame_step: int,
-                  actions: torch.Tensor | None = None):
+    def per_frame(
+        self,
+        z_future: torch.Tensor,
+        state0: torch.Tensor,
+        z_last: torch.Tensor,
+        frame_step: int,
+        actions: torch.Tensor | None = None,
+    ):
         assert frame_step == 1
         return state0[:, None].expand(-1, z_future.shape[1], -1) + 0.01 * z_future[..., :1]
 
@@ -46,13 +52,20 @@ stand_in_probe = StandInProbe()
 
 def learned_planner(config: PlannerConfig = SMALL, model: WorldModel | None = None) -> PlannerPilot:
     model = model or WorldModel(get_preset("tiny").model).eval()
-    return PlannerPilot(Variant.PLANNER, LearnedDynamics(model, stand_in_probe), PredictedDepth(model),
-                        Camera.from_sim(SIM), config, SIM)
+    return PlannerPilot(
+        Variant.PLANNER,
+        LearnedDynamics(model, stand_in_probe),
+        PredictedDepth(model),
+        Camera.from_sim(SIM),
+        config,
+        SIM,
+    )
 
 
 def sensor_planner(config: PlannerConfig = SMALL) -> PlannerPilot:
-    return PlannerPilot(Variant.ORACLE_TRUE_DYN_SENSOR, RigidBodyDynamics(SIM), sensor_depth, Camera.from_sim(SIM),
-                        config, SIM)
+    return PlannerPilot(
+        Variant.ORACLE_TRUE_DYN_SENSOR, RigidBodyDynamics(SIM), sensor_depth, Camera.from_sim(SIM), config, SIM
+    )
 
 
 def reachable(root, kinds: tuple[type, ...], limit: int = 200_000) -> list:
@@ -105,7 +118,7 @@ def test_the_planner_pilot_never_receives_the_obstacles(make):
     result = fly_episode(env, spy, grid_seed(0, 3, 1.0, 0), 3, 1.0)
     env.close()
     assert len(result.scenario.obstacles) == 3 and result.length > 1
-    (args, kwargs), = spy.resets
+    ((args, kwargs),) = spy.resets
     assert kwargs == {} and len(args) == 1 and isinstance(args[0], Task)
     sensor = {"depth", "depth_low"} if pilot.variant == Variant.ORACLE_TRUE_DYN_SENSOR else set()
     assert all(keys == {"state", "image"} | sensor for keys in spy.observations)  # the rendered depth: sensor only
@@ -141,8 +154,7 @@ def test_nan_and_out_of_range_thrusts_never_reach_the_simulator():
         pilot.mppi.nominal = torch.tensor([[float("nan"), 1.5, -0.2, 0.5, 0, 0, 0, 0]] * 5)
 
     pilot._replan = lambda obs: broken(None, None)
-    obs = {"state": AT_REST,
-           "depth_low": np.full((16, 16), 50.1, np.float32)}
+    obs = {"state": AT_REST, "depth_low": np.full((16, 16), 50.1, np.float32)}
     action = pilot.act(obs)
     assert np.isfinite(action).all() and action.min() >= 0 and action.max() <= 1
     assert action.tolist() == [0, 1, 0, 0.5, 0, 0, 0, 0]
@@ -208,8 +220,17 @@ def test_the_dynamics_and_the_depth_head_share_one_encoder_pass_per_frame():
     assert len(calls) == 4  # + the two reference passes above + this one
 
 
-@pytest.mark.parametrize("bad", [dict(support=9), dict(support=-1), dict(memory_frames=0), dict(replan_every=0),
-                                 dict(depth_head="best"), dict(noise="colour")])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        dict(support=9),
+        dict(support=-1),
+        dict(memory_frames=0),
+        dict(replan_every=0),
+        dict(depth_head="best"),
+        dict(noise="colour"),
+    ],
+)
 def test_a_planner_config_out_of_range_is_refused_by_name(bad):
     (key,) = bad
     with pytest.raises(ValueError, match=key):

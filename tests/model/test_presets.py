@@ -15,8 +15,12 @@ def test_each_preset_carries_its_probe_recipe():
     assert (get_preset("paper").probe.inputs, get_preset("paper").probe.integrator) == ("latent", "upstream")
     assert get_preset("paper").probe == ProbeRecipe()  # upstream's recipe, written once
     cpu = get_preset("cpu").probe
-    assert (cpu.inputs, cpu.integrator, cpu.train.weights[-1], cpu.train.loop.epochs) == ("latent+change", "coasting",
-                                                                                          100.0, 60)
+    assert (cpu.inputs, cpu.integrator, cpu.train.weights[-1], cpu.train.loop.epochs) == (
+        "latent+change",
+        "coasting",
+        100.0,
+        60,
+    )
 
 
 def test_the_flown_preset_is_the_cpu_preset_stepping_five_frames():
@@ -26,8 +30,12 @@ def test_the_flown_preset_is_the_cpu_preset_stepping_five_frames():
     cpu, flown = get_preset("cpu"), get_preset("cpu-step5")
     assert flown.model == dataclasses.replace(cpu.model, frame_step=5, lambda_sigreg=0.4)
     assert flown.train == dataclasses.replace(cpu.train, val_fraction=0.05)
-    assert flown.probe == dataclasses.replace(cpu.probe, inputs="latent+change+thrust", per_frame=True,
-                                              train=dataclasses.replace(cpu.probe.train, increment_weight=100.0))
+    assert flown.probe == dataclasses.replace(
+        cpu.probe,
+        inputs="latent+change+thrust",
+        per_frame=True,
+        train=dataclasses.replace(cpu.probe.train, increment_weight=100.0),
+    )
 
 
 def test_a_custom_preset_keeps_its_recipe_through_the_run_config():
@@ -71,8 +79,11 @@ def flat(train: dict) -> dict:
 def test_a_flat_stage1_config_from_before_the_loop_field_reads_as_the_nested_one(name):
     nested = json.loads(json.dumps(get_preset(name).to_dict()))
     assert set(nested["train"]["loop"]) >= {"lr", "epochs", "max_steps", "seed"}  # new runs write the nested shape
-    old = {**nested, "train": flat(nested["train"]),
-           "probe": {**nested["probe"], "train": flat(nested["probe"]["train"])}}
+    old = {
+        **nested,
+        "train": flat(nested["train"]),
+        "probe": {**nested["probe"], "train": flat(nested["probe"]["train"])},
+    }
     assert "loop" not in old["train"] and old["train"]["batch_size"] == nested["train"]["loop"]["batch_size"]
     assert Preset.from_dict(old) == Preset.from_dict(nested) == get_preset(name)
 
@@ -90,8 +101,9 @@ def test_a_config_with_the_loop_settings_in_both_places_is_refused():
         TrainConfig.from_dict({**train, "epochs": 3})
 
 
-@pytest.mark.parametrize("train", [TrainConfig(), ProbeTrainConfig(), PolicyTrainConfig()],
-                         ids=lambda t: type(t).__name__)
+@pytest.mark.parametrize(
+    "train", [TrainConfig(), ProbeTrainConfig(), PolicyTrainConfig()], ids=lambda t: type(t).__name__
+)
 def test_flat_names_route_into_the_loop_and_its_checks_hold_for_every_stage(train):
     """``with_train(lr=...)``, ``--lr``: a loop setting by its own name lands in ``loop``, the
     stage's own settings stay its own, and the loop's checks are the same in every stage."""
@@ -99,8 +111,12 @@ def test_flat_names_route_into_the_loop_and_its_checks_hold_for_every_stage(trai
     assert (changed.loop.lr, changed.loop.max_steps, changed.loop.seed) == (0.5, 7, train.loop.seed)
     assert changed.to_dict()["loop"]["lr"] == 0.5 and "lr" not in changed.to_dict() and not hasattr(changed, "lr")
     assert type(changed).from_dict(json.loads(json.dumps(changed.to_dict()))) == changed
-    for bad, message in (({"epochs": 0}, "give epochs >= 1"), ({"max_steps": -1}, "max_steps >= 0"),
-                         ({"warmup": 1.0}, r"warmup=1.0 is a fraction"), ({"batch_size": 0}, "batch_size=0")):
+    for bad, message in (
+        ({"epochs": 0}, "give epochs >= 1"),
+        ({"max_steps": -1}, "max_steps >= 0"),
+        ({"warmup": 1.0}, r"warmup=1.0 is a fraction"),
+        ({"batch_size": 0}, "batch_size=0"),
+    ):
         with pytest.raises(ValueError, match=message):
             train.with_changes(**bad)
     with pytest.raises(TypeError):

@@ -6,10 +6,10 @@ import pytest
 import torch
 
 from orbitdata import schema as S
+from orbitmodel.kinematics import FUEL, ROT, P, V, W, geodesic_angle, hat, matrix_to_rot6d, rot6d_to_matrix
+from orbitmodel.kinematics import so3_exp as exp_so3
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics, constant_velocity
 from orbitmodel.probe.config import ProbeConfig
-from orbitmodel.kinematics import FUEL, P, ROT, V, W, geodesic_angle, hat, matrix_to_rot6d, rot6d_to_matrix
-from orbitmodel.kinematics import so3_exp as exp_so3
 from orbitmodel.probe.integrator import increments_of, integrate, step
 from orbitmodel.probe.model import PhysicsProbe
 
@@ -18,8 +18,15 @@ DT = S.DT
 
 def make_state(B=1, p=(0, 0, 0), v=(0, 0, 0), R=None, w=(0, 0, 0), fuel=0.8) -> torch.Tensor:
     R = torch.eye(3) if R is None else R
-    one = torch.cat([torch.tensor(p, dtype=torch.float32), torch.tensor(v, dtype=torch.float32),
-                     matrix_to_rot6d(R.float()), torch.tensor(w, dtype=torch.float32), torch.tensor([fuel])])
+    one = torch.cat(
+        [
+            torch.tensor(p, dtype=torch.float32),
+            torch.tensor(v, dtype=torch.float32),
+            matrix_to_rot6d(R.float()),
+            torch.tensor(w, dtype=torch.float32),
+            torch.tensor([fuel]),
+        ]
+    )
     return one.expand(B, S.STATE_DIM).clone()
 
 
@@ -193,8 +200,9 @@ def test_both_integrators_agree_with_their_step_and_invert_their_increments(coas
         x = step(x, inc[:, k], coasting=coasting)
         assert torch.allclose(out[:, k], x, atol=1e-5)
     trajectory = torch.cat([state[:, None], out], dim=1)
-    assert torch.allclose(integrate(state, increments_of(trajectory, coasting=coasting), coasting=coasting), out,
-                          atol=1e-5)
+    assert torch.allclose(
+        integrate(state, increments_of(trajectory, coasting=coasting), coasting=coasting), out, atol=1e-5
+    )
 
 
 def test_coasting_with_zero_increments_is_constant_velocity():
@@ -241,7 +249,7 @@ def test_a_per_frame_probe_gives_each_frame_of_a_latent_step_its_own_increments(
     inc = probe.increments(z)  # (2, 12, 10)
     assert inc.shape == (2, 4 * s, 10)
     raw = probe.increments.net(z).reshape(2, 4, s, 10) * probe.increments.scale
-    assert torch.equal(inc[:, s:2 * s], raw[:, 1])  # latent 2 owns frames 4..6
+    assert torch.equal(inc[:, s : 2 * s], raw[:, 1])  # latent 2 owns frames 4..6
     out = probe.per_frame(z, state, None, s)
     assert torch.equal(out, integrate(state, inc, dt, coasting=True)) and out.shape == (2, 12, 16)
     with pytest.raises(ValueError, match="predicts 3 frames per latent"):

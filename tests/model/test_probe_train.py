@@ -13,8 +13,8 @@ from typer.testing import CliRunner
 from orbitdata import schema as S
 from orbitdata.load import load_windows
 from orbitmodel.cli.app import app
-from orbitmodel.probe.cache import CACHE_FILE, LAST, LATENT
 from orbitmodel.config import get_preset
+from orbitmodel.probe.cache import CACHE_FILE, LAST, LATENT
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.evaluate import PAPER, QUANTITIES, ROWS, TABLE_JSON, TABLE_MD
 from orbitmodel.probe.model import PhysicsProbe
@@ -33,8 +33,9 @@ def run(tiny_run, tmp_path):
 
 
 def request(run, dataset, kind="latent", **changes):
-    return ProbeRequest(run=run, dataset=str(dataset), recipe=get_preset("tiny").probe.with_changes(**changes),
-                        kind=kind, device="cpu")
+    return ProbeRequest(
+        run=run, dataset=str(dataset), recipe=get_preset("tiny").probe.with_changes(**changes), kind=kind, device="cpu"
+    )
 
 
 def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
@@ -45,8 +46,13 @@ def test_the_world_model_stays_frozen_bit_for_bit(run, tiny_dataset_master):
     t = get_preset("tiny").probe.train.with_changes(cache_windows=0, max_steps=4)
     probe = PhysicsProbe(ProbeConfig(latent_dim=32, hidden=32))
     module = LatentObjective(world_model, probe, t).train()
-    windows = load_windows(tiny_dataset_master, context=t.context, horizon=t.horizon, stride=t.window_stride,
-                           columns=[S.IMAGE, S.STATE, S.ACTION])
+    windows = load_windows(
+        tiny_dataset_master,
+        context=t.context,
+        horizon=t.horizon,
+        stride=t.window_stride,
+        columns=[S.IMAGE, S.STATE, S.ACTION],
+    )
     out = run / "probe"
     RunDir(out).start({"stage": "probe"}, resume=False, overwrite=False)
     fit(ProbeJob(module, probe, "latent", t.context), windows, t.loop, RunDir(out), torch.device("cpu"))
@@ -65,8 +71,11 @@ def test_probe_trains_and_the_loss_falls(run, tiny_dataset_master):
 
     def loss(probe):
         with torch.no_grad():
-            return float(LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION], z_future=batch[LATENT],
-                                                                z_last=batch[LAST])[0])
+            return float(
+                LatentObjective(world_model, probe, t)(
+                    batch[S.STATE], batch[S.ACTION], z_future=batch[LATENT], z_last=batch[LAST]
+                )[0]
+            )
 
     trained = PhysicsProbe.from_pretrained(run)
     untrained = PhysicsProbe(trained.config)  # zero increments: coasting
@@ -84,8 +93,15 @@ def test_a_per_frame_probe_is_scored_on_every_frame_after_the_context(tiny_datas
 
     s, preset = 2, get_preset("tiny").with_model(frame_step=2)
     t = preset.probe.train  # context 4, horizon 4 model steps
-    windows = load_model_windows(str(tiny_dataset_master), s, split="train", context=t.context, horizon=t.horizon,
-                                 columns=[S.IMAGE, S.STATE, S.ACTION], frame_states=True)
+    windows = load_model_windows(
+        str(tiny_dataset_master),
+        s,
+        split="train",
+        context=t.context,
+        horizon=t.horizon,
+        columns=[S.IMAGE, S.STATE, S.ACTION],
+        frame_states=True,
+    )
     batch = windows.__getitems__([0, 5, 9]).stacked
     assert batch[FRAME_STATES].shape[1] == (t.context + t.horizon) * s
     assert torch.equal(batch[FRAME_STATES][:, ::s], batch[S.STATE])  # a model step's state is its first frame's
@@ -93,10 +109,11 @@ def test_a_per_frame_probe_is_scored_on_every_frame_after_the_context(tiny_datas
     assert (config.substeps, config.dt) == (s, S.DT)
     objective = LatentObjective(WorldModel(preset.model), PhysicsProbe(config), t)
     with torch.no_grad():
-        got = objective(batch[S.STATE], batch[S.ACTION], images=batch[S.IMAGE][:, :t.context],
-                        frame_states=batch[FRAME_STATES])[0]
+        got = objective(
+            batch[S.STATE], batch[S.ACTION], images=batch[S.IMAGE][:, : t.context], frame_states=batch[FRAME_STATES]
+        )[0]
     start = (t.context - 1) * s
-    truth = batch[FRAME_STATES][:, start + 1:start + 1 + t.horizon * s]
+    truth = batch[FRAME_STATES][:, start + 1 : start + 1 + t.horizon * s]
     expected = state_loss(constant_velocity(batch[S.STATE][:, t.context - 1], t.horizon * s, S.DT), truth, t.weights)[0]
     assert torch.allclose(got, expected)
 
@@ -113,24 +130,32 @@ def test_the_increment_loss_scores_each_frames_change_in_output_units(tiny_datas
 
     s, preset = 2, get_preset("tiny").with_model(frame_step=2)
     t = preset.probe.train
-    windows = load_model_windows(str(tiny_dataset_master), s, split="train", context=t.context, horizon=t.horizon,
-                                 columns=[S.IMAGE, S.STATE, S.ACTION], frame_states=True)
+    windows = load_model_windows(
+        str(tiny_dataset_master),
+        s,
+        split="train",
+        context=t.context,
+        horizon=t.horizon,
+        columns=[S.IMAGE, S.STATE, S.ACTION],
+        frame_states=True,
+    )
     batch = windows.__getitems__([0, 5]).stacked
     recipe = preset.probe.with_changes(per_frame=True, inputs="latent+change+thrust")
     probe = PhysicsProbe(probe_config(recipe, "latent", preset.model.latent_dim, s))
     torch.nn.init.normal_(probe.increments.thrust_net[-1].weight, generator=torch.Generator().manual_seed(0))
     probe.increments.set_scale(torch.linspace(0.5, 2.0, 10))
     world_model = WorldModel(preset.model)
-    args = dict(images=batch[S.IMAGE][:, :t.context], frame_states=batch[FRAME_STATES])
+    args = dict(images=batch[S.IMAGE][:, : t.context], frame_states=batch[FRAME_STATES])
     with torch.no_grad():
         plain, _ = LatentObjective(world_model, probe, t)(batch[S.STATE], batch[S.ACTION], **args)
         both, parts = LatentObjective(world_model, probe, dataclasses.replace(t, increment_weight=3.0))(
-            batch[S.STATE], batch[S.ACTION], **args)
-        z = world_model.encode(batch[S.IMAGE][:, :t.context], batch[S.STATE][:, :t.context])
+            batch[S.STATE], batch[S.ACTION], **args
+        )
+        z = world_model.encode(batch[S.IMAGE][:, : t.context], batch[S.STATE][:, : t.context])
         z_future = world_model.rollout(z, batch[S.ACTION][:, :-1])
-        inc = probe.step_increments(z_future, z[:, -1], batch[S.ACTION][:, t.context - 1:-1])
+        inc = probe.step_increments(z_future, z[:, -1], batch[S.ACTION][:, t.context - 1 : -1])
     start = (t.context - 1) * s
-    true = increments_of(batch[FRAME_STATES][:, start:start + 1 + t.horizon * s], S.DT, coasting=True)
+    true = increments_of(batch[FRAME_STATES][:, start : start + 1 + t.horizon * s], S.DT, coasting=True)
     expected = ((inc - true) / probe.increments.scale).pow(2).mean()
     assert torch.allclose(parts["increments"], expected) and torch.allclose(both, plain + 3 * expected)
 
@@ -155,8 +180,9 @@ def test_a_probe_run_with_a_flat_training_config_resumes_as_the_same_run(run, ti
     path = run / "probe" / "config.json"
     nested = json.loads(path.read_text())
     train = nested["train"]
-    path.write_text(json.dumps({**nested, "train": {**{k: v for k, v in train.items() if k != "loop"},
-                                                    **train["loop"]}}))
+    path.write_text(
+        json.dumps({**nested, "train": {**{k: v for k, v in train.items() if k != "loop"}, **train["loop"]}})
+    )
     (run / "probe" / "model.safetensors").unlink()
     with pytest.raises(RunError, match=r"another config \(differs in: train\)"):
         train_probe(replace(request(run, tiny_dataset_master, epochs=2), resume=True))
@@ -192,8 +218,23 @@ def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
     config = PhysicsProbe.from_pretrained(run).config
     assert (config.integrator, config.inputs) == ("coasting", "latent+change")  # the defaults
     out = tmp_path / "eval"
-    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2",
-                              "--horizon", "25", "--horizon", "50", "--out", str(out)])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "probe",
+            str(run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "25",
+            "--horizon",
+            "50",
+            "--out",
+            str(out),
+        ],
+    )
     assert res.exit_code == 0, res.output
     result = json.loads((out / TABLE_JSON).read_text())
     for row in ROWS:
@@ -229,13 +270,16 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     config["preset"]["model"]["image_size"] = 32
     (other_size / "config.json").write_text(json.dumps(config))
     one_line_error(runner.invoke(app, ["probe", str(other_size), data]), "holds 64 px")
-    one_line_error(runner.invoke(app, ["probe", str(run), data, "--state-only", "--increment-weight", "1"]),
-                   "--increment-weight")
+    one_line_error(
+        runner.invoke(app, ["probe", str(run), data, "--state-only", "--increment-weight", "1"]), "--increment-weight"
+    )
     for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1"):
         one_line_error(runner.invoke(app, ["probe", str(run), data, "--loss-weights", bad]), "--loss-weights")
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
-    one_line_error(runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5",
-                                       "--no-figures"]), "test episodes")
+    one_line_error(
+        runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5", "--no-figures"]),
+        "test episodes",
+    )
 
 
 def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, tiny_dataset_master, tmp_path):
@@ -251,10 +295,27 @@ def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, ti
     res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu"])
     assert res.exit_code == 0, res.output
     probe = json.loads((custom / "probe" / "config.json").read_text())
-    assert (probe["probe"]["inputs"], probe["probe"]["integrator"], probe["probe"]["hidden"]) == ("latent", "upstream", 24)
+    assert (probe["probe"]["inputs"], probe["probe"]["integrator"], probe["probe"]["hidden"]) == (
+        "latent",
+        "upstream",
+        24,
+    )
     assert probe["train"]["loop"]["epochs"] == 1 and probe["train"]["weights"] == [1, 2, 3, 4, 5]
-    res = runner.invoke(app, ["probe", str(custom), str(tiny_dataset_master), "--device", "cpu", "--overwrite",
-                              "--inputs", "latent+change", "--epochs", "2"])  # flags change single settings
+    res = runner.invoke(
+        app,
+        [
+            "probe",
+            str(custom),
+            str(tiny_dataset_master),
+            "--device",
+            "cpu",
+            "--overwrite",
+            "--inputs",
+            "latent+change",
+            "--epochs",
+            "2",
+        ],
+    )  # flags change single settings
     probe = json.loads((custom / "probe" / "config.json").read_text())
     assert res.exit_code == 0 and probe["probe"]["inputs"] == "latent+change" and probe["train"]["loop"]["epochs"] == 2
 
@@ -276,13 +337,35 @@ def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset
 
     run = tmp_path / "wm"  # trained long enough that its predictor, and so the history, matters
     s = frame_step
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), device="cpu", out=run,
-                                    preset=get_preset("tiny").with_model(frame_step=s).with_train(max_steps=30, lr=1e-2)))
+    train_world_model(
+        Stage1Request(
+            dataset=str(tiny_dataset_master),
+            device="cpu",
+            out=run,
+            preset=get_preset("tiny").with_model(frame_step=s).with_train(max_steps=30, lr=1e-2),
+        )
+    )
     # a probe whose output the latents move
     flown_kind = {"per_frame": True, "inputs": "latent+change+thrust"} if s > 1 else {}
     train_probe(request(run, tiny_dataset_master, epochs=20, lr=1e-2, **flown_kind))
-    res = runner.invoke(app, ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "2",
-                              "--horizon", "4", "--history", "2", "--no-figures"])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "probe",
+            str(run),
+            str(tiny_dataset_master),
+            "--windows",
+            "2",
+            "--horizon",
+            "2",
+            "--horizon",
+            "4",
+            "--history",
+            "2",
+            "--no-figures",
+        ],
+    )
     assert res.exit_code == 0, res.output
     table = json.loads((run / "eval" / TABLE_JSON).read_text())
     assert table["history"] == 2 and "seeing 2 latents" in res.output and table["per_frame"] == (s > 1)
@@ -291,20 +374,31 @@ def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset
     m, n = table["context"], max(table["horizons"])
     errors = {q: [] for q in ("position", "velocity", "rotation", "angular_velocity", "fuel")}
     for episode, first in zip(table["episodes"], table["first_frames"]):
-        rows = sorted((r for r in steps if r[S.EPISODE_INDEX] == episode and first <= r[S.FRAME_INDEX] < first + m + n),
-                      key=lambda r: r[S.FRAME_INDEX])
+        rows = sorted(
+            (r for r in steps if r[S.EPISODE_INDEX] == episode and first <= r[S.FRAME_INDEX] < first + m + n),
+            key=lambda r: r[S.FRAME_INDEX],
+        )
         assert len(rows) == m + n
-        images = np.stack([cv2.cvtColor(cv2.imdecode(np.frombuffer(r[S.IMAGE]["bytes"], np.uint8), cv2.IMREAD_COLOR),
-                                        cv2.COLOR_BGR2RGB) for r in rows[:m]])  # (m, H, W, 3)
+        images = np.stack(
+            [
+                cv2.cvtColor(
+                    cv2.imdecode(np.frombuffer(r[S.IMAGE]["bytes"], np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB
+                )
+                for r in rows[:m]
+            ]
+        )  # (m, H, W, 3)
         states = np.array([r[S.STATE] for r in rows], np.float32)  # (m + n, 16)
         actions = np.array([r[S.ACTION] for r in rows], np.float32)
         with torch.no_grad():
-            z = model.encode(torch.from_numpy(images[::s]).permute(0, 3, 1, 2)[None],
-                             torch.from_numpy(states[None, :m:s]))  # every s-th frame, the last at m - 1
-            grouped = torch.from_numpy(actions[:m - 1 + n]).reshape(1, (m - 1 + n) // s, 8 * s)  # s thrusts a step
+            z = model.encode(
+                torch.from_numpy(images[::s]).permute(0, 3, 1, 2)[None], torch.from_numpy(states[None, :m:s])
+            )  # every s-th frame, the last at m - 1
+            grouped = torch.from_numpy(actions[: m - 1 + n]).reshape(1, (m - 1 + n) // s, 8 * s)  # s thrusts a step
             z_future = model.rollout(z, grouped, history=2)
-            future = grouped[:, (m - 1) // s:] if s > 1 else None  # the thrusts of each imagined step
-            pred = probe(z_future, torch.from_numpy(states[None, m - 1]), z[:, -1], future)[0].double().numpy()  # (n, 16)
+            future = grouped[:, (m - 1) // s :] if s > 1 else None  # the thrusts of each imagined step
+            pred = (
+                probe(z_future, torch.from_numpy(states[None, m - 1]), z[:, -1], future)[0].double().numpy()
+            )  # (n, 16)
         assert pred.shape == (n, 16)  # the probe itself gives every frame
         true = states[m:].astype(np.float64)
         rel = np.swapaxes(rot6d_to_matrix(true[:, 6:12]), -1, -2) @ rot6d_to_matrix(pred[:, 6:12])

@@ -10,16 +10,28 @@ import shutil
 import pytest
 import torch
 from huggingface_hub import ModelCard
+from publish.hub_server import TOKEN
 from safetensors.torch import load_file, save_file
 from typer.testing import CliRunner
 
 from orbitmodel.cli.app import app
-from publish.hub_server import TOKEN
 
 runner = CliRunner()
 REPO = "tester/tiny-wm"
-GRID = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "4", "--set", "samples=8",
-        "--set", "horizon=5"]
+GRID = [
+    "--obstacles",
+    "1",
+    "--speeds",
+    "1",
+    "--episodes",
+    "1",
+    "--max-steps",
+    "4",
+    "--set",
+    "samples=8",
+    "--set",
+    "horizon=5",
+]
 
 
 @pytest.fixture(scope="module")
@@ -32,9 +44,11 @@ def evaluated_run(tiny_run, tiny_dataset_master, tmp_path_factory):
     shutil.copytree(tiny_run, run)
     train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
     data = str(tiny_dataset_master)
-    for args in (["eval", "rollout", str(run), data, "--windows", "2", "--horizon", "3"],
-                 ["eval", "probe", str(run), data, "--windows", "2", "--horizon", "2", "--horizon", "4", "--no-figures"],
-                 ["eval", "closed-loop", str(run), *GRID, "--json", str(run / "eval" / "grid" / "planner.json")]):
+    for args in (
+        ["eval", "rollout", str(run), data, "--windows", "2", "--horizon", "3"],
+        ["eval", "probe", str(run), data, "--windows", "2", "--horizon", "2", "--horizon", "4", "--no-figures"],
+        ["eval", "closed-loop", str(run), *GRID, "--json", str(run / "eval" / "grid" / "planner.json")],
+    ):
         res = runner.invoke(app, args)
         assert res.exit_code == 0, res.output
     return run
@@ -45,8 +59,9 @@ def state_dicts_equal(a: torch.nn.Module, b: torch.nn.Module) -> bool:
     return sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
 
 
-def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hub_client, monkeypatch,
-                                                                 tiny_dataset_master, tmp_path):
+def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(
+    evaluated_run, hub_client, monkeypatch, tiny_dataset_master, tmp_path
+):
     from huggingface_hub import constants
 
     from orbitmodel import PhysicsProbe, WorldModel
@@ -59,18 +74,31 @@ def test_a_pushed_run_loads_by_repo_id_flies_and_works_offline(evaluated_run, hu
     assert TOKEN not in res.output and "pushed" in res.output
     assert not any(TOKEN.encode() in body for body in hub_client.state.bodies)  # the token only in a header
     files = hub_client.files(REPO, kind="models")
-    leaks = [p for p, data in files.items() if p.endswith((".json", ".md")) and str(evaluated_run.parent).encode() in data]
+    leaks = [
+        p for p, data in files.items() if p.endswith((".json", ".md")) and str(evaluated_run.parent).encode() in data
+    ]
     assert not leaks, leaks  # no local absolute path is published
-    assert {"config.json", "model.safetensors", "probe/config.json", "probe/model.safetensors", "training.json",
-            "eval/probe_table.json", "eval/rollout.json", "eval/grid/planner.json", "README.md"} <= set(files)
+    assert {
+        "config.json",
+        "model.safetensors",
+        "probe/config.json",
+        "probe/model.safetensors",
+        "training.json",
+        "eval/probe_table.json",
+        "eval/rollout.json",
+        "eval/grid/planner.json",
+        "README.md",
+    } <= set(files)
     assert not [p for p in files if p.startswith("checkpoints/") or "latents" in p]  # nothing only resuming needs
     assert files["model.safetensors"] == (evaluated_run / "model.safetensors").read_bytes()
 
     local = WorldModel.from_pretrained(evaluated_run)
     hubbed = WorldModel.from_pretrained(REPO)
     assert state_dicts_equal(local, hubbed) and hubbed.fingerprint == local.fingerprint
-    assert state_dicts_equal(PhysicsProbe.from_pretrained(evaluated_run),
-                             PhysicsProbe.from_pretrained(f"{REPO}@main", world_model=hubbed.fingerprint))
+    assert state_dicts_equal(
+        PhysicsProbe.from_pretrained(evaluated_run),
+        PhysicsProbe.from_pretrained(f"{REPO}@main", world_model=hubbed.fingerprint),
+    )
     pilot = make_planner(_config(), run=REPO, preset="cpu", samples="8", horizon="5")
     assert pilot.name == "planner" and pilot.config.history == 2
 
@@ -93,8 +121,12 @@ def _config():
     from orbitdata.sim.config import CameraConfig
 
     config = GenerationConfig()
-    return config.__class__(**{**config.__dict__, "sim": config.sim.__class__(
-        **{**config.sim.__dict__, "camera": CameraConfig(image_size=64)})})
+    return config.__class__(
+        **{
+            **config.__dict__,
+            "sim": config.sim.__class__(**{**config.sim.__dict__, "camera": CameraConfig(image_size=64)}),
+        }
+    )
 
 
 def test_the_cards_figures_are_the_eval_files(evaluated_run, hub_client):
@@ -129,8 +161,12 @@ def test_an_incomplete_run_is_refused_in_one_line(tiny_run, evaluated_run, hub_c
     weights = load_file(retrained / "model.safetensors")
     weights["predictor.pos"] = weights["predictor.pos"] + 1.0
     save_file(weights, retrained / "model.safetensors")
-    for run, reason in ((no_probe, "no physics probe"), (unfinished, "training has not finished"),
-                        (retrained, "another world model"), (tmp_path / "nothing", "not an orbitmodel run")):
+    for run, reason in (
+        (no_probe, "no physics probe"),
+        (unfinished, "training has not finished"),
+        (retrained, "another world model"),
+        (tmp_path / "nothing", "not an orbitmodel run"),
+    ):
         res = runner.invoke(app, ["push", str(run), REPO])
         lines = [line for line in res.output.splitlines() if line.strip()]
         assert res.exit_code == 2 and len(lines) == 1 and reason in lines[0], res.output
@@ -160,8 +196,9 @@ def test_what_is_a_hub_repo_id_and_what_a_local_path(tmp_path, monkeypatch):
 
 
 def test_a_policy_run_round_trips(hub_client, tmp_path):
-    from orbitmodel.baselines.diffusion import DiffusionPolicy
     from test_diffusion_pilot import PRESET, save_policy_run
+
+    from orbitmodel.baselines.diffusion import DiffusionPolicy
 
     torch.manual_seed(0)
     policy = DiffusionPolicy(PRESET.model).eval()
@@ -196,8 +233,7 @@ def reproduce_lines(card: str) -> list[str]:
     return block.strip().splitlines()
 
 
-def test_the_cards_reproduce_commands_give_the_runs_config(evaluated_run, hub_client, tiny_dataset_master,
-                                                           tmp_path):
+def test_the_cards_reproduce_commands_give_the_runs_config(evaluated_run, hub_client, tiny_dataset_master, tmp_path):
     """The tiny run trained with --max-steps 2, which its preset does not: the card's train command
     says so, and running it writes the run's config.json again."""
     res = runner.invoke(app, ["push", str(evaluated_run), REPO, "--dry-run"])
@@ -228,16 +264,19 @@ def test_the_reproduce_commands_flag_each_changed_setting_and_name_the_rest(eval
     probe["train"]["loop"].update(epochs=5, lr=0.0025, warmup=0.3)
     assert probe_command(raw, probe, "latent") == (
         "orbitmodel probe RUN DATA --integrator upstream --epochs 5 --lr 0.0025 --loss-weights 1,1,1,1,0.5 "
-        "--cache-windows 16   # no flag sets train.loop.warmup=0.3 (config.json records every setting)")
+        "--cache-windows 16   # no flag sets train.loop.warmup=0.3 (config.json records every setting)"
+    )
     refit = {**asdict(DepthRefitConfig()), "frames": 64, "near_weight": 10.0, "eval_split": "val", "batch_size": 32}
     assert depth_command({"refit": refit}) == (
         "orbitmodel depth RUN DATA --frames 64 --near-weight 10 --eval-split val   # no flag sets batch_size=32 "
-        "(config.json records every setting)")
+        "(config.json records every setting)"
+    )
 
 
 def test_a_policy_cards_reproduce_command_gives_the_runs_preset(hub_client, tiny_dataset_master, tmp_path):
-    from orbitmodel.baselines.diffusion import DiffusionPolicy
     from test_diffusion_pilot import PRESET, save_policy_run
+
+    from orbitmodel.baselines.diffusion import DiffusionPolicy
 
     preset = PRESET.with_train(max_steps=3, lr=0.002, mask_padding=False, num_workers=0)
     torch.manual_seed(0)
@@ -247,8 +286,10 @@ def test_a_policy_cards_reproduce_command_gives_the_runs_preset(hub_client, tiny
     [command] = reproduce_lines(res.output)
     assert command == "orbitmodel train-policy DATA --preset tiny --out RUN --max-steps 3 --lr 0.002 --no-mask-padding"
     out = tmp_path / "again"
-    res = runner.invoke(app, [*command.replace("DATA", str(tiny_dataset_master)).replace("RUN", str(out)).split()[1:],
-                              "--device", "cpu"])
+    res = runner.invoke(
+        app,
+        [*command.replace("DATA", str(tiny_dataset_master)).replace("RUN", str(out)).split()[1:], "--device", "cpu"],
+    )
     assert res.exit_code == 0, res.output
     again, pushed = (json.loads((folder / "config.json").read_text())["preset"] for folder in (out, run))
     assert again == pushed

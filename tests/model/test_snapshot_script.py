@@ -29,8 +29,13 @@ def fake_run(path: Path, max_steps: int, steps: list[int], final: bool) -> Path:
 
 
 def start(run: Path, out: Path) -> subprocess.Popen:
-    return subprocess.Popen(["bash", str(SCRIPT), str(run), "4", str(out)], env={"SNAPSHOT_POLL_S": "0.2",
-                            "PATH": "/usr/bin:/bin"}, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen(
+        ["bash", str(SCRIPT), str(run), "4", str(out)],
+        env={"SNAPSHOT_POLL_S": "0.2", "PATH": "/usr/bin:/bin"},
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
 
 
 def test_a_finished_run_is_snapshotted_and_the_script_stops(tmp_path):

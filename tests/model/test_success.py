@@ -23,9 +23,14 @@ def test_wilson_matches_the_textbook_values():
 
 
 def grid(pilot, successes, collisions=0, timeouts=0):
-    return {"pilot": pilot, "seed": 0, "settings": [
-        {"obstacles": n, "speed": v, "episodes": 20, "success": k, "collision": c, "timeout": t, "out_of_fuel": 0}
-        for (n, v), k, c, t in zip([(1, 1.0), (5, 2.0)], successes, collisions or [0, 0], timeouts or [0, 0])]}
+    return {
+        "pilot": pilot,
+        "seed": 0,
+        "settings": [
+            {"obstacles": n, "speed": v, "episodes": 20, "success": k, "collision": c, "timeout": t, "out_of_fuel": 0}
+            for (n, v), k, c, t in zip([(1, 1.0), (5, 2.0)], successes, collisions or [0, 0], timeouts or [0, 0])
+        ],
+    }
 
 
 def test_the_table_gives_counts_the_interval_and_the_failures(tmp_path):
@@ -47,9 +52,20 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     from orbitmodel.evaluate.success import outcome_flips
 
     def report(outcomes, clearances=(0.5, 0.5, 0.0, 0.3), frames=(100, 90, 40, 300)):
-        return {"episodes": [{"obstacles": 1, "speed": 1.0, "episode": k, "seed": 100 + k, "outcome": o,
-                              "min_clearance_m": c, "frames": n}
-                             for k, (o, c, n) in enumerate(zip(outcomes, clearances, frames))]}
+        return {
+            "episodes": [
+                {
+                    "obstacles": 1,
+                    "speed": 1.0,
+                    "episode": k,
+                    "seed": 100 + k,
+                    "outcome": o,
+                    "min_clearance_m": c,
+                    "frames": n,
+                }
+                for k, (o, c, n) in enumerate(zip(outcomes, clearances, frames))
+            ]
+        }
 
     a = report(["success", "success", "collision", "timeout"])
     b = report(["success", "collision", "collision", "success"], (0.5, 0.0, 0.0, 0.7), (100, 60, 40, 200))
@@ -59,10 +75,13 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     assert result["identical"] == 2
     assert result["clearance_change_m"] == pytest.approx({"median": 0.2, "max": 0.5})
     assert result["frames_change"] == {"median": 15.0, "max": 100}
-    assert "identical" not in outcome_flips(report(["success"] * 4), {"episodes": [
-        {k: v for k, v in e.items() if k != "frames"} for e in a["episodes"]]})  # not recorded: not reported
-    assert [(f["episode"], f["first"], f["second"]) for f in result["flipped"]] == [(1, "success", "collision"),
-                                                                                    (3, "timeout", "success")]
+    assert "identical" not in outcome_flips(
+        report(["success"] * 4), {"episodes": [{k: v for k, v in e.items() if k != "frames"} for e in a["episodes"]]}
+    )  # not recorded: not reported
+    assert [(f["episode"], f["first"], f["second"]) for f in result["flipped"]] == [
+        (1, "success", "collision"),
+        (3, "timeout", "success"),
+    ]
     with pytest.raises(ValueError, match="share no episode seed"):
         outcome_flips(a, {"episodes": [{**e, "seed": e["seed"] + 50} for e in a["episodes"]]})
     (tmp_path / "a.json").write_text(json.dumps(a))
@@ -75,31 +94,55 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
 def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
     from orbitmodel.evaluate.success import pool_seeds, report_totals
 
-    seeds = [{**grid("planner", k, collisions=[20 - k[0], 20 - k[1]]), "seed": s}
-             for s, k in ((3, [20, 19]), (4, [17, 20]), (5, [20, 20]))]
+    seeds = [
+        {**grid("planner", k, collisions=[20 - k[0], 20 - k[1]]), "seed": s}
+        for s, k in ((3, [20, 19]), (4, [17, 20]), (5, [20, 20]))
+    ]
     pooled = pool_seeds(seeds)
     assert report_totals(pooled) == (116, 120) and pooled["seeds"] == [3, 4, 5]
     assert [s["collision"] for s in pooled["settings"]] == [3, 1]
-    assert pooled["worst_setting"] == {"seed": 4, "obstacles": 1, "speed": 1.0, "rate": 0.85, "success": 17,
-                                       "episodes": 20}
+    assert pooled["worst_setting"] == {
+        "seed": 4,
+        "obstacles": 1,
+        "speed": 1.0,
+        "rate": 0.85,
+        "success": 17,
+        "episodes": 20,
+    }
     row = markdown_table([pooled]).splitlines()[2]  # a pooled table is a grid result like any other, plus its worst
-    assert row == "| planner | 57/60 | 59/60 | 96.7 % [91.7, 98.7] (116/120) | 4 collisions | 17/20 (seed 4, 1 obst. 1 m/s) |"
-    for bad, match in (([seeds[0], seeds[0]], "repeat"), ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
-                       ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid"),
-                       ([seeds[0], {**seeds[1], "seed": None}], "root seed"),
-                       ([{**seeds[0], "pilot_settings": {"timestep_spacing": "leading"}},
-                         {**seeds[1], "pilot_settings": {"timestep_spacing": "trailing"}}], "one way of flying"),
-                       ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec"),
-                       ([{**seeds[0], "preset": "cpu"}, {**seeds[1], "preset": "reference"}], "preset")):
+    assert (
+        row
+        == "| planner | 57/60 | 59/60 | 96.7 % [91.7, 98.7] (116/120) | 4 collisions | 17/20 (seed 4, 1 obst. 1 m/s) |"
+    )
+    for bad, match in (
+        ([seeds[0], seeds[0]], "repeat"),
+        ([seeds[0], {**seeds[1], "pilot": "expert"}], "pilots differ"),
+        ([seeds[0], {**seeds[1], "settings": seeds[1]["settings"][:1]}], "another grid"),
+        ([seeds[0], {**seeds[1], "seed": None}], "root seed"),
+        (
+            [
+                {**seeds[0], "pilot_settings": {"timestep_spacing": "leading"}},
+                {**seeds[1], "pilot_settings": {"timestep_spacing": "trailing"}},
+            ],
+            "one way of flying",
+        ),
+        ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec"),
+        ([{**seeds[0], "preset": "cpu"}, {**seeds[1], "preset": "reference"}], "preset"),
+    ):
         with pytest.raises(ValueError, match=match):
             pool_seeds(bad)
     flown = [{**s, "preset": "cpu", "pilot_settings": {"draws": 1}, "image_codec": True} for s in seeds]
     assert {k: pool_seeds(flown)[k] for k in ("preset", "pilot_settings", "image_codec")} == {
-        "preset": "cpu", "pilot_settings": {"draws": 1}, "image_codec": True}  # how the seeds flew, carried along
+        "preset": "cpu",
+        "pilot_settings": {"draws": 1},
+        "image_codec": True,
+    }  # how the seeds flew, carried along
     for s in seeds:
         (tmp_path / f"seed{s['seed']}.json").write_text(json.dumps(s))
-    res = CliRunner().invoke(app, ["eval", "pool", *(str(tmp_path / f"seed{k}.json") for k in (3, 4, 5)),
-                                   "--json", str(tmp_path / "test.json")])
+    res = CliRunner().invoke(
+        app,
+        ["eval", "pool", *(str(tmp_path / f"seed{k}.json") for k in (3, 4, 5)), "--json", str(tmp_path / "test.json")],
+    )
     assert res.exit_code == 0, res.output
     assert "96.7 % [91.7, 98.7] (116/120)" in res.output and "seed 4, 1 obstacles at 1 m/s, 17/20" in res.output
     assert json.loads((tmp_path / "test.json").read_text())["seeds"] == [3, 4, 5]

@@ -29,8 +29,9 @@ KILL_AFTER = Path(__file__).with_name("kill_after.py")
 def _cli(*args: str, env: dict | None = None, kill_after: int | None = None) -> subprocess.CompletedProcess:
     """The CLI in a fresh process; ``kill_after``: SIGKILLed right after that step's checkpoint."""
     launch = ["-m", "orbitmodel.cli.app"] if kill_after is None else [str(KILL_AFTER), str(kill_after)]
-    return subprocess.run([sys.executable, *launch, *args], capture_output=True, text=True,
-                          env={**os.environ, **(env or {})}, timeout=300)
+    return subprocess.run(
+        [sys.executable, *launch, *args], capture_output=True, text=True, env={**os.environ, **(env or {})}, timeout=300
+    )
 
 
 def _train(dataset, out, steps: int, **train) -> None:
@@ -85,19 +86,41 @@ def test_a_killed_run_resumes_to_the_same_weights(tiny_dataset_master, tmp_path)
     assert a.keys() == b.keys()
     for name in a:
         assert torch.equal(a[name], b[name]), name
-    steps = [json.loads(l)["step"] for l in (tmp_path / "b" / "metrics.jsonl").read_text().splitlines()]
+    steps = [json.loads(r)["step"] for r in (tmp_path / "b" / "metrics.jsonl").read_text().splitlines()]
     assert steps == list(range(1, 9))  # no step logged twice
 
 
 def test_ddp_on_two_cpu_processes(tiny_dataset_master, tmp_path):
     out = tmp_path / "ddp"
     proc = subprocess.run(
-        [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node", "2", "--master_port", "29517",
-         "-m", "orbitmodel.cli.app", "train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "3",
-         "--device", "cpu", "--out", str(out)],
-        capture_output=True, text=True, timeout=300, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        [
+            sys.executable,
+            "-m",
+            "torch.distributed.run",
+            "--nproc_per_node",
+            "2",
+            "--master_port",
+            "29517",
+            "-m",
+            "orbitmodel.cli.app",
+            "train",
+            str(tiny_dataset_master),
+            "--preset",
+            "tiny",
+            "--max-steps",
+            "3",
+            "--device",
+            "cpu",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**os.environ, "OMP_NUM_THREADS": "1"},
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    records = [json.loads(l) for l in (out / "metrics.jsonl").read_text().splitlines()]
+    records = [json.loads(r) for r in (out / "metrics.jsonl").read_text().splitlines()]
     assert [r["step"] for r in records] == [1, 2, 3]  # rank 0 alone writes
     assert records[-1]["world_size"] == 2
     assert (out / "model.safetensors").exists()
@@ -113,7 +136,7 @@ def test_training_is_reproducible_from_the_seed(tiny_dataset_master, tmp_path):
 # ---- bad input: one line, exit 2 ---------------------------------------------------------------
 def _one_line_exit_2(result, *needles: str) -> None:
     assert result.exit_code == 2, result.output
-    lines = [l for l in result.output.splitlines() if l.strip()]
+    lines = [r for r in result.output.splitlines() if r.strip()]
     assert len(lines) == 1 and "Traceback" not in result.output, result.output
     for needle in needles:
         assert needle in lines[0], lines[0]
@@ -125,8 +148,10 @@ def test_missing_dataset(tmp_path):
 
 def test_folder_that_is_not_a_dataset(tmp_path):
     (tmp_path / "plain").mkdir()
-    _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
-                     "not a finished orbitdata dataset")
+    _one_line_exit_2(
+        runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
+        "not a finished orbitdata dataset",
+    )
 
 
 def test_image_size_the_preset_cannot_take(tiny_dataset_master, tmp_path):
@@ -162,8 +187,9 @@ def test_a_corrupt_checkpoint_is_one_line(trained, tmp_path):
 
 
 def test_resume_without_a_run(tiny_dataset_master, tmp_path):
-    result = runner.invoke(app, ["train", str(tiny_dataset_master), "--preset", "tiny", "--resume",
-                                 "--out", str(tmp_path / "empty")])
+    result = runner.invoke(
+        app, ["train", str(tiny_dataset_master), "--preset", "tiny", "--resume", "--out", str(tmp_path / "empty")]
+    )
     _one_line_exit_2(result, "--resume")
 
 
@@ -177,8 +203,19 @@ def test_sigreg_flags_override_the_preset_and_land_in_the_run_config(tiny_datase
     from orbitmodel.runs import read_run_config
 
     run = tmp_path / "run"
-    args = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "1", "--out", str(run),
-            "--lambda-sigreg", "0.7", "--sigreg-pool"]
+    args = [
+        "train",
+        str(tiny_dataset_master),
+        "--preset",
+        "tiny",
+        "--max-steps",
+        "1",
+        "--out",
+        str(run),
+        "--lambda-sigreg",
+        "0.7",
+        "--sigreg-pool",
+    ]
     assert runner.invoke(app, args).exit_code == 0
     model = read_run_config(run).preset.model
     assert (model.lambda_sigreg, model.sigreg_pool) == (0.7, True)
@@ -201,8 +238,10 @@ def test_model_step_windows_take_every_step_th_frame_and_group_its_actions(tiny_
     assert torch.equal(item[S.COLLISION], raw[S.COLLISION].view(6, 2).any(1))
     batch = collate_windows(steps.__getitems__([0, 1]))  # the batched path gives the same windows
     assert torch.equal(batch[S.ACTION][1], item[S.ACTION]) and torch.equal(batch[S.IMAGE][1], item[S.IMAGE])
-    assert load_model_windows(tiny_dataset_master, 1, context=8, horizon=4, stride=3, columns=cols).__class__ \
-        is frames.__class__  # one frame per step: the loader's own dataset
+    assert (
+        load_model_windows(tiny_dataset_master, 1, context=8, horizon=4, stride=3, columns=cols).__class__
+        is frames.__class__
+    )  # one frame per step: the loader's own dataset
 
 
 def test_a_run_from_before_presets_carried_their_probe_recipe_resumes(tiny_dataset_master, tmp_path):
@@ -220,8 +259,9 @@ def test_a_run_from_before_presets_carried_their_probe_recipe_resumes(tiny_datas
     (out / "config.json").write_text(json.dumps(config))
     (out / "model.safetensors").unlink()
     preset = get_preset("tiny").with_train(max_steps=2, save_every=1)
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu",
-                                    resume=True))
+    train_world_model(
+        Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu", resume=True)
+    )
     assert (out / "model.safetensors").is_file()
     upgraded = json.loads((out / "config.json").read_text())["preset"]
     assert "probe" in upgraded and Preset.from_dict(upgraded).probe == get_preset("tiny").probe
@@ -249,7 +289,8 @@ def test_a_run_with_flat_training_configs_reads_back_and_resumes(tiny_dataset_ma
     preset = get_preset("tiny").with_train(max_steps=2, save_every=1)
     assert read_run_config(out).preset == preset
     (out / "model.safetensors").unlink()
-    train_world_model(Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu",
-                                    resume=True))
+    train_world_model(
+        Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=out, device="cpu", resume=True)
+    )
     assert (out / "model.safetensors").is_file()
     assert json.loads((out / "config.json").read_text()) == nested

@@ -36,8 +36,7 @@ def test_the_split_is_a_seeded_fraction_of_every_level(tiny_dataset_master):
         validation_split(tiny_dataset_master, 1.0, 0)
 
 
-def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_dataset_master, tmp_path,
-                                                                         monkeypatch):
+def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_dataset_master, tmp_path, monkeypatch):
     import orbitmodel.plan.depth_refit
     import orbitmodel.probe.train
     import orbitmodel.train.stage1
@@ -49,6 +48,7 @@ def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_d
             if kwargs.get("split") == "train":
                 trained_on.setdefault(stage, []).append(kwargs.get("episodes"))
             return load(*args, **kwargs)
+
         return wrapped
 
     for module, stage in ((orbitmodel.train.stage1, "stage1"), (orbitmodel.probe.train, "probe")):
@@ -62,52 +62,133 @@ def test_a_run_holds_its_validation_episodes_out_and_is_evaluated_on_them(tiny_d
 
     monkeypatch.setattr(orbitmodel.plan.depth_refit, "_patches", fitted_frames)
     run, data = tmp_path / "wm", str(tiny_dataset_master)
-    res = runner.invoke(app, ["train", data, "--preset", "tiny", "--max-steps", "2", "--val-fraction", "0.5",
-                              "--device", "cpu", "--out", str(run)])
+    res = runner.invoke(
+        app,
+        [
+            "train",
+            data,
+            "--preset",
+            "tiny",
+            "--max-steps",
+            "2",
+            "--val-fraction",
+            "0.5",
+            "--device",
+            "cpu",
+            "--out",
+            str(run),
+        ],
+    )
     assert res.exit_code == 0, res.output
     held_out = ValidationSplit.from_dict(json.loads((run / "config.json").read_text())["validation"])
     assert held_out.fraction == 0.5 and held_out.episodes
     assert held_out == validation_split(tiny_dataset_master, 0.5, 0)
     res = runner.invoke(app, ["probe", str(run), data, "--device", "cpu", "--epochs", "1"])
     assert res.exit_code == 0, res.output
-    res = runner.invoke(app, ["depth", str(run), data, "--frames", "32", "--test-frames", "16", "--epochs", "1",
-                              "--eval-split", "val"])
+    res = runner.invoke(
+        app, ["depth", str(run), data, "--frames", "32", "--test-frames", "16", "--epochs", "1", "--eval-split", "val"]
+    )
     assert res.exit_code == 0, res.output
     assert set(trained_on) == {"stage1", "probe", "refit"}
     for stage, calls in trained_on.items():  # every training stage left the validation episodes out
         assert all(isinstance(e, list) and e and not set(e) & set(held_out.episodes) for e in calls), (stage, calls)
-    res = runner.invoke(app, ["eval", "probe", str(run), data, "--split", "val", "--windows", "1", "--horizon", "2",
-                              "--no-figures"])
+    res = runner.invoke(
+        app, ["eval", "probe", str(run), data, "--split", "val", "--windows", "1", "--horizon", "2", "--no-figures"]
+    )
     assert res.exit_code == 0, res.output
     table = json.loads((run / "eval" / "probe_table.json").read_text())
     assert table["split"] == "val" and set(table["episodes"]) <= set(held_out.episodes)
-    res = runner.invoke(app, ["eval", "rollout", str(run), data, "--split", "val", "--windows", "2", "--horizon", "2",
-                              "--out", str(tmp_path / "val")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "rollout",
+            str(run),
+            data,
+            "--split",
+            "val",
+            "--windows",
+            "2",
+            "--horizon",
+            "2",
+            "--out",
+            str(tmp_path / "val"),
+        ],
+    )
     assert res.exit_code == 0, res.output
     rollout = json.loads((tmp_path / "val" / "rollout.json").read_text())
     assert set(rollout["episodes"]) <= set(held_out.episodes) and rollout["config"]["split"] == "val"
     # the training windows of every stage leave them out
-    kept = load_windows(data, split="train", context=1, horizon=0, columns=[S.STATE],
-                        episodes=training_episodes(data, (), (), held_out))
+    kept = load_windows(
+        data, split="train", context=1, horizon=0, columns=[S.STATE], episodes=training_episodes(data, (), (), held_out)
+    )
     assert not set(kept.episodes.tolist()) & set(held_out.episodes)
 
 
 def test_a_run_without_a_validation_split_refuses_split_val_in_one_line(tiny_run, tiny_dataset_master, tmp_path):
-    res = runner.invoke(app, ["eval", "rollout", str(tiny_run), str(tiny_dataset_master), "--split", "val",
-                              "--windows", "2", "--horizon", "2", "--out", str(tmp_path / "x")])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "rollout",
+            str(tiny_run),
+            str(tiny_dataset_master),
+            "--split",
+            "val",
+            "--windows",
+            "2",
+            "--horizon",
+            "2",
+            "--out",
+            str(tmp_path / "x"),
+        ],
+    )
     lines = [line for line in res.output.splitlines() if line.strip()]
     assert res.exit_code == 2 and len(lines) == 1 and "--val-fraction" in lines[0], res.output
 
 
 def test_a_policy_run_holds_out_and_is_evaluated_on_its_validation_episodes(tiny_dataset_master, tmp_path):
     run, data = tmp_path / "dp", str(tiny_dataset_master)
-    res = runner.invoke(app, ["train-policy", data, "--preset", "tiny", "--max-steps", "2", "--val-fraction", "0.5",
-                              "--device", "cpu", "--out", str(run)])
+    res = runner.invoke(
+        app,
+        [
+            "train-policy",
+            data,
+            "--preset",
+            "tiny",
+            "--max-steps",
+            "2",
+            "--val-fraction",
+            "0.5",
+            "--device",
+            "cpu",
+            "--out",
+            str(run),
+        ],
+    )
     assert res.exit_code == 0, res.output
     held_out = ValidationSplit.from_dict(json.loads((run / "config.json").read_text())["validation"])
     assert held_out == validation_split(tiny_dataset_master, 0.5, 0)
-    res = runner.invoke(app, ["eval", "policy", str(run), data, "--split", "val", "--level", "expert",
-                              "--level", "exploratory", "--level", "risky", "--stride", "8", "--json"])
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "policy",
+            str(run),
+            data,
+            "--split",
+            "val",
+            "--level",
+            "expert",
+            "--level",
+            "exploratory",
+            "--level",
+            "risky",
+            "--stride",
+            "8",
+            "--json",
+        ],
+    )
     assert res.exit_code == 0, res.output
     result = json.loads(res.output)
     assert result["split"] == "val" and result["frames"] > 0

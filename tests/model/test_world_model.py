@@ -44,11 +44,11 @@ def test_shapes_and_dtypes_through_every_module():
     c = model.config
     images, states, actions, depth = _batch(model)
     cls, patches = model.encoder(images.flatten(0, 1).float() / 255)
-    assert cls.shape == (B * T, c.width) and patches.shape == (B * T, c.grid ** 2, c.width)
+    assert cls.shape == (B * T, c.width) and patches.shape == (B * T, c.grid**2, c.width)
     z = model.encode(images, states)
     assert z.shape == (B, T, c.latent_dim) and z.dtype == torch.float32
     assert model.predict_next(z, actions).shape == (B, T, c.latent_dim)
-    future = model.rollout(z[:, :4], torch.cat([actions, actions], dim=1)[:, :4 - 1 + 7])
+    future = model.rollout(z[:, :4], torch.cat([actions, actions], dim=1)[:, : 4 - 1 + 7])
     assert future.shape == (B, 7, c.latent_dim)
     d = model.predict_depth(images)
     assert d.shape == (B, T, 16, 16) and d.dtype == torch.float32
@@ -122,7 +122,7 @@ def test_rollout_slides_a_window_of_history_latents():
     m = h + 2
     imgs = torch.cat([images, images], dim=1)[:, :m]
     sts = torch.cat([states, states], dim=1)[:, :m]
-    acts = torch.cat([actions, actions, actions], dim=1)[:, :m - 1 + 3]
+    acts = torch.cat([actions, actions, actions], dim=1)[:, : m - 1 + 3]
     with torch.no_grad():
         z = model.encode(imgs, sts)
         a = model.rollout(z, acts)
@@ -139,7 +139,7 @@ def test_a_shorter_rollout_history_is_a_shorter_window():
     with torch.no_grad():
         z = model.encode(images, states)  # (B, T, D), T = 6 > 2
         short = model.rollout(z, actions[:, :T], history=2)[:, 0]
-        last_two = model.rollout(z[:, -2:], actions[:, T - 2:T], history=2)[:, 0]
+        last_two = model.rollout(z[:, -2:], actions[:, T - 2 : T], history=2)[:, 0]
         full = model.rollout(z, actions[:, :T])[:, 0]
     torch.testing.assert_close(short, last_two)
     assert not torch.allclose(short, full)
@@ -147,15 +147,17 @@ def test_a_shorter_rollout_history_is_a_shorter_window():
         model.rollout(z, actions[:, :T], history=0)
 
 
-@pytest.mark.skipif(shutil.which("g++") is None and shutil.which("c++") is None,
-                    reason="torch.compile's CPU backend needs a C++ compiler")
+@pytest.mark.skipif(
+    shutil.which("g++") is None and shutil.which("c++") is None,
+    reason="torch.compile's CPU backend needs a C++ compiler",
+)
 def test_a_compiled_rollout_imagines_the_same_latents():
     """compile_rollout (the planner's ``compile`` option) changes the speed, not the plan."""
     model = _model()
     images, states, actions, _ = _batch(model)
     with torch.no_grad():
         z = model.encode(images, states)[:, :2]
-        acts = torch.cat([actions, actions], dim=1)[:, :1 + 7]  # a window that fills, then slides
+        acts = torch.cat([actions, actions], dim=1)[:, : 1 + 7]  # a window that fills, then slides
         eager = model.rollout(z, acts, history=3)
         compiled = model.compile_rollout().rollout(z, acts, history=3)
     assert compiled.shape == eager.shape == (B, 7, model.config.latent_dim)
@@ -232,8 +234,13 @@ def test_paper_preset_runs_a_forward_and_backward_pass_at_batch_2():
     model = WorldModel(c).train()
     T2 = 3
     images = torch.rand(2, T2, 3, 224, 224)
-    loss, _ = model(images, torch.randn(2, T2, 16), torch.rand(2, T2, 8), 50 * torch.rand(2, T2, 16, 16),
-                    torch.Generator().manual_seed(0))
+    loss, _ = model(
+        images,
+        torch.randn(2, T2, 16),
+        torch.rand(2, T2, 8),
+        50 * torch.rand(2, T2, 16, 16),
+        torch.Generator().manual_seed(0),
+    )
     loss.backward()
     grads = [p.grad for p in model.parameters() if p.requires_grad]
     assert all(g is not None and torch.isfinite(g).all() for g in grads)

@@ -58,8 +58,12 @@ class Blob:
         return f"version https://git-lfs.github.com/spec/v1\noid sha256:{self.sha256}\nsize {len(self.data)}\n".encode()
 
     def entry(self, path: str) -> dict:
-        out = {"type": "file", "path": path, "size": len(self.data),
-               "oid": git_oid(self.pointer() if self.lfs else self.data)}
+        out = {
+            "type": "file",
+            "path": path,
+            "size": len(self.data),
+            "oid": git_oid(self.pointer() if self.lfs else self.data),
+        }
         if self.lfs:
             out["lfs"] = {"oid": self.sha256, "size": len(self.data), "pointerSize": len(self.pointer())}
         return out
@@ -108,8 +112,9 @@ class Handler(BaseHTTPRequestHandler):
             self.state.bodies.append(body)
         return body
 
-    def _send(self, status: int, body: bytes = b"", headers: dict | None = None,
-              content_type="application/json") -> None:
+    def _send(
+        self, status: int, body: bytes = b"", headers: dict | None = None, content_type="application/json"
+    ) -> None:
         with self.state.lock:
             self.state.requests.append((self.command, urlparse(self.path).path, status))
         self.send_response(status)
@@ -193,8 +198,16 @@ class Handler(BaseHTTPRequestHandler):
             return
         if not self._authorized():
             return self._error(401, "Invalid credentials in Authorization header")
-        self._json(200, {"type": "user", "name": self.state.user, "fullname": self.state.user, "orgs": [],
-                         "auth": {"type": "access_token", "accessToken": {"displayName": "test", "role": "write"}}})
+        self._json(
+            200,
+            {
+                "type": "user",
+                "name": self.state.user,
+                "fullname": self.state.user,
+                "orgs": [],
+                "auth": {"type": "access_token", "accessToken": {"displayName": "test", "role": "write"}},
+            },
+        )
 
     def create_repo(self) -> None:
         body = json.loads(self._body() or b"{}")
@@ -227,8 +240,9 @@ class Handler(BaseHTTPRequestHandler):
             lfs = f["path"].endswith(LFS_SUFFIXES)
             blob = tree.get(f["path"])
             oid = None if blob is None else (blob.sha256 if blob.lfs else git_oid(blob.data))
-            files.append({"path": f["path"], "uploadMode": "lfs" if lfs else "regular", "shouldIgnore": False,
-                          "oid": oid})
+            files.append(
+                {"path": f["path"], "uploadMode": "lfs" if lfs else "regular", "shouldIgnore": False, "oid": oid}
+            )
         self._json(200, {"files": files, "commitOid": repo.resolve(rev)})
 
     def lfs_batch(self, kind, repo_id) -> None:
@@ -242,8 +256,11 @@ class Handler(BaseHTTPRequestHandler):
             if obj["oid"] not in self.state.lfs:
                 entry["actions"] = {"upload": {"href": f"{self.endpoint}/lfs-objects/{obj['oid']}"}}
             objects.append(entry)
-        self._send(200, json.dumps({"transfer": "basic", "objects": objects}).encode(),
-                   content_type="application/vnd.git-lfs+json")
+        self._send(
+            200,
+            json.dumps({"transfer": "basic", "objects": objects}).encode(),
+            content_type="application/vnd.git-lfs+json",
+        )
 
     def lfs_put(self, oid) -> None:
         data = self._body()
@@ -286,14 +303,17 @@ class Handler(BaseHTTPRequestHandler):
                 elif key == "deletedFolder":
                     prefix = value["path"].rstrip("/") + "/"
                     tree = {p: b for p, b in tree.items() if not p.startswith(prefix)}
-            sha = hashlib.sha1(json.dumps([parent, summary, sorted((p, b.sha256) for p, b in tree.items())])
-                               .encode()).hexdigest()
+            sha = hashlib.sha1(
+                json.dumps([parent, summary, sorted((p, b.sha256) for p, b in tree.items())]).encode()
+            ).hexdigest()
             repo.commits[sha] = tree
             repo.branches[rev if rev in repo.branches else "main"] = sha
             repo.messages.append(summary)
         prefix = "" if kind == "models" else f"{kind}/"
-        self._json(200, {"commitUrl": f"{self.endpoint}/{prefix}{repo_id}/commit/{sha}", "commitOid": sha,
-                         "pullRequestUrl": None})
+        self._json(
+            200,
+            {"commitUrl": f"{self.endpoint}/{prefix}{repo_id}/commit/{sha}", "commitOid": sha, "pullRequestUrl": None},
+        )
 
     def branch(self, kind, repo_id, name) -> None:
         body = json.loads(self._body() or b"{}")
@@ -311,8 +331,16 @@ class Handler(BaseHTTPRequestHandler):
         repo = self._repo(kind, repo_id)
         if repo is None:
             return
-        self._json(200, {"branches": [{"name": n, "ref": f"refs/heads/{n}", "targetCommit": s}
-                                      for n, s in repo.branches.items()], "converts": [], "tags": []})
+        self._json(
+            200,
+            {
+                "branches": [
+                    {"name": n, "ref": f"refs/heads/{n}", "targetCommit": s} for n, s in repo.branches.items()
+                ],
+                "converts": [],
+                "tags": [],
+            },
+        )
 
     def _tree(self, kind, repo_id, rev):
         repo = self._repo(kind, repo_id)
@@ -329,11 +357,24 @@ class Handler(BaseHTTPRequestHandler):
         if tree is None:
             return
         repo = self.state.repos[(kind, repo_id)]
-        self._json(200, {"id": repo_id, "_id": repo_id, "author": repo_id.split("/")[0], "sha": sha,
-                         "private": repo.private, "gated": False, "disabled": False, "downloads": 0, "likes": 0,
-                         "tags": [], "lastModified": "2026-01-01T00:00:00.000Z",
-                         "createdAt": "2026-01-01T00:00:00.000Z",
-                         "siblings": [{"rfilename": p} for p in sorted(tree)]})
+        self._json(
+            200,
+            {
+                "id": repo_id,
+                "_id": repo_id,
+                "author": repo_id.split("/")[0],
+                "sha": sha,
+                "private": repo.private,
+                "gated": False,
+                "disabled": False,
+                "downloads": 0,
+                "likes": 0,
+                "tags": [],
+                "lastModified": "2026-01-01T00:00:00.000Z",
+                "createdAt": "2026-01-01T00:00:00.000Z",
+                "siblings": [{"rfilename": p} for p in sorted(tree)],
+            },
+        )
 
     def tree(self, kind, repo_id, rev, path) -> None:
         sha, tree = self._tree(kind, repo_id, rev)
@@ -350,7 +391,7 @@ class Handler(BaseHTTPRequestHandler):
         for p in sorted(tree):
             if not p.startswith(base):
                 continue
-            rest = p[len(base):].split("/")
+            rest = p[len(base) :].split("/")
             for depth in range(1, len(rest)):
                 d = base + "/".join(rest[:depth])
                 if (recursive or depth == 1) and d not in dirs:
@@ -395,7 +436,7 @@ class Handler(BaseHTTPRequestHandler):
         if m and self.command == "GET":
             start = int(m.group(1))
             end = int(m.group(2)) if m.group(2) else len(data) - 1
-            data, status = data[start: end + 1], 206
+            data, status = data[start : end + 1], 206
             headers["Content-Range"] = f"bytes {start}-{start + len(data) - 1}/{len(blob.data)}"
         self._send(status, data, headers, content_type="application/octet-stream")
 
@@ -427,8 +468,15 @@ class HubServer:
 def subprocess_env(hub: HubServer, home, token: str | None = TOKEN) -> dict:
     """Environment for a child process that uses the test Hub, as a user with HF_TOKEN set would."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(("HF_", "HUGGING"))}
-    env.update(HF_ENDPOINT=hub.url, HF_HUB_DISABLE_XET="1", HF_HUB_OFFLINE="0", HF_DATASETS_OFFLINE="0",
-               HF_HOME=str(home), HF_HUB_DISABLE_TELEMETRY="1", MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    env.update(
+        HF_ENDPOINT=hub.url,
+        HF_HUB_DISABLE_XET="1",
+        HF_HUB_OFFLINE="0",
+        HF_DATASETS_OFFLINE="0",
+        HF_HOME=str(home),
+        HF_HUB_DISABLE_TELEMETRY="1",
+        MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"),
+    )
     if token:
         env["HF_TOKEN"] = token
     return env

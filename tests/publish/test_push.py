@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 import pytest
+from hub_server import TOKEN, subprocess_env
 from typer.testing import CliRunner
 
-from hub_server import TOKEN, subprocess_env
 from orbitdata import schema as S
 from orbitdata.cli.app import app
 from orbitdata.publish import HubError, PushOptions, PushRefused, push
@@ -55,8 +55,13 @@ def test_push_end_to_end_then_load_dataset(hub, tiny_dataset_master, tmp_path):
     assert "validate --quick: valid" in pushed.stdout and f'load_dataset("{REPO}")' in pushed.stdout
     assert hub.files(REPO) == dataset_files(tiny_dataset_master)  # the uploaded set is the dataset, byte for byte
 
-    loaded = subprocess.run([sys.executable, "-c", LOAD, REPO, str(tmp_path / "snapshot"), S.IMAGE], env=env,
-                            capture_output=True, text=True, timeout=240)
+    loaded = subprocess.run(
+        [sys.executable, "-c", LOAD, REPO, str(tmp_path / "snapshot"), S.IMAGE],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
     assert loaded.returncode == 0, loaded.stderr[-3000:]
     result = json.loads(loaded.stdout.strip().splitlines()[-1])
     counts = json.loads((tiny_dataset_master / S.INFO_PATH).read_text())["counts"]["splits"]
@@ -121,8 +126,9 @@ def test_dry_run_lists_files_sizes_and_card_without_the_hub(hub_client, tiny_dat
 
 
 def test_push_to_a_branch(hub_client, tiny_dataset_master):
-    result = runner.invoke(app, ["push", str(tiny_dataset_master), REPO, "--branch", "v1", "--private",
-                                 "--message", "first release"])
+    result = runner.invoke(
+        app, ["push", str(tiny_dataset_master), REPO, "--branch", "v1", "--private", "--message", "first release"]
+    )
     assert result.exit_code == 0, result.output
     repo = hub_client.state.repos["datasets", REPO]
     assert repo.private and hub_client.files(REPO, "v1") == dataset_files(tiny_dataset_master)
@@ -135,20 +141,25 @@ def test_repush_of_a_resharded_dataset_removes_stale_shards(hub_client, tiny_dat
     from orbitdata.write.finalize import finalize
 
     push(tiny_dataset, REPO)
-    finalize(tiny_dataset, max_shard_bytes=100_000, figure=overview_figure)  # several smaller shards replace each split's one
+    finalize(
+        tiny_dataset, max_shard_bytes=100_000, figure=overview_figure
+    )  # several smaller shards replace each split's one
     result = push(tiny_dataset, REPO)
     assert result.deleted == [S.shard_path(S.DATA_DIR, "test", 0, 1), S.shard_path(S.DATA_DIR, "train", 0, 1)]
     assert hub_client.files(REPO) == dataset_files(tiny_dataset)
 
 
-@pytest.mark.parametrize("problem, hint", [
-    ("no token", "hf auth login"),
-    ("stored token", None),
-    ("bad token", "rejected the token (401)"),
-    ("no write access", "write access"),
-    ("offline", "HF_HUB_OFFLINE"),
-    ("unreachable", "cannot reach the Hub"),
-])
+@pytest.mark.parametrize(
+    "problem, hint",
+    [
+        ("no token", "hf auth login"),
+        ("stored token", None),
+        ("bad token", "rejected the token (401)"),
+        ("no write access", "write access"),
+        ("offline", "HF_HUB_OFFLINE"),
+        ("unreachable", "cannot reach the Hub"),
+    ],
+)
 def test_hub_problems_give_one_clear_line(hub_client, tiny_dataset_master, monkeypatch, tmp_path, problem, hint):
     from huggingface_hub import constants
 

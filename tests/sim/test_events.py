@@ -1,7 +1,5 @@
 """Collisions, success and the step limit."""
 
-import dataclasses
-
 import numpy as np
 from scenes import free_space, wall_ahead
 

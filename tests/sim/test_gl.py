@@ -71,17 +71,26 @@ print("parent", "same" if (env.reset(seed=4)[0]["image"] == first).all() else "d
 """
 
 
-@pytest.mark.parametrize("backend, child", [
-    ("egl", "child same"),  # the display is released before the fork: the child renders the same pixels
-    ("osmesa", "child RenderBackendError this process was forked from one that had rendered with MUJOCO_GL=osmesa"),
-])
+@pytest.mark.parametrize(
+    "backend, child",
+    [
+        ("egl", "child same"),  # the display is released before the fork: the child renders the same pixels
+        ("osmesa", "child RenderBackendError this process was forked from one that had rendered with MUJOCO_GL=osmesa"),
+    ],
+)
 def test_a_child_forked_after_rendering_renders_or_says_why_it_cannot(backend, child):
     """It used to wait forever in the renderer; the script runs in its own process group, killed
     whole if it does not finish."""
     env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")}
     env["MUJOCO_GL"] = backend
-    proc = subprocess.Popen([sys.executable, "-c", FORK], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", FORK],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = proc.communicate(timeout=120)  # seconds normally; a guard against a hang
     except subprocess.TimeoutExpired:

@@ -61,17 +61,20 @@ def test_make_keywords_and_the_module_form():
     env.close()
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"n_obstacles": 2.5}, "n_obstacles=2.5"),
-    ({"n_obstacles": -1}, "n_obstacles=-1"),
-    ({"speed": -1.0}, "speed=-1.0"),
-    ({"speed": float("nan")}, "speed=nan"),
-    ({"max_steps": 0}, "max_steps=0"),
-    ({"max_steps": 2.0}, "max_steps=2.0"),
-    ({"image_size": 100}, "image_size must be a multiple of 16"),
-    ({"seed": -3}, "seed=-3"),
-    ({"images": "no"}, "images='no'"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"n_obstacles": 2.5}, "n_obstacles=2.5"),
+        ({"n_obstacles": -1}, "n_obstacles=-1"),
+        ({"speed": -1.0}, "speed=-1.0"),
+        ({"speed": float("nan")}, "speed=nan"),
+        ({"max_steps": 0}, "max_steps=0"),
+        ({"max_steps": 2.0}, "max_steps=2.0"),
+        ({"image_size": 100}, "image_size must be a multiple of 16"),
+        ({"seed": -3}, "seed=-3"),
+        ({"images": "no"}, "images='no'"),
+    ],
+)
 def test_bad_arguments_are_refused_at_make_naming_them(kwargs, message):
     with pytest.raises(ValueError, match=message.replace("[", r"\[")):
         gym.make("CubeSat-v1", **{"images": False, **kwargs})
@@ -126,8 +129,14 @@ def test_an_async_vector_env_runs_in_a_process_that_has_rendered():
     script runs in its own process group, killed whole if it does not finish."""
     paths = [str(Path(orbitdata.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in paths if p))
-    proc = subprocess.Popen([sys.executable, "-c", ASYNC], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", ASYNC],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
     try:
         out, err = proc.communicate(timeout=240)  # seconds normally; a guard against a hang
     except subprocess.TimeoutExpired:

@@ -51,8 +51,12 @@ def write(root: Path, rel: str, table: pa.Table, seal: bool = True, schema: pa.S
     kind = rel.split("/")[0]
     if schema is None:
         schema = S.with_hf_metadata(S.STEP_SCHEMA if kind == S.DATA_DIR else S.EPISODE_SCHEMA, kind)
-    pq.write_table(table.cast(schema) if schema.names == table.schema.names else table, root / rel,
-                   compression="zstd", row_group_size=ROW_GROUP_ROWS)
+    pq.write_table(
+        table.cast(schema) if schema.names == table.schema.names else table,
+        root / rel,
+        compression="zstd",
+        row_group_size=ROW_GROUP_ROWS,
+    )
     if seal:
         reseal(root, rel)
 
@@ -107,8 +111,9 @@ def set_image(root: Path, rel: str, column: str, row: int, blob: bytes) -> None:
     col = table.column(column).combine_chunks()
     blobs = col.field("bytes").to_pylist()
     blobs[row] = blob
-    arr = pa.StructArray.from_arrays([pa.array(blobs, pa.binary()), pa.nulls(len(blobs), pa.string())],
-                                     names=["bytes", "path"])
+    arr = pa.StructArray.from_arrays(
+        [pa.array(blobs, pa.binary()), pa.nulls(len(blobs), pa.string())], names=["bytes", "path"]
+    )
     write(root, rel, table.set_column(table.schema.get_field_index(column), column, arr))
 
 

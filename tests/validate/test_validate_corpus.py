@@ -11,11 +11,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+import corruptions as X
 import numpy as np
 import pyarrow as pa
 import pytest
 
-import corruptions as X
 from orbitdata import schema as S
 from orbitdata.validate import CHECKS, ValidateOptions, validate
 from orbitdata.validate import checks as C
@@ -69,7 +69,7 @@ def _bad_page(root):
     path = root / X.TRAIN
     offset = X.page_offset(root, X.TRAIN, 2, S.STATE)
     data = bytearray(path.read_bytes())
-    data[offset: offset + 24] = b"\xde\xad\xbe\xef" * 6
+    data[offset : offset + 24] = b"\xde\xad\xbe\xef" * 6
     path.write_bytes(bytes(data))
     X.reseal(root, X.TRAIN)
 
@@ -87,8 +87,14 @@ def _card_edit(root):
 def _rename_column(root):
     table = X.read(root, X.TRAIN)
     names = [("actions" if n == S.ACTION else n) for n in table.column_names]
-    X.write(root, X.TRAIN, table.rename_columns(names), schema=table.schema.remove_metadata()
-            .set(table.schema.get_field_index(S.ACTION), pa.field("actions", table.schema.field(S.ACTION).type)))
+    X.write(
+        root,
+        X.TRAIN,
+        table.rename_columns(names),
+        schema=table.schema.remove_metadata().set(
+            table.schema.get_field_index(S.ACTION), pa.field("actions", table.schema.field(S.ACTION).type)
+        ),
+    )
 
 
 def _wrong_type(root):
@@ -201,10 +207,12 @@ def _collision_mid_episode(root):
 
 def _state_edit(offset: int, fn, split: str = "train"):
     """Edit one state; test-split edits leave meta/stats.json (train only) right."""
+
     def corrupt(root):
         ep = X.longest_episode(root, split)
         X.edit_state(root, ep[S.DATA_FILE], ep[S.ROW_START] + offset, fn)
         return ep[S.EPISODE_INDEX], offset
+
     return corrupt
 
 
@@ -226,6 +234,7 @@ def _action(value: float, offset: int | None, split: str = "train"):
         a[ep[S.ROW_START] + frame, 0] = value
         X.write(root, ep[S.DATA_FILE], X.set_matrix(table, S.ACTION, a))
         return ep[S.EPISODE_INDEX], frame
+
     return corrupt
 
 
@@ -233,6 +242,7 @@ def _rotate(angle):
     def fn(s):
         R = np.array(s[6:12]).reshape(3, 2)
         s[6:12] = (X.rotation_z(angle) @ np.c_[R, np.cross(R[:, 0], R[:, 1])])[:, :2].reshape(-1)
+
     return fn
 
 
@@ -250,6 +260,7 @@ def _image(column: str, blob: Callable[[Path], bytes], offset: int = 15):
         ep = X.longest_train_episode(root)
         X.set_image(root, X.TRAIN, column, ep[S.ROW_START] + offset, blob(root))
         return ep[S.EPISODE_INDEX], offset
+
     return corrupt
 
 
@@ -276,8 +287,11 @@ def _card_count(root):
 
 
 def _info_count(root):
-    X.edit_json(root, S.INFO_PATH, lambda info: info["counts"]["splits"]["test"]["levels"]["expert"]["outcomes"]
-                .update(success=99))
+    X.edit_json(
+        root,
+        S.INFO_PATH,
+        lambda info: info["counts"]["splits"]["test"]["levels"]["expert"]["outcomes"].update(success=99),
+    )
 
 
 def _stats_mean(root):
@@ -321,15 +335,17 @@ CASES = [
     Case("terminal action not zero", C.ACTION, _action(0.3, None, "test"), only=True),
     Case("rot6d column scaled", C.ROT6D, _state_edit(60, lambda s: s.__setitem__(slice(6, 12), s[6:12] * 1.1))),
     Case("fuel above 1", C.FUEL, _state_edit(0, lambda s: s.__setitem__(15, 1.2))),
-    Case("fuel rises", C.FUEL, _state_edit(80, lambda s: s.__setitem__(15, s[15] + 0.01), "test"),
-         only=True),
+    Case("fuel rises", C.FUEL, _state_edit(80, lambda s: s.__setitem__(15, s[15] + 0.01), "test"), only=True),
     Case("start off origin", C.START, _state_edit(0, lambda s: s.__setitem__(0, 0.25))),
     Case("negative clearance", C.CLEARANCE, _clearance),
     Case("position jump", C.KIN_POSITION, _state_edit(70, lambda s: s.__setitem__(1, s[1] + 0.02))),
     Case("velocity sign flip", C.KIN_POSITION, _state_edit(90, lambda s: s.__setitem__(slice(3, 6), -s[3:6]))),
     Case("attitude jump", C.KIN_ROTATION, _state_edit(100, _rotate(0.05))),
-    Case("angular velocity scaled", C.KIN_ROTATION, _state_edit(110, lambda s: s.__setitem__(slice(12, 15),
-                                                                                             3 * s[12:15] + 1))),
+    Case(
+        "angular velocity scaled",
+        C.KIN_ROTATION,
+        _state_edit(110, lambda s: s.__setitem__(slice(12, 15), 3 * s[12:15] + 1)),
+    ),
     Case("garbage JPEG", C.DECODE, _image(S.IMAGE, lambda root: b"\xff\xd8not a jpeg")),
     Case("garbage PNG", C.DECODE, _image(S.DEPTH, lambda root: b"\x89PNG broken")),
     Case("truncated JPEG", C.DECODE, _image(S.IMAGE, lambda root: X.image_bytes(root, X.TRAIN, S.IMAGE, 3)[:300])),

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 
+import corruptions as X
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import corruptions as X
 from orbitdata import schema as S
 from orbitdata.cli.app import app
 from orbitdata.validate import ValidateOptions, validate

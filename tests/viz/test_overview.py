@@ -36,8 +36,9 @@ def test_the_overview_is_deterministic_and_reads_only_what_it_shows(tiny_dataset
     episodes = read_episodes(tiny_dataset)
     reads = []
     read_row_group = pq.ParquetFile.read_row_group
-    monkeypatch.setattr(pq.ParquetFile, "read_row_group",
-                        lambda self, g, *a, **k: reads.append(g) or read_row_group(self, g, *a, **k))
+    monkeypatch.setattr(
+        pq.ParquetFile, "read_row_group", lambda self, g, *a, **k: reads.append(g) or read_row_group(self, g, *a, **k)
+    )
     write_overview(tiny_dataset, episodes.take(np.arange(episodes.num_rows)[::-1]), FAR)  # row order must not matter
     read = len(reads)
     assert (tiny_dataset / S.OVERVIEW_PATH).read_bytes() == before
@@ -49,25 +50,31 @@ def test_the_overview_is_deterministic_and_reads_only_what_it_shows(tiny_dataset
         starts = RowReader(tiny_dataset / pick[S.DATA_FILE]).starts
         first, end = pick[S.ROW_START], pick[S.ROW_START] + pick[S.LENGTH]
         expected += int(((starts[:-1] < end) & (starts[1:] > first)).sum())
-        groups = {int(np.searchsorted(starts, first + t, side="right")) - 1
-                  for t in frames_to_show(tiny_dataset, pick, FAR)}
+        groups = {
+            int(np.searchsorted(starts, first + t, side="right")) - 1 for t in frames_to_show(tiny_dataset, pick, FAR)
+        }
         frames_by_file.setdefault(pick[S.DATA_FILE], set()).update(groups)
     expected += sum(len(groups) for groups in frames_by_file.values())
     assert read == expected
 
 
 def test_samples_are_typical_episodes():
-    table = pa.table({
-        S.EPISODE_INDEX: [0, 1, 2, 3, 4],
-        S.LEVEL: ["expert", "expert", "expert", "risky", "expert"],
-        S.OUTCOME: ["success", "success", "success", "collision", "collision"],
-        S.LENGTH: [100, 300, 150, 40, 90],
-        S.DATA_FILE: ["data/train-00000-of-00001.parquet"] * 5,
-        S.ROW_START: [0, 100, 400, 550, 590],
-    })
+    table = pa.table(
+        {
+            S.EPISODE_INDEX: [0, 1, 2, 3, 4],
+            S.LEVEL: ["expert", "expert", "expert", "risky", "expert"],
+            S.OUTCOME: ["success", "success", "success", "collision", "collision"],
+            S.LENGTH: [100, 300, 150, 40, 90],
+            S.DATA_FILE: ["data/train-00000-of-00001.parquet"] * 5,
+            S.ROW_START: [0, 100, 400, 550, 590],
+        }
+    )
     picks = sample_episodes(table)
     assert {k: v[S.EPISODE_INDEX] for k, v in picks.items()} == {
-        ("expert", "success"): 2, ("risky", "collision"): 3, ("expert", "collision"): 4}
+        ("expert", "success"): 2,
+        ("risky", "collision"): 3,
+        ("expert", "collision"): 4,
+    }
 
 
 def test_frames_to_show_start_fill_and_end(tiny_dataset_master):
@@ -81,8 +88,9 @@ def test_frames_to_show_start_fill_and_end(tiny_dataset_master):
         # The middle frame is where obstacles fill the most of the view between a quarter of the
         # way and the end, measured here on the full-resolution depth (pixels with a return).
         start = max(1, min(length // 4, end - 1))
-        depth = read_cells(tiny_dataset_master / pick[S.DATA_FILE],
-                           [pick[S.ROW_START] + t for t in range(start, end)], S.DEPTH)
+        depth = read_cells(
+            tiny_dataset_master / pick[S.DATA_FILE], [pick[S.ROW_START] + t for t in range(start, end)], S.DEPTH
+        )
         fill = np.array([(decode_depth(d["bytes"]) > 0).mean() for d in depth])
         middle = frames[1] - start
         assert fill[middle] >= fill.max() - 0.05, (pick[S.EPISODE_INDEX], fill[middle], fill.max())

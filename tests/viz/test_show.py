@@ -50,7 +50,7 @@ def test_every_frame_shows_this_episodes_camera(video):
         assert frame.shape == (720, 1280, 3) and frame.dtype == np.uint8
         box = video.boxes["camera"]
         expected = P.fit(ep.rgb([t])[0], box.size)
-        np.testing.assert_array_equal(frame[box.y0:box.y1, box.x0:box.x1], expected)
+        np.testing.assert_array_equal(frame[box.y0 : box.y1, box.x0 : box.x1], expected)
 
 
 @pytest.mark.parametrize("view", ["top", "side"])
@@ -75,7 +75,7 @@ def test_the_path_is_drawn_only_up_to_the_current_frame(video):
     ep = video.ep
     mid = len(ep) // 2
     frame = video.frame(mid)
-    future = video.path_pixels("top", len(ep) - 1)[mid + 6:-4]
+    future = video.path_pixels("top", len(ep) - 1)[mid + 6 : -4]
     past = video.path_pixels("top", mid)[4:-6]
     moved = np.abs(np.diff(future, axis=0)).sum() > 10  # the CubeSat moved visibly after mid
     assert _path_share(frame, past) > 0.9
@@ -148,7 +148,7 @@ def test_png_is_a_contact_sheet_of_this_episode(tiny_dataset_master, shortest, t
     np.testing.assert_array_equal(image, sheet.image)
     assert sheet.frames == key_frames(len(ep)) and sheet.frames[0] == 0 and sheet.frames[-1] == len(ep) - 1
     for t, (cam, _) in zip(sheet.frames, sheet.frame_boxes):
-        np.testing.assert_array_equal(image[cam.y0:cam.y1, cam.x0:cam.x1], P.fit(ep.rgb([t])[0], cam.size))
+        np.testing.assert_array_equal(image[cam.y0 : cam.y1, cam.x0 : cam.x1], P.fit(ep.rgb([t])[0], cam.size))
     for view in ("top", "side"):
         pixels = sheet.path_pixels(view)
         # key-frame dots sit on the path: leave out the points next to them
@@ -179,16 +179,20 @@ def test_show_cli(tiny_dataset_master, shortest, tmp_path):
     assert out.exists() and str(out) in res.output
 
 
-@pytest.mark.parametrize("args, code, message", [
-    (["--episode", "0", "--out", "x.avi"], 2, "unknown format '.avi'"),
-    (["--episode", "0", "--out", "x"], 2, "unknown format (no suffix)"),
-    (["--episode", "77", "--out", "x.png"], 2, "episode 77 is not in"),
-    (["--out", "x.png"], 2, "pass --episode N"),
-    (["--episode", "0", "--out", "x.mp4", "--fps", "0"], 2, "--fps 0"),
-])
+@pytest.mark.parametrize(
+    "args, code, message",
+    [
+        (["--episode", "0", "--out", "x.avi"], 2, "unknown format '.avi'"),
+        (["--episode", "0", "--out", "x"], 2, "unknown format (no suffix)"),
+        (["--episode", "77", "--out", "x.png"], 2, "episode 77 is not in"),
+        (["--out", "x.png"], 2, "pass --episode N"),
+        (["--episode", "0", "--out", "x.mp4", "--fps", "0"], 2, "--fps 0"),
+    ],
+)
 def test_show_cli_errors(tiny_dataset_master, tmp_path, args, code, message):
-    res = runner.invoke(app, ["show", str(tiny_dataset_master), *[str(tmp_path / a) if a.startswith("x") else a
-                                                                  for a in args]])
+    res = runner.invoke(
+        app, ["show", str(tiny_dataset_master), *[str(tmp_path / a) if a.startswith("x") else a for a in args]]
+    )
     assert res.exit_code == code, res.output
     assert message in res.output and "Traceback" not in res.output
     assert len(res.output.strip().splitlines()) == 1

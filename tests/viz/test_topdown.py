@@ -49,8 +49,9 @@ def test_a_sphere_is_drawn_to_scale():
 def test_a_capsule_is_its_hull_not_an_ellipsoid():
     # radius 0.5, half-length 1, lying along world x (local z -> world x)
     q = (math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4), 0.0)
-    view = PlaneMap(_scenario(Obstacle("capsule", (5.0, 0.0, 0.0), (0.5, 1.0, 0.0), quat=q, rgba=(1, 1, 1, 1))),
-                    (400, 400))
+    view = PlaneMap(
+        _scenario(Obstacle("capsule", (5.0, 0.0, 0.0), (0.5, 1.0, 0.0), quat=q, rgba=(1, 1, 1, 1))), (400, 400)
+    )
     img = view.background()
     assert _colour(img, view, (6.2, 0.4)) == (255, 255, 255)  # inside the capsule, outside an ellipsoid fit
     assert _colour(img, view, (6.7, 0.0)) in (BG, GRID)

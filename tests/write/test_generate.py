@@ -11,8 +11,8 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 import yaml
-
 from tiny import tiny_config
+
 from orbitdata import schema as S
 from orbitdata.viz import overview_figure
 from orbitdata.write.finalize import finalize
@@ -83,9 +83,7 @@ def test_counts_agree_between_card_info_and_data(tiny_dataset_master):
         t = pq.read_table(path)
         episodes[path.name.split("-")[0]] += t.num_rows
         assert sum(t.column(S.LENGTH).to_pylist()) == data[path.name.split("-")[0]]
-    card_counts = {
-        c["config_name"]: {s["name"]: s["num_examples"] for s in c["splits"]} for c in card["dataset_info"]
-    }
+    card_counts = {c["config_name"]: {s["name"]: s["num_examples"] for s in c["splits"]} for c in card["dataset_info"]}
     for split, counts in info["counts"]["splits"].items():
         assert counts["frames"] == data[split] == card_counts["default"][split]
         assert counts["episodes"] == episodes[split] == card_counts["episodes"][split]

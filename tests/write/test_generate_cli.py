@@ -104,12 +104,12 @@ def test_non_dataset_folder_is_not_clobbered(tmp_path):
 def test_generate_from_toml_and_flags(tmp_path):
     cfg = tmp_path / "small.toml"
     cfg.write_text(
-        "[dataset]\nlevel_mix = [0.0, 1.0, 0.0]\n[scenario]\nn_obstacles = [5, 5]\n"
-        "[sim.camera]\nimage_size = 32\n"
+        "[dataset]\nlevel_mix = [0.0, 1.0, 0.0]\n[scenario]\nn_obstacles = [5, 5]\n[sim.camera]\nimage_size = 32\n"
     )
     out = tmp_path / "out"
-    res = runner.invoke(app, ["generate", str(out), "--config", str(cfg), "--episodes", "2", "--workers", "1",
-                              "--test-fraction", "0"])
+    res = runner.invoke(
+        app, ["generate", str(out), "--config", str(cfg), "--episodes", "2", "--workers", "1", "--test-fraction", "0"]
+    )
     assert res.exit_code == 0, res.output
     import json
 
@@ -122,8 +122,9 @@ def test_generate_from_toml_and_flags(tmp_path):
 def test_a_single_episode_says_in_one_line_that_there_is_no_test_split(tmp_path):
     cfg = tmp_path / "risky.toml"
     cfg.write_text("[dataset]\nlevel_mix = [0.0, 1.0, 0.0]\n[sim.camera]\nimage_size = 32\n")
-    res = runner.invoke(app, ["generate", str(tmp_path / "one"), "--config", str(cfg), "--episodes", "1",
-                              "--workers", "1"])
+    res = runner.invoke(
+        app, ["generate", str(tmp_path / "one"), "--config", str(cfg), "--episodes", "1", "--workers", "1"]
+    )
     assert res.exit_code == 0, res.output
     notes = [line for line in res.output.splitlines() if "test split" in line]
     assert notes == ["note: no test split: one episode is all train; pass --episodes 2 or more for a test split"]

@@ -28,8 +28,7 @@ def _sha256(path) -> str:
 
 def test_every_parquet_file_has_the_golden_bytes(tiny_dataset_master):
     found = {
-        str(p.relative_to(tiny_dataset_master)): _sha256(p)
-        for p in sorted(tiny_dataset_master.glob("*/*.parquet"))
+        str(p.relative_to(tiny_dataset_master)): _sha256(p) for p in sorted(tiny_dataset_master.glob("*/*.parquet"))
     }
     assert set(found) == set(PARQUET_SHA256), "the set of shards changed"
     changed = [name for name, digest in PARQUET_SHA256.items() if found[name] != digest]

@@ -44,5 +44,7 @@ def test_plans_with_a_test_share_are_unchanged():
     """The default 8000-episode plan and the golden tiny dataset's, as the code made them before
     small datasets kept a test episode (digests of (index, split, level, seed))."""
     assert _digest(DatasetConfig()) == "6cee97857c71d48d4c3e3ceefdd58d16baf1c03a58d10483b9238e076b763dec"
-    assert _digest(DatasetConfig(episodes=6, test_fraction=0.34)) == \
-        "22b0c5cfea03ff925365508be1c03b245e586a7114bd938664db8ce30066554d"
+    assert (
+        _digest(DatasetConfig(episodes=6, test_fraction=0.34))
+        == "22b0c5cfea03ff925365508be1c03b245e586a7114bd938664db8ce30066554d"
+    )

@@ -28,8 +28,9 @@ def goal_seeking_velocity(p: np.ndarray, goal: np.ndarray, cruise: float, brake_
     return to_goal / dist * min(cruise, np.sqrt(2.0 * brake_accel * dist) + APPROACH_SPEED_FLOOR)
 
 
-def goal_seeking_accel(controller: Controller, state: np.ndarray, goal: np.ndarray, cruise: float,
-                       brake_accel: float = 1.0) -> np.ndarray:
+def goal_seeking_accel(
+    controller: Controller, state: np.ndarray, goal: np.ndarray, cruise: float, brake_accel: float = 1.0
+) -> np.ndarray:
     """PD towards the goal: aim for a velocity along the line of sight that slows on arrival."""
     p, *_ = controller.unpack(state)
     if np.linalg.norm(goal - p) < 1e-9:

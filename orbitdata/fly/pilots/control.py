@@ -63,8 +63,9 @@ class Controller:
         norm = np.linalg.norm(a)
         return a if norm <= g.max_accel else a * (g.max_accel / norm)
 
-    def thrust(self, state: np.ndarray, accel_world: np.ndarray, R_des: np.ndarray,
-               alpha_offset: np.ndarray | None = None) -> np.ndarray:
+    def thrust(
+        self, state: np.ndarray, accel_world: np.ndarray, R_des: np.ndarray, alpha_offset: np.ndarray | None = None
+    ) -> np.ndarray:
         """Thrusts that best produce ``accel_world`` while turning towards ``R_des``.
 
         ``alpha_offset`` (rad/s^2, body frame) is added to the attitude PD's command.

@@ -43,8 +43,14 @@ class ExpertPilot(ControlledPilot):
         self.rng = make_rng(task.seed, "pilot", self.noise_draw)
         inflation = self.controller.cubesat.bounding_radius + cfg.planner.margin
         v0 = float(np.linalg.norm(task.initial_velocity))
-        plan = plan_path((0.0, 0.0, 0.0), task.goal, scenario.obstacles, inflation, cfg.planner,
-                         make_rng(task.seed, "planner", self.plan_draw))
+        plan = plan_path(
+            (0.0, 0.0, 0.0),
+            task.goal,
+            scenario.obstacles,
+            inflation,
+            cfg.planner,
+            make_rng(task.seed, "planner", self.plan_draw),
+        )
         self.plan = plan
         self.trajectory: Trajectory | None = None
         if plan.solved:
@@ -81,8 +87,11 @@ class ExpertPilot(ControlledPilot):
         if i >= len(traj.points) - 1 or np.linalg.norm(look) < MIN_LOOK_DISTANCE:
             look = self.goal - p
         turn = so3_log(R.T @ face(self.controller, state, look))
-        return (float(np.linalg.norm(p - pos_ref)), float(np.linalg.norm(v - vel_ref)),
-                float(np.degrees(np.linalg.norm(turn))))
+        return (
+            float(np.linalg.norm(p - pos_ref)),
+            float(np.linalg.norm(v - vel_ref)),
+            float(np.degrees(np.linalg.norm(turn))),
+        )
 
     def could_be_at(self, state: np.ndarray, position_m: float, speed_mps: float, angle_deg: float) -> bool:
         """Whether an expert flying this plan could be in ``state``: its :meth:`deviation` is
@@ -110,5 +119,11 @@ class ExpertPilot(ControlledPilot):
 
     def metadata(self) -> dict:
         p = self.plan
-        return {"planner": {"solved": p.solved, "iterations": p.iterations, "path_length": p.path_length,
-                            "planning_time": p.planning_time}}
+        return {
+            "planner": {
+                "solved": p.solved,
+                "iterations": p.iterations,
+                "path_length": p.path_length,
+                "planning_time": p.planning_time,
+            }
+        }

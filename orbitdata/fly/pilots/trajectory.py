@@ -11,7 +11,6 @@ Everything is deterministic.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -47,8 +46,16 @@ class Trajectory:
         self.duration = float(self.t[-1])
         step = float(ds.mean()) if len(ds) else 1.0
         self._window_n = max(2, int(math.floor(self.window / max(step, 1e-9) + 1e-9)) + 1)
-        for a in (self.points, self.tangents, self.normals, self.curvature, self.s, self.speed,
-                  self.along_accel, self.t):
+        for a in (
+            self.points,
+            self.tangents,
+            self.normals,
+            self.curvature,
+            self.s,
+            self.speed,
+            self.along_accel,
+            self.t,
+        ):
             a.setflags(write=False)
 
     def __len__(self) -> int:
@@ -165,8 +172,9 @@ def time_parametrise(
     pts = pts[keep]
     if len(pts) == 1:  # already at the goal: a single sample, no motion
         z = np.zeros((1, 3))
-        return Trajectory(pts.copy(), np.array([[1.0, 0.0, 0.0]]), z, np.zeros(1), np.zeros(1),
-                          np.array([float(cfg.goal_speed)]))
+        return Trajectory(
+            pts.copy(), np.array([[1.0, 0.0, 0.0]]), z, np.zeros(1), np.zeros(1), np.array([float(cfg.goal_speed)])
+        )
     free = None
     if obstacles is not None and inflation is not None and len(obstacles) > 0:
         # The 1 nm guard keeps the numpy-evaluated samples strictly valid despite rounding.

@@ -15,13 +15,23 @@ Heavy imports (torch, diffusers) happen when a name is first used.
 from __future__ import annotations
 
 _EXPORTS = {
-    "PolicyConfig": "config", "PolicyTrainConfig": "config", "PolicyPreset": "config",
-    "POLICY_PRESETS": "config", "get_policy_preset": "config",
-    "ConditionalUnet1D": "unet", "DiffusionPolicy": "policy",
-    "PolicyRequest": "train", "train_policy": "train", "read_policy_run": "config",
-    "DiffusionPilot": "pilot", "load_policy_pilot": "pilot",
-    "PolicySampling": "sampling", "POLICY_FLIGHTS": "sampling", "policy_sampling": "sampling",
-    "evaluate_policy": "evaluate", "ActionMSE": "evaluate",
+    "PolicyConfig": "config",
+    "PolicyTrainConfig": "config",
+    "PolicyPreset": "config",
+    "POLICY_PRESETS": "config",
+    "get_policy_preset": "config",
+    "ConditionalUnet1D": "unet",
+    "DiffusionPolicy": "policy",
+    "PolicyRequest": "train",
+    "train_policy": "train",
+    "read_policy_run": "config",
+    "DiffusionPilot": "pilot",
+    "load_policy_pilot": "pilot",
+    "PolicySampling": "sampling",
+    "POLICY_FLIGHTS": "sampling",
+    "policy_sampling": "sampling",
+    "evaluate_policy": "evaluate",
+    "ActionMSE": "evaluate",
     "ExpertFloor": "expert_floor",  # and expert_floor.expert_floor(RUN, DATASET)
 }
 __all__ = list(_EXPORTS)

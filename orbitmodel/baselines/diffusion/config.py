@@ -87,24 +87,33 @@ class PolicyConfig:
             raise ValueError(f"obstacles={self.obstacles}: give the number of true obstacles to read, 0 for none")
         levels = 2 ** (len(self.down_dims) - 1)
         if self.horizon % levels:
-            raise ValueError(f"horizon={self.horizon} must be divisible by {levels}: the U-Net halves it "
-                             f"{len(self.down_dims) - 1} times (down_dims={self.down_dims})")
+            raise ValueError(
+                f"horizon={self.horizon} must be divisible by {levels}: the U-Net halves it "
+                f"{len(self.down_dims) - 1} times (down_dims={self.down_dims})"
+            )
         if self.n_obs_steps < 1:
             raise ValueError(f"n_obs_steps={self.n_obs_steps}: condition on at least one observation")
         if not 1 <= self.n_action_steps <= self.horizon - self.n_obs_steps + 1:
-            raise ValueError(f"n_action_steps={self.n_action_steps} must be in [1, horizon - n_obs_steps + 1 = "
-                             f"{self.horizon - self.n_obs_steps + 1}]: executed actions start at the current frame")
+            raise ValueError(
+                f"n_action_steps={self.n_action_steps} must be in [1, horizon - n_obs_steps + 1 = "
+                f"{self.horizon - self.n_obs_steps + 1}]: executed actions start at the current frame"
+            )
         if not 1 <= self.inference_steps <= self.train_timesteps:
-            raise ValueError(f"inference_steps={self.inference_steps} must be in [1, train_timesteps="
-                             f"{self.train_timesteps}]")
+            raise ValueError(
+                f"inference_steps={self.inference_steps} must be in [1, train_timesteps={self.train_timesteps}]"
+            )
         if self.timestep_spacing not in TIMESTEP_SPACINGS:
-            raise ValueError(f"timestep_spacing={self.timestep_spacing!r}: choose one of {', '.join(TIMESTEP_SPACINGS)}")
+            raise ValueError(
+                f"timestep_spacing={self.timestep_spacing!r}: choose one of {', '.join(TIMESTEP_SPACINGS)}"
+            )
         if self.prediction_type not in PREDICTION_TYPES:
             raise ValueError(f"prediction_type={self.prediction_type!r}: choose one of {', '.join(PREDICTION_TYPES)}")
         side = 2 ** len(self.cnn_channels)
         if self.image_size % side:
-            raise ValueError(f"image_size={self.image_size} must be divisible by {side} "
-                             f"({len(self.cnn_channels)} stride-2 convolutions)")
+            raise ValueError(
+                f"image_size={self.image_size} must be divisible by {side} "
+                f"({len(self.cnn_channels)} stride-2 convolutions)"
+            )
         for name in ("cnn_channels", "down_dims"):
             bad = [c for c in getattr(self, name) if c % self.n_groups]
             if bad:
@@ -147,9 +156,21 @@ class PolicyTrainConfig(StageTrainConfig):
     val_seed: int = 0
     pad_before: int = 1
     mask_padding: bool = True
-    loop: LoopSettings = LoopSettings(batch_size=64, lr=1e-4, min_lr=0.0, weight_decay=1e-6, betas=(0.95, 0.999),
-                                      epochs=100, max_steps=0, warmup=0.05, grad_clip=10.0, num_workers=4,
-                                      log_every=10, save_every=500, seed=42)
+    loop: LoopSettings = LoopSettings(
+        batch_size=64,
+        lr=1e-4,
+        min_lr=0.0,
+        weight_decay=1e-6,
+        betas=(0.95, 0.999),
+        epochs=100,
+        max_steps=0,
+        warmup=0.05,
+        grad_clip=10.0,
+        num_workers=4,
+        log_every=10,
+        save_every=500,
+        seed=42,
+    )
 
     def __post_init__(self):
         if not 0.0 <= self.val_fraction < 1.0:
@@ -181,8 +202,12 @@ class PolicyPreset:
         """A preset as a run's config.json holds it (its training config nested or flat, see
         ``StageTrainConfig.from_dict``)."""
         model = {k: tuple(v) if isinstance(v, list) else v for k, v in d["model"].items()}
-        return cls(name=d["name"], description=d["description"], model=PolicyConfig(**model),
-                   train=PolicyTrainConfig.from_dict(d["train"]))
+        return cls(
+            name=d["name"],
+            description=d["description"],
+            model=PolicyConfig(**model),
+            train=PolicyTrainConfig.from_dict(d["train"]),
+        )
 
     def with_train(self, **changes) -> "PolicyPreset":
         """The preset with some training settings replaced, the loop's by their own names
@@ -196,39 +221,73 @@ def _cpu() -> PolicyPreset:
     # samples far from the data, biased by the clipped x0 estimates of the noisiest steps), so the
     # preset predicts the clean sample (the reference's other prediction_type) at a 3x higher
     # learning rate.
-    train = PolicyTrainConfig().with_changes(batch_size=64, lr=3e-4, epochs=100, max_steps=16000, warmup=0.05,
-                                             num_workers=0, log_every=20, save_every=250)
-    return PolicyPreset("cpu", "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
-                        "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction",
-                        PolicyConfig(prediction_type="sample"), train)
+    train = PolicyTrainConfig().with_changes(
+        batch_size=64, lr=3e-4, epochs=100, max_steps=16000, warmup=0.05, num_workers=0, log_every=20, save_every=250
+    )
+    return PolicyPreset(
+        "cpu",
+        "Diffusion Policy for a 2-core CPU: 4-layer GroupNorm CNN on 64 px, U-Net "
+        "(64, 128, 256), DDPM 100 / DDIM 10, x0 prediction",
+        PolicyConfig(prediction_type="sample"),
+        train,
+    )
 
 
 def _cpu_state() -> PolicyPreset:
     # The cpu policy and recipe without the camera: a second baseline row, and a cheap proxy of
     # how much of the policy's skill needs no vision.
     cpu = _cpu()
-    return PolicyPreset("cpu-state", "the cpu Diffusion Policy on states and goal only (no camera)",
-                        replace(cpu.model, images=False), cpu.train)
+    return PolicyPreset(
+        "cpu-state",
+        "the cpu Diffusion Policy on states and goal only (no camera)",
+        replace(cpu.model, images=False),
+        cpu.train,
+    )
 
 
 def _cpu_state_obstacles() -> PolicyPreset:
     # The diagnostic beside cpu-state: the same policy told the episode's true obstacles (up to 5,
     # the dataset's most), so its error is what perfect perception would leave. It does not fly.
     blind = _cpu_state()
-    return PolicyPreset("cpu-state-obstacles", "diagnostic: cpu-state told the true obstacles (privileged; does not fly)",
-                        replace(blind.model, obstacles=5), blind.train)
+    return PolicyPreset(
+        "cpu-state-obstacles",
+        "diagnostic: cpu-state told the true obstacles (privileged; does not fly)",
+        replace(blind.model, obstacles=5),
+        blind.train,
+    )
 
 
 def _tiny() -> PolicyPreset:
-    model = PolicyConfig(cnn_channels=(8, 8, 8, 8), image_features=8, n_groups=4, down_dims=(8, 16),
-                         step_embed=8, kernel_size=3, inference_steps=4)
-    train = PolicyTrainConfig().with_changes(window_stride=4, batch_size=4, lr=1e-3, epochs=2, warmup=0.1, shift=2,
-                                             num_workers=0, log_every=1, save_every=2, seed=0)
+    model = PolicyConfig(
+        cnn_channels=(8, 8, 8, 8),
+        image_features=8,
+        n_groups=4,
+        down_dims=(8, 16),
+        step_embed=8,
+        kernel_size=3,
+        inference_steps=4,
+    )
+    train = PolicyTrainConfig().with_changes(
+        window_stride=4,
+        batch_size=4,
+        lr=1e-3,
+        epochs=2,
+        warmup=0.1,
+        shift=2,
+        num_workers=0,
+        log_every=1,
+        save_every=2,
+        seed=0,
+    )
     return PolicyPreset("tiny", "a tiny policy for tests", model, train)
 
 
-POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {"cpu": _cpu, "cpu-state": _cpu_state,
-                                                           "cpu-state-obstacles": _cpu_state_obstacles, "tiny": _tiny}
+POLICY_PRESETS: dict[str, Callable[[], PolicyPreset]] = {
+    "cpu": _cpu,
+    "cpu-state": _cpu_state,
+    "cpu-state-obstacles": _cpu_state_obstacles,
+    "tiny": _tiny,
+}
 
 
 def get_policy_preset(name: str) -> PolicyPreset:
@@ -250,8 +309,10 @@ def read_policy_run(path: str | Path) -> PolicyRun:
     """A policy run's preset and dataset facts, from its config.json; RunError for anything else."""
     raw = RunDir(path).read_config()
     if raw.get("stage") != POLICY or raw.get("policy") != FAMILY:
-        raise RunError(f"{path} holds a {raw.get('stage', 'unknown')!r} run, not a diffusion policy; "
-                       "train one with `orbitmodel train-policy DATASET --out RUN`")
+        raise RunError(
+            f"{path} holds a {raw.get('stage', 'unknown')!r} run, not a diffusion policy; "
+            "train one with `orbitmodel train-policy DATASET --out RUN`"
+        )
     try:
         return PolicyRun(PolicyPreset.from_dict(raw["preset"]), DatasetMeta.from_dict(raw["dataset"]), raw)
     except (KeyError, TypeError, ValueError) as err:

@@ -50,8 +50,13 @@ class ObservationEncoder(nn.Module):
         features = config.image_features if config.images else 0
         self.out_dim = config.n_obs_steps * (features + config.state_dim + GOAL_DIM + OBSTACLE_DIM * config.obstacles)
 
-    def forward(self, images: torch.Tensor | None, states: torch.Tensor, goal_body: torch.Tensor,
-                obstacles_body: torch.Tensor | None = None) -> torch.Tensor:
+    def forward(
+        self,
+        images: torch.Tensor | None,
+        states: torch.Tensor,
+        goal_body: torch.Tensor,
+        obstacles_body: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """images (B, To, 3, S, S) in [-1, 1] (None without an image encoder); states (B, To, 16),
         goal_body (B, To, 3) and (a privileged policy's) obstacles_body (B, To, K, 5) normalised
         -> (B, To * (F + 19 + 5 K))."""

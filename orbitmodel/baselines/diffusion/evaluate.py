@@ -107,19 +107,28 @@ class ActionMSE:
         return self.policy / self.mean_action if self.mean_action > 0 else float("nan")
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "levels": list(self.levels), "per_index": list(self.per_index),
-                "per_band": list(self.per_band), "ratio": self.ratio}
+        return {
+            **asdict(self),
+            "levels": list(self.levels),
+            "per_index": list(self.per_index),
+            "per_band": list(self.per_band),
+            "ratio": self.ratio,
+        }
 
 
-def mean_action(source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out: ValidationSplit | None = None
-                ) -> np.ndarray:
+def mean_action(
+    source: str | Path, levels=DEFAULT_LEVELS, outcomes=(), held_out: ValidationSplit | None = None
+) -> np.ndarray:
     """(8,) mean thrust over the non-terminal frames of the chosen training episodes (not the
     held-out validation ones)."""
-    chosen = select_episodes(load_episode_table(source, "train", {}),
-                             training_episodes(source, levels, outcomes, held_out), "train")
+    chosen = select_episodes(
+        load_episode_table(source, "train", {}), training_episodes(source, levels, outcomes, held_out), "train"
+    )
     table = load_steps(source, "train", False, {}).data.table.select([S.EPISODE_INDEX, S.ACTION, S.IS_LAST])
-    keep = pc.and_(pc.is_in(table.column(S.EPISODE_INDEX), value_set=pc.cast(chosen, table.column(S.EPISODE_INDEX).type)),
-                   pc.invert(table.column(S.IS_LAST)))
+    keep = pc.and_(
+        pc.is_in(table.column(S.EPISODE_INDEX), value_set=pc.cast(chosen, table.column(S.EPISODE_INDEX).type)),
+        pc.invert(table.column(S.IS_LAST)),
+    )
     actions = table.filter(keep).column(S.ACTION).combine_chunks().flatten().to_numpy().reshape(-1, S.ACTION_DIM)
     return actions.mean(axis=0)
 
@@ -133,16 +142,36 @@ def scored_windows(dataset, config, held_out: ValidationSplit, split: str, level
     if episodes is not None:  # the held-out episodes of the chosen levels and outcomes
         keep = set(select_episodes(load_episode_table(dataset, "train", {}), chosen, "train").tolist())
         chosen = [e for e in episodes if e in keep]
-    return source_split, load_windows(dataset, split=source_split, context=config.n_obs_steps,
-                                      horizon=config.horizon - config.n_obs_steps, stride=stride, pad=True,
-                                      columns=columns, episodes=chosen)
+    return source_split, load_windows(
+        dataset,
+        split=source_split,
+        context=config.n_obs_steps,
+        horizon=config.horizon - config.n_obs_steps,
+        stride=stride,
+        pad=True,
+        columns=columns,
+        episodes=chosen,
+    )
 
 
 @torch.no_grad()
-def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", levels=DEFAULT_LEVELS, outcomes=(),
-                    stride: int = 4, max_windows: int = 0, batch_size: int = 64, seed: int = 0,
-                    device: str = "cpu", use_ema: bool = True, sampling: PolicySampling | None = None,
-                    without_obstacles: bool = False, indices=None, preset: str | None = None) -> ActionMSE:
+def evaluate_policy(
+    run: str | Path,
+    dataset: str | Path,
+    split: str = "test",
+    levels=DEFAULT_LEVELS,
+    outcomes=(),
+    stride: int = 4,
+    max_windows: int = 0,
+    batch_size: int = 64,
+    seed: int = 0,
+    device: str = "cpu",
+    use_ema: bool = True,
+    sampling: PolicySampling | None = None,
+    without_obstacles: bool = False,
+    indices=None,
+    preset: str | None = None,
+) -> ActionMSE:
     """Action MSE of the policy in ``run`` on ``split`` windows of ``dataset`` (every ``stride``-th
     start; the first ``max_windows`` when > 0), against predicting the mean training action.
     ``sampling`` (default: the ``cpu`` flight preset; ``preset`` names it for the record) sets
@@ -156,14 +185,18 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         sampling, preset = policy_sampling(DEFAULT_FLIGHT), preset or DEFAULT_FLIGHT
     samples = sampling.draws
     if stride < 1 or batch_size < 1 or max_windows < 0:
-        raise ValueError(f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}: "
-                         "give stride and batch size >= 1 and max_windows >= 0")
+        raise ValueError(
+            f"stride={stride}, batch_size={batch_size}, max_windows={max_windows}: "
+            "give stride and batch size >= 1 and max_windows >= 0"
+        )
     policy = DiffusionPolicy.from_pretrained(run, device)
     c = policy.config
     sampling = sampling.resolved(c)
     if without_obstacles and not c.obstacles:
-        raise ValueError(f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
-                         "privileged policy's (preset cpu-state-obstacles)")
+        raise ValueError(
+            f"--without-obstacles: the policy of {run} is told no obstacles; it knocks out a "
+            "privileged policy's (preset cpu-state-obstacles)"
+        )
     if c.images:
         check_image_size(read_dataset_meta(dataset), c.image_size, f"the policy of {run}")
     held_out = read_policy_run(resolve_run(run)).validation
@@ -178,7 +211,9 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     else:
         order = [int(i) for i in indices]
         if any(not 0 <= i < len(windows) for i in order):
-            raise ValueError(f"indices: split {split!r} of {dataset} has {len(windows)} windows; give positions below that")
+            raise ValueError(
+                f"indices: split {split!r} of {dataset} has {len(windows)} windows; give positions below that"
+            )
     n = len(order)
     # one noise stream per draw: the first is the stream a single-draw evaluation uses, whatever N
     seeds = [seed] + [int(np.random.SeedSequence([seed, k]).generate_state(1)[0]) for k in range(1, samples)]
@@ -188,13 +223,19 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
     names = ("policy", "mean_action") + (("draws", "variance", "sample_mean", "central") if samples > 1 else ())
     by_index, by_band = Errors(steps, names), Errors(len(GOAL_BANDS_M) + 1, names)
     To = c.n_obs_steps
-    batches = [order[first:first + batch_size] for first in range(0, n, batch_size)]
+    batches = [order[first : first + batch_size] for first in range(0, n, batch_size)]
     for batch in DataLoader(windows, batch_sampler=batches, collate_fn=collate_windows):
         goal = goals[batch[S.EPISODE_INDEX][:, 0]]
         images = batch[S.IMAGE][:, :To] if c.images else None
         told = obstacles[batch[S.EPISODE_INDEX][:, 0]] if obstacles is not None else None
-        draws = torch.stack([policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema, told,
-                                                   sampling).cpu()[:, executed] for g in generators])  # (N, B, 8, 8)
+        draws = torch.stack(
+            [
+                policy.sample_actions(images, batch[S.STATE][:, :To], goal, g, use_ema, told, sampling).cpu()[
+                    :, executed
+                ]
+                for g in generators
+            ]
+        )  # (N, B, 8, 8)
         truth = batch[S.ACTION][:, executed]  # (B, 8 steps, 8)
         real = (~(batch[IS_PAD][:, executed] | batch[S.IS_LAST][:, executed])).numpy()  # (B, 8 steps)
         errors = {"policy": ((draws[0] - truth) ** 2).mean(-1), "mean_action": ((baseline - truth) ** 2).mean(-1)}
@@ -217,14 +258,23 @@ def evaluate_policy(run: str | Path, dataset: str | Path, split: str = "test", l
         raise ValueError(f"no real frames to compare in split {split!r} of {dataset}; use a smaller --stride")
     edges = (0.0, *GOAL_BANDS_M, None)
     several = samples > 1
-    return ActionMSE(split=split, levels=tuple(levels), windows=n, frames=frames,
-                     policy=by_index.total("policy"), mean_action=by_index.total("mean_action"),
-                     per_index=tuple(by_index.rows([{"index": k} for k in range(steps)])),
-                     per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
-                     samples=samples, noise_scale=sampling.noise_scale, without_obstacles=without_obstacles,
-                     inference_steps=sampling.inference_steps, timestep_spacing=sampling.timestep_spacing,
-                     preset=preset,
-                     draws=by_index.total("draws") if several else None,
-                     variance=by_index.total("variance") if several else None,
-                     sample_mean=by_index.total("sample_mean") if several else None,
-                     central=by_index.total("central") if several else None)
+    return ActionMSE(
+        split=split,
+        levels=tuple(levels),
+        windows=n,
+        frames=frames,
+        policy=by_index.total("policy"),
+        mean_action=by_index.total("mean_action"),
+        per_index=tuple(by_index.rows([{"index": k} for k in range(steps)])),
+        per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
+        samples=samples,
+        noise_scale=sampling.noise_scale,
+        without_obstacles=without_obstacles,
+        inference_steps=sampling.inference_steps,
+        timestep_spacing=sampling.timestep_spacing,
+        preset=preset,
+        draws=by_index.total("draws") if several else None,
+        variance=by_index.total("variance") if several else None,
+        sample_mean=by_index.total("sample_mean") if several else None,
+        central=by_index.total("central") if several else None,
+    )

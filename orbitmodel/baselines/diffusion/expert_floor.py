@@ -41,7 +41,7 @@ from orbitmodel.kinematics import P
 from orbitmodel.runs import resolve_run
 
 COLUMNS = (S.STATE, S.ACTION, S.IS_LAST)  # plus episode_index and is_pad
-OWN_NOISE_DRAW = 2 ** 31 - 1  # the own plan's other thrust noise: a draw no other plan uses
+OWN_NOISE_DRAW = 2**31 - 1  # the own plan's other thrust noise: a draw no other plan uses
 
 
 @dataclass(frozen=True)
@@ -77,8 +77,13 @@ class ExpertFloor:
         return self.other / self.mean_action if self.mean_action > 0 else float("nan")
 
     def to_dict(self) -> dict:
-        return {**asdict(self), "levels": list(self.levels), "per_index": list(self.per_index),
-                "per_band": list(self.per_band), "ratio": self.ratio}
+        return {
+            **asdict(self),
+            "levels": list(self.levels),
+            "per_index": list(self.per_index),
+            "per_band": list(self.per_band),
+            "ratio": self.ratio,
+        }
 
 
 class _Experts:
@@ -91,11 +96,14 @@ class _Experts:
         env.reset(seed=int(row[S.SEED]))
         scn = env.scenario
         if not np.allclose(scn.goal, row[S.GOAL], atol=1e-4):
-            raise ValueError(f"episode {row[S.EPISODE_INDEX]}: its seed gives the goal {tuple(scn.goal)}, the "
-                             f"dataset records {tuple(row[S.GOAL])}; the dataset's config no longer rebuilds "
-                             "its scenarios (made by another version of orbitdata?)")
-        task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity,
-                    seed=int(row[S.SEED]))
+            raise ValueError(
+                f"episode {row[S.EPISODE_INDEX]}: its seed gives the goal {tuple(scn.goal)}, the "
+                f"dataset records {tuple(row[S.GOAL])}; the dataset's config no longer rebuilds "
+                "its scenarios (made by another version of orbitdata?)"
+            )
+        task = Task(
+            goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=int(row[S.SEED])
+        )
         self.own = make_pilot("expert", generation, plan_draw=0, noise_draw=OWN_NOISE_DRAW)
         self.others = [make_pilot("expert", generation, plan_draw=k, noise_draw=k) for k in range(1, plans + 1)]
         for pilot in (self.own, *self.others):
@@ -109,10 +117,22 @@ def _chunk_errors(pilot, states: np.ndarray, truth: np.ndarray) -> np.ndarray:
     return ((acts - truth) ** 2).mean(-1)
 
 
-def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stride: int = 4, max_windows: int = 0,
-                 plans: int = 64, position_m: float = 0.1, speed_mps: float = 0.1, angle_deg: float = 27.0,
-                 with_policy: bool = True, seed: int = 0, device: str = "cpu",
-                 sampling: PolicySampling | None = None, preset: str | None = None) -> ExpertFloor:
+def expert_floor(
+    run: str | Path,
+    dataset: str | Path,
+    split: str = "test",
+    stride: int = 4,
+    max_windows: int = 0,
+    plans: int = 64,
+    position_m: float = 0.1,
+    speed_mps: float = 0.1,
+    angle_deg: float = 27.0,
+    with_policy: bool = True,
+    seed: int = 0,
+    device: str = "cpu",
+    sampling: PolicySampling | None = None,
+    preset: str | None = None,
+) -> ExpertFloor:
     """Other experts' error on the windows ``eval policy`` scores for the policy in ``run`` (its
     window geometry, validation episodes and mean action; expert episodes only), with ``plans``
     other RRT* draws per episode and the tolerances of ``ExpertPilot.could_be_at`` (the defaults
@@ -120,11 +140,15 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
     policy scored on the same windows beside them (its sampling noise from ``seed``, sampled as
     ``sampling`` says, by default the ``cpu`` flight preset; ``preset`` names it)."""
     if stride < 1 or max_windows < 0 or plans < 1:
-        raise ValueError(f"stride={stride}, max_windows={max_windows}, plans={plans}: give stride and plans >= 1 and "
-                         "max_windows >= 0")
+        raise ValueError(
+            f"stride={stride}, max_windows={max_windows}, plans={plans}: give stride and plans >= 1 and "
+            "max_windows >= 0"
+        )
     if sampling is not None and not with_policy:
-        raise ValueError("sampling settings sample the policy, which with_policy=False (--no-policy) does not score; "
-                         "drop one of them")
+        raise ValueError(
+            "sampling settings sample the policy, which with_policy=False (--no-policy) does not score; "
+            "drop one of them"
+        )
     if not (position_m > 0 and speed_mps > 0 and angle_deg > 0):
         raise ValueError(f"tolerances {position_m} m, {speed_mps} m/s, {angle_deg} deg: give positive ones")
     from orbitdata.sim.env import CubeSatEnv
@@ -153,9 +177,9 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
                 ep = int(batch[S.EPISODE_INDEX][b, 0])
                 if ep != episode:
                     experts, episode = _Experts(env, generation, rows[ep], plans), ep
-                states = batch[S.STATE][b, t0:t0 + K].numpy()
-                truth = batch[S.ACTION][b, t0:t0 + K].numpy()
-                real = ~(batch[IS_PAD][b, t0:t0 + K] | batch[S.IS_LAST][b, t0:t0 + K]).numpy()
+                states = batch[S.STATE][b, t0 : t0 + K].numpy()
+                truth = batch[S.ACTION][b, t0 : t0 + K].numpy()
+                real = ~(batch[IS_PAD][b, t0 : t0 + K] | batch[S.IS_LAST][b, t0 : t0 + K]).numpy()
                 could = [e for e in experts.others if e.could_be_at(states[0], position_m, speed_mps, angle_deg)]
                 looked += 1
                 own_could += experts.own.could_be_at(states[0], position_m, speed_mps, angle_deg)
@@ -166,9 +190,11 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
                     continue
                 scored.append(index)
                 could_total += len(could)
-                errors = {"other": np.mean([_chunk_errors(e, states, truth) for e in could], axis=0),
-                          "own": _chunk_errors(experts.own, states, truth),
-                          "mean_action": ((baseline - truth) ** 2).mean(-1)}
+                errors = {
+                    "other": np.mean([_chunk_errors(e, states, truth) for e in could], axis=0),
+                    "own": _chunk_errors(experts.own, states, truth),
+                    "mean_action": ((baseline - truth) ** 2).mean(-1),
+                }
                 errors = {k: v[real] for k, v in errors.items()}
                 goal = np.asarray(rows[ep][S.GOAL], np.float32)
                 band = int(np.searchsorted(GOAL_BANDS_M, np.linalg.norm(goal - states[0, P]), side="right"))
@@ -178,25 +204,51 @@ def expert_floor(run: str | Path, dataset: str | Path, split: str = "test", stri
         env.close()
     frames = int(by_index.frames.sum())
     if frames == 0:
-        raise ValueError(f"no window of split {split!r} of {dataset} has another plan within the tolerances; use more "
-                         "--plans, wider tolerances or a smaller --stride")
+        raise ValueError(
+            f"no window of split {split!r} of {dataset} has another plan within the tolerances; use more "
+            "--plans, wider tolerances or a smaller --stride"
+        )
     policy = None
     if with_policy:
         from orbitmodel.baselines.diffusion.evaluate import evaluate_policy
 
-        policy = evaluate_policy(run, dataset, split=split, levels=levels, stride=stride, seed=seed, device=device,
-                                 indices=scored, sampling=sampling, preset=preset).to_dict()
+        policy = evaluate_policy(
+            run,
+            dataset,
+            split=split,
+            levels=levels,
+            stride=stride,
+            seed=seed,
+            device=device,
+            indices=scored,
+            sampling=sampling,
+            preset=preset,
+        ).to_dict()
     edges = (0.0, *GOAL_BANDS_M, None)
     quantiles = np.percentile(np.asarray(own_deviation).reshape(-1, 3), [50, 90], axis=0) if own_deviation else None
-    spread = {name: ([float(q) for q in quantiles[:, k]] if quantiles is not None else None)
-              for k, name in enumerate(("position_m", "speed_mps", "angle_deg"))}
-    return ExpertFloor(run=str(run), dataset=str(dataset), split=split, levels=tuple(levels), windows=n, plans=plans,
-                       position_m=position_m, speed_mps=speed_mps, angle_deg=angle_deg, scored_windows=len(scored), frames=frames,
-                       own_plan_could=own_could / looked, own_plan_deviation=spread,
-                       plans_per_window=could_total / len(scored),
-                       other=by_index.total("other"), own=by_index.total("own"),
-                       mean_action=by_index.total("mean_action"),
-                       per_index=tuple(by_index.rows([{"index": k} for k in range(K)])),
-                       per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi}
-                                                    for lo, hi in zip(edges[:-1], edges[1:])])),
-                       policy=policy)
+    spread = {
+        name: ([float(q) for q in quantiles[:, k]] if quantiles is not None else None)
+        for k, name in enumerate(("position_m", "speed_mps", "angle_deg"))
+    }
+    return ExpertFloor(
+        run=str(run),
+        dataset=str(dataset),
+        split=split,
+        levels=tuple(levels),
+        windows=n,
+        plans=plans,
+        position_m=position_m,
+        speed_mps=speed_mps,
+        angle_deg=angle_deg,
+        scored_windows=len(scored),
+        frames=frames,
+        own_plan_could=own_could / looked,
+        own_plan_deviation=spread,
+        plans_per_window=could_total / len(scored),
+        other=by_index.total("other"),
+        own=by_index.total("own"),
+        mean_action=by_index.total("mean_action"),
+        per_index=tuple(by_index.rows([{"index": k} for k in range(K)])),
+        per_band=tuple(by_band.rows([{"from_m": lo, "to_m": hi} for lo, hi in zip(edges[:-1], edges[1:])])),
+        policy=policy,
+    )

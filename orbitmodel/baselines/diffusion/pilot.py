@@ -47,11 +47,18 @@ class DiffusionPilot(Pilot):
     privileged = False
     needs_images = True
 
-    def __init__(self, policy: DiffusionPolicy, sampling: PolicySampling | None = None, use_ema: bool = True,
-                 preset: str | None = None):
+    def __init__(
+        self,
+        policy: DiffusionPolicy,
+        sampling: PolicySampling | None = None,
+        use_ema: bool = True,
+        preset: str | None = None,
+    ):
         if policy.config.obstacles:
-            raise ValueError("this policy reads the true obstacles (a privileged diagnostic, preset "
-                             "cpu-state-obstacles): no pilot is told them, so it cannot fly; score it with eval policy")
+            raise ValueError(
+                "this policy reads the true obstacles (a privileged diagnostic, preset "
+                "cpu-state-obstacles): no pilot is told them, so it cannot fly; score it with eval policy"
+            )
         if sampling is None:
             sampling, preset = policy_sampling(DEFAULT_FLIGHT), preset or DEFAULT_FLIGHT
         c = policy.config
@@ -73,7 +80,7 @@ class DiffusionPilot(Pilot):
     def reset(self, task) -> None:
         """Start an episode: keep the goal (metres, world frame relative to the start) and the seed."""
         self._goal = torch.tensor(np.asarray(task.goal, dtype=np.float32).reshape(1, 3))
-        self._generator.manual_seed(int(rng(int(task.seed), "pilot").integers(2 ** 62)))
+        self._generator.manual_seed(int(rng(int(task.seed), "pilot").integers(2**62)))
         self._history.clear()
         self._queue.clear()
         self._chunks.clear()
@@ -86,17 +93,21 @@ class DiffusionPilot(Pilot):
         c = self.policy.config
         image, state = obs.get("image") if c.images else None, obs["state"]
         if c.images and (image is None or image.shape != (c.image_size, c.image_size, 3)):
-            raise ValueError(f"pilot {self.name!r} was trained on {c.image_size} px RGB images but the camera gives "
-                             f"{None if image is None else image.shape}; fly it with a {c.image_size} px camera")
-        frame = (torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1) if c.images else None,  # (3, S, S)
-                 torch.as_tensor(state, dtype=torch.float32))  # (16,)
+            raise ValueError(
+                f"pilot {self.name!r} was trained on {c.image_size} px RGB images but the camera gives "
+                f"{None if image is None else image.shape}; fly it with a {c.image_size} px camera"
+            )
+        frame = (
+            torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1) if c.images else None,  # (3, S, S)
+            torch.as_tensor(state, dtype=torch.float32),
+        )  # (16,)
         while len(self._history) < c.n_obs_steps - 1:  # first step: repeat the first observation
             self._history.append(frame)
         self._history.append(frame)
         t, self._t = self._t, self._t + 1
         if self.ensemble is None:
             if not self._queue:
-                self._queue.extend(self._sample()[:self.action_steps])
+                self._queue.extend(self._sample()[: self.action_steps])
             return self._queue.popleft()
         if t % self.action_steps == 0:
             self._chunks.append((t, self._sample()))
@@ -108,33 +119,43 @@ class DiffusionPilot(Pilot):
     def _sample(self) -> np.ndarray:
         """A chunk from the last observations: (n, 8) thrusts for the current frame on."""
         n = self.sampling.draws
-        images = (torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
-                  if self.policy.config.images else None)
+        images = (
+            torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
+            if self.policy.config.images
+            else None
+        )
         states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
-        draws = self.policy.sample_actions(images, states, self._goal.expand(n, -1), self._generator,
-                                           self.use_ema, sampling=self.sampling)  # (N, H, 8)
+        draws = self.policy.sample_actions(
+            images, states, self._goal.expand(n, -1), self._generator, self.use_ema, sampling=self.sampling
+        )  # (N, H, 8)
         c = self.policy.config
         if self.sampling.pick == "central":
-            executed = draws[:, c.action_start:c.action_start + self.action_steps]
+            executed = draws[:, c.action_start : c.action_start + self.action_steps]
             actions = draws[int(((executed - executed.mean(0)) ** 2).flatten(1).sum(1).argmin())]
         else:
             actions = draws.mean(0)  # (H, 8)
-        return actions[c.action_start:].cpu().numpy().astype(np.float32)
+        return actions[c.action_start :].cpu().numpy().astype(np.float32)
 
     def metadata(self) -> dict:
         """The flight preset's name and every sampling setting it flew with."""
         return {"preset": self.preset, **self.sampling.to_dict()}
 
 
-def load_policy_pilot(run_dir: str | Path, sampling: PolicySampling | None = None, device: str = "cpu",
-                      use_ema: bool = True, preset: str | None = None) -> DiffusionPilot:
+def load_policy_pilot(
+    run_dir: str | Path,
+    sampling: PolicySampling | None = None,
+    device: str = "cpu",
+    use_ema: bool = True,
+    preset: str | None = None,
+) -> DiffusionPilot:
     """A pilot flying the policy of a run folder (``orbitmodel train-policy --out RUN``) or Hub
     repo id, sampled as ``sampling`` says (default: the ``cpu`` flight preset)."""
     return DiffusionPilot(DiffusionPolicy.from_pretrained(run_dir, device), sampling, use_ema=use_ema, preset=preset)
 
 
-def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str = "cpu", preset: str = DEFAULT_FLIGHT,
-                         **options) -> DiffusionPilot:
+def make_diffusion_pilot(
+    config=None, run: str | Path | None = None, device: str = "cpu", preset: str = DEFAULT_FLIGHT, **options
+) -> DiffusionPilot:
     """``orbitdata.pilots`` factory: ``orbitdata fly --pilot diffusion --pilot-option run=RUN``
     flies the flight preset ``preset`` (``--pilot-option preset=reference``; default ``cpu``); any
     other option is a field of :class:`PolicySampling` (``--pilot-option draws=4``)."""
@@ -143,6 +164,8 @@ def make_diffusion_pilot(config=None, run: str | Path | None = None, device: str
     pilot = load_policy_pilot(run, policy_sampling(str(preset), **options), device, preset=str(preset))
     size = getattr(getattr(getattr(config, "sim", None), "camera", None), "image_size", None)
     if pilot.needs_images and size is not None and size != pilot.policy.config.image_size:
-        raise ValueError(f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
-                         f"{size} px; pass --image-size {pilot.policy.config.image_size}")
+        raise ValueError(
+            f"{run} was trained on {pilot.policy.config.image_size} px images but the camera renders "
+            f"{size} px; pass --image-size {pilot.policy.config.image_size}"
+        )
     return pilot

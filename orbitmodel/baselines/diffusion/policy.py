@@ -49,18 +49,32 @@ def make_schedulers(config: PolicyConfig, sampling: PolicySampling | None = None
     from diffusers import DDIMScheduler, DDPMScheduler
 
     s = (sampling or PolicySampling()).resolved(config)
-    ddpm = DDPMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
-                         variance_type="fixed_small", clip_sample=config.clip_sample,
-                         prediction_type=config.prediction_type)
-    ddim = DDIMScheduler(num_train_timesteps=config.train_timesteps, beta_schedule=config.beta_schedule,
-                         clip_sample=config.clip_sample, set_alpha_to_one=True, steps_offset=0,
-                         prediction_type=config.prediction_type, timestep_spacing=s.timestep_spacing)
+    ddpm = DDPMScheduler(
+        num_train_timesteps=config.train_timesteps,
+        beta_schedule=config.beta_schedule,
+        variance_type="fixed_small",
+        clip_sample=config.clip_sample,
+        prediction_type=config.prediction_type,
+    )
+    ddim = DDIMScheduler(
+        num_train_timesteps=config.train_timesteps,
+        beta_schedule=config.beta_schedule,
+        clip_sample=config.clip_sample,
+        set_alpha_to_one=True,
+        steps_offset=0,
+        prediction_type=config.prediction_type,
+        timestep_spacing=s.timestep_spacing,
+    )
     ddim.set_timesteps(s.inference_steps)
     return ddpm, ddim
 
 
-def denoise(scheduler, predict: Callable[[torch.Tensor, torch.Tensor], torch.Tensor], sample: torch.Tensor,
-            generator: torch.Generator | None = None) -> torch.Tensor:
+def denoise(
+    scheduler,
+    predict: Callable[[torch.Tensor, torch.Tensor], torch.Tensor],
+    sample: torch.Tensor,
+    generator: torch.Generator | None = None,
+) -> torch.Tensor:
     """Run ``scheduler``'s reverse process from ``sample`` (B, H, A): predict(x, k (B,)) is the
     network's output (the noise or the clean sample, as the scheduler's prediction_type says)."""
     for k in scheduler.timesteps:
@@ -71,7 +85,7 @@ def denoise(scheduler, predict: Callable[[torch.Tensor, torch.Tensor], torch.Ten
 
 def ema_decay(step: int, power: float, max_decay: float) -> float:
     """The reference's EMA warm-up: 0 at the first update, then 1 - step^-power, capped."""
-    return 0.0 if step <= 1 else min(max_decay, 1.0 - step ** -power)
+    return 0.0 if step <= 1 else min(max_decay, 1.0 - step**-power)
 
 
 class Denoiser(nn.Module):
@@ -80,8 +94,14 @@ class Denoiser(nn.Module):
     def __init__(self, config: PolicyConfig):
         super().__init__()
         self.obs_encoder = ObservationEncoder(config)
-        self.unet = ConditionalUnet1D(config.action_dim, self.obs_encoder.out_dim, config.down_dims,
-                                      config.step_embed, config.kernel_size, config.n_groups)
+        self.unet = ConditionalUnet1D(
+            config.action_dim,
+            self.obs_encoder.out_dim,
+            config.down_dims,
+            config.step_embed,
+            config.kernel_size,
+            config.n_groups,
+        )
 
 
 class DiffusionPolicy(NormalisedStates, nn.Module):
@@ -127,8 +147,14 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
     def unnormalise_actions(self, x: torch.Tensor) -> torch.Tensor:  # (..., 8) [-1, 1] -> thrust in [0, 1]
         return ((x + 1) / 2 * (self.action_high - self.action_low) + self.action_low).clamp(0.0, 1.0)
 
-    def condition(self, net: Denoiser, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
-                  obstacles: torch.Tensor | None = None) -> torch.Tensor:
+    def condition(
+        self,
+        net: Denoiser,
+        images: torch.Tensor,
+        states: torch.Tensor,
+        goal: torch.Tensor,
+        obstacles: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """images (B, To, 3, S, S) uint8 (ignored, may be None, for a policy without images), states
         (B, To, 16), goal (B, 3) metres world frame, and for a privileged policy obstacles (B, K, 4):
         the true obstacles' centres (metres, world frame) and bounding radii (0: an empty slot) -> (B, C)."""
@@ -141,20 +167,30 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         o = None
         if self.config.obstacles:
             if obstacles is None or obstacles.shape[1:] != (self.config.obstacles, 4):
-                raise ValueError(f"this policy is privileged: pass the episode's true obstacles as (B, "
-                                 f"{self.config.obstacles}, 4) centres and radii")
+                raise ValueError(
+                    f"this policy is privileged: pass the episode's true obstacles as (B, "
+                    f"{self.config.obstacles}, 4) centres and radii"
+                )
             K = obstacles.shape[1]
             here = (obstacles[:, None, :, 3:] > 0).to(states.dtype).expand(-1, To, -1, -1)  # (B, To, K, 1)
-            centre = goal_in_body(states[:, :, None].expand(-1, -1, K, -1),
-                                  obstacles[:, None, :, :3].expand(-1, To, -1, -1))  # (B, To, K, 3)
+            centre = goal_in_body(
+                states[:, :, None].expand(-1, -1, K, -1), obstacles[:, None, :, :3].expand(-1, To, -1, -1)
+            )  # (B, To, K, 3)
             radius = obstacles[:, None, :, 3:].expand(-1, To, -1, -1)
             o = torch.cat([centre * here / self.goal_scale, radius / self.goal_scale, here], -1)  # (B, To, K, 5)
         return net.obs_encoder(x, s, g, o)
 
     # ---- training ---------------------------------------------------------------------------
-    def loss(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor, actions: torch.Tensor,
-             generator: torch.Generator | None = None, real: torch.Tensor | None = None,
-             obstacles: torch.Tensor | None = None) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+    def loss(
+        self,
+        images: torch.Tensor,
+        states: torch.Tensor,
+        goal: torch.Tensor,
+        actions: torch.Tensor,
+        generator: torch.Generator | None = None,
+        real: torch.Tensor | None = None,
+        obstacles: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
         """DDPM loss on the noise (or the clean sample). images (B, To, 3, S, S) uint8, states (B, To, 16), goal (B, 3),
         actions (B, H, 8) in [0, 1]; noise levels and noise come from ``generator`` (CPU). ``real``
         (B, H) bool: the frames whose action was really taken; the others (the terminal frame's
@@ -187,10 +223,16 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
 
     # ---- acting -----------------------------------------------------------------------------
     @torch.no_grad()
-    def sample_actions(self, images: torch.Tensor, states: torch.Tensor, goal: torch.Tensor,
-                       generator: torch.Generator | None = None, use_ema: bool = True,
-                       obstacles: torch.Tensor | None = None, sampling: PolicySampling | None = None
-                       ) -> torch.Tensor:
+    def sample_actions(
+        self,
+        images: torch.Tensor,
+        states: torch.Tensor,
+        goal: torch.Tensor,
+        generator: torch.Generator | None = None,
+        use_ema: bool = True,
+        obstacles: torch.Tensor | None = None,
+        sampling: PolicySampling | None = None,
+    ) -> torch.Tensor:
         """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
         observations of frames t-To+1 .. t (see :meth:`condition`). Execute
         ``[:, config.action_start : config.action_start + action_steps]``.
@@ -218,8 +260,9 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         return sum(p.numel() for p in self.net.parameters())
 
     @classmethod
-    def from_pretrained(cls, path: str | Path, device: str | torch.device = "cpu",
-                        revision: str | None = None) -> "DiffusionPolicy":
+    def from_pretrained(
+        cls, path: str | Path, device: str | torch.device = "cpu", revision: str | None = None
+    ) -> "DiffusionPolicy":
         """Load a trained policy, in eval mode, from a run folder (``orbitmodel train-policy --out
         RUN``) or a Hub model repo id (``orbitmodel push``; ``revision`` or ``owner/name@rev``)."""
         path = resolve_run(path, revision)
@@ -228,7 +271,8 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         try:
             policy.load_state_dict(load_weights(path))
         except RuntimeError as err:
-            raise RunError(f"{path}: the weights do not fit the config's policy ({str(err).splitlines()[0]}); "
-                           "train the run again") from None
+            raise RunError(
+                f"{path}: the weights do not fit the config's policy ({str(err).splitlines()[0]}); train the run again"
+            ) from None
         policy.run_info = run.dataset
         return policy.to(device).eval()

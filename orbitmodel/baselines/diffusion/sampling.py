@@ -70,7 +70,9 @@ class PolicySampling:
         if not 0 <= self.noise_scale < float("inf"):
             raise ValueError(f"noise_scale={self.noise_scale}: give a finite scale >= 0 (1: sample as trained)")
         if self.timestep_spacing is not None and self.timestep_spacing not in TIMESTEP_SPACINGS:
-            raise ValueError(f"timestep_spacing={self.timestep_spacing!r}: choose one of {', '.join(TIMESTEP_SPACINGS)}")
+            raise ValueError(
+                f"timestep_spacing={self.timestep_spacing!r}: choose one of {', '.join(TIMESTEP_SPACINGS)}"
+            )
         if self.inference_steps is not None and self.inference_steps < 1:
             raise ValueError(f"inference_steps={self.inference_steps}: give 1 or more DDIM steps")
 
@@ -79,15 +81,18 @@ class PolicySampling:
         checked against it: what the policy then samples with."""
         most = config.horizon - config.n_obs_steps + 1  # actions a sample holds from the current frame on
         out = dataclasses.replace(
-            self, action_steps=config.n_action_steps if self.action_steps is None else self.action_steps,
+            self,
+            action_steps=config.n_action_steps if self.action_steps is None else self.action_steps,
             timestep_spacing=self.timestep_spacing or config.timestep_spacing,
             inference_steps=config.inference_steps if self.inference_steps is None else self.inference_steps,
-            image_codec=self.image_codec and config.images)
+            image_codec=self.image_codec and config.images,
+        )
         if out.action_steps > most:
             raise ValueError(f"action_steps={out.action_steps}: execute 1 to {most} actions of each sampled chunk")
         if out.inference_steps > config.train_timesteps:
-            raise ValueError(f"inference_steps={out.inference_steps} must be in [1, train_timesteps="
-                             f"{config.train_timesteps}]")
+            raise ValueError(
+                f"inference_steps={out.inference_steps} must be in [1, train_timesteps={config.train_timesteps}]"
+            )
         return out
 
     def to_dict(self) -> dict:

@@ -97,15 +97,21 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     B, To, C, H, W = images.shape
     padded = F.pad(images.flatten(1, 2).float(), (pad,) * 4, mode="replicate")  # (B, To*3, H+2p, W+2p)
     dx, dy = torch.randint(0, 2 * pad + 1, (2, B), generator=generator).tolist()
-    out = torch.stack([padded[b, :, dy[b]:dy[b] + H, dx[b]:dx[b] + W] for b in range(B)])
+    out = torch.stack([padded[b, :, dy[b] : dy[b] + H, dx[b] : dx[b] + W] for b in range(B)])
     return out.view(B, To, C, H, W).to(images.dtype)
 
 
 class PolicyJob:
     """What the shared loop needs: the module, how a batch becomes its inputs, the EMA update."""
 
-    def __init__(self, policy: DiffusionPolicy, preset: PolicyPreset, goals: torch.Tensor, rank: int = 0,
-                 obstacles: torch.Tensor | None = None):
+    def __init__(
+        self,
+        policy: DiffusionPolicy,
+        preset: PolicyPreset,
+        goals: torch.Tensor,
+        rank: int = 0,
+        obstacles: torch.Tensor | None = None,
+    ):
         self.module = self.saved = policy
         self.preset = preset
         self.goals = goals
@@ -116,12 +122,17 @@ class PolicyJob:
         t, To = self.preset.train, self.preset.model.n_obs_steps
         images = None
         if self.preset.model.images:
-            images = random_shift(batch[S.IMAGE][:, :To], t.shift,
-                                  step_generator(t.loop.seed, step, STREAM_SHIFT, self.rank)).to(device)
+            images = random_shift(
+                batch[S.IMAGE][:, :To], t.shift, step_generator(t.loop.seed, step, STREAM_SHIFT, self.rank)
+            ).to(device)
         goal = self.goals[batch[S.EPISODE_INDEX][:, 0]]  # (B, 3)
-        inputs = {"images": images, "states": batch[S.STATE][:, :To].to(device), "goal": goal.to(device),
-                  "actions": batch[S.ACTION].to(device),
-                  "generator": step_generator(t.loop.seed, step, STREAM_NOISE, self.rank)}
+        inputs = {
+            "images": images,
+            "states": batch[S.STATE][:, :To].to(device),
+            "goal": goal.to(device),
+            "actions": batch[S.ACTION].to(device),
+            "generator": step_generator(t.loop.seed, step, STREAM_NOISE, self.rank),
+        }
         if self.preset.model.obstacles:
             inputs["obstacles"] = self.obstacles[batch[S.EPISODE_INDEX][:, 0]].to(device)
         if t.mask_padding:  # the terminal frame's and the padding's zero thrust are no action anyone took; they
@@ -134,16 +145,25 @@ class PolicyJob:
         self.module.ema_update(step, t.ema_power, t.ema_max)
 
 
-def policy_windows(source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None,
-                   pad_before: int = 0):
+def policy_windows(
+    source: str | Path, split: str, preset: PolicyPreset, episodes, stride: int | None = None, pad_before: int = 0
+):
     """Windows of ``horizon`` frames (the first ``n_obs_steps`` real; images decoded for those only) of
     the ``episodes=`` selection;
     with ``pad_before`` > 0 also, per episode, windows that start that many frames before its first
     (:class:`PadBefore`)."""
     m = preset.model
-    windows = load_windows(source, split=split, context=m.n_obs_steps, horizon=m.horizon - m.n_obs_steps,
-                           stride=stride or preset.train.window_stride, pad=True, columns=policy_columns(m),
-                           episodes=episodes, context_only=[S.IMAGE] if m.images else [])
+    windows = load_windows(
+        source,
+        split=split,
+        context=m.n_obs_steps,
+        horizon=m.horizon - m.n_obs_steps,
+        stride=stride or preset.train.window_stride,
+        pad=True,
+        columns=policy_columns(m),
+        episodes=episodes,
+        context_only=[S.IMAGE] if m.images else [],
+    )
     return PadBefore(windows, pad_before) if pad_before else windows
 
 
@@ -185,15 +205,26 @@ class PadBefore(Dataset):
         n = len(self.windows)
         bases = [i if i < n else self.extra[i - n][0] for i in indices]
         stacked = self.windows.__getitems__(bases).stacked  # key -> (B, T, ...)
-        rows = [shift_in({k: v[j] for k, v in stacked.items()}, self.extra[i - n][1]) if i >= n else
-                {k: v[j] for k, v in stacked.items()} for j, i in enumerate(indices)]
+        rows = [
+            shift_in({k: v[j] for k, v in stacked.items()}, self.extra[i - n][1])
+            if i >= n
+            else {k: v[j] for k, v in stacked.items()}
+            for j, i in enumerate(indices)
+        ]
         return WindowBatch({k: torch.stack([r[k] for r in rows]) for k in stacked})
 
-    def sampler(self, shuffle: bool = True, seed: int = 0, drop_last: bool = False, rank: int | None = None,
-                world_size: int | None = None) -> DistributedSampler:
+    def sampler(
+        self,
+        shuffle: bool = True,
+        seed: int = 0,
+        drop_last: bool = False,
+        rank: int | None = None,
+        world_size: int | None = None,
+    ) -> DistributedSampler:
         """Order a pure function of (seed, epoch), as ``WindowDataset.sampler``."""
-        return DistributedSampler(self, num_replicas=world_size or 1, rank=rank or 0, shuffle=shuffle, seed=seed,
-                                  drop_last=drop_last)
+        return DistributedSampler(
+            self, num_replicas=world_size or 1, rank=rank or 0, shuffle=shuffle, seed=seed, drop_last=drop_last
+        )
 
 
 # ---- runs ------------------------------------------------------------------------------------
@@ -213,17 +244,27 @@ class PolicyRequest:
 def upgrade_config(old: dict) -> dict:
     """A policy run's config.json as this version writes it (``runs.upgrade_preset_config``); a run
     from before padding and masking settings keeps the recipe it was started with (none of either)."""
+
     def parse(preset: dict) -> PolicyPreset:
         return PolicyPreset.from_dict({**preset, "train": {"pad_before": 0, "mask_padding": False, **preset["train"]}})
+
     return upgrade_preset_config(old, parse, POLICY_PRESETS)
 
 
-def policy_run_config(preset: PolicyPreset, meta: DatasetMeta, levels, outcomes,
-                      held_out: ValidationSplit | None = None) -> dict:
+def policy_run_config(
+    preset: PolicyPreset, meta: DatasetMeta, levels, outcomes, held_out: ValidationSplit | None = None
+) -> dict:
     """The run's config.json (``runs.run_config``)."""
     held_out = held_out or ValidationSplit(0.0, 0, ())
-    return run_config(POLICY, policy=FAMILY, preset=preset.to_dict(), dataset=meta.to_dict(), levels=list(levels),
-                      outcomes=list(outcomes), validation=held_out.to_dict())
+    return run_config(
+        POLICY,
+        policy=FAMILY,
+        preset=preset.to_dict(),
+        dataset=meta.to_dict(),
+        levels=list(levels),
+        outcomes=list(outcomes),
+        validation=held_out.to_dict(),
+    )
 
 
 def build_policy(preset: PolicyPreset, meta: DatasetMeta) -> DiffusionPolicy:
@@ -246,22 +287,41 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
     rank = int(os.environ.get("RANK", 0))
     t = req.preset.train
     held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
-    windows = policy_windows(req.dataset, "train", req.preset,
-                             training_episodes(req.dataset, req.levels, req.outcomes, held_out),
-                             pad_before=t.pad_before)
+    windows = policy_windows(
+        req.dataset,
+        "train",
+        req.preset,
+        training_episodes(req.dataset, req.levels, req.outcomes, held_out),
+        pad_before=t.pad_before,
+    )
     loop = t.loop
     if req.extend and loop.max_steps:  # the loop stops at the run's epochs too: an extension must fit in them
         world = int(os.environ.get("WORLD_SIZE", 1))
         per_epoch = len(windows.sampler(seed=loop.seed, drop_last=True, rank=0, world_size=world)) // loop.batch_size
         if per_epoch * loop.epochs < loop.max_steps:
-            raise RunError(f"--extend --max-steps {loop.max_steps}: the run's {loop.epochs} epochs end at step "
-                           f"{per_epoch * loop.epochs}, and an extension changes only --max-steps; extend it to at "
-                           f"most {per_epoch * loop.epochs}")
+            raise RunError(
+                f"--extend --max-steps {loop.max_steps}: the run's {loop.epochs} epochs end at step "
+                f"{per_epoch * loop.epochs}, and an extension changes only --max-steps; extend it to at "
+                f"most {per_epoch * loop.epochs}"
+            )
     if rank == 0:
-        run.start(policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out), resume=req.resume,
-                  overwrite=req.overwrite, upgrade=upgrade_config, extend=req.extend)
+        run.start(
+            policy_run_config(req.preset, meta, req.levels, req.outcomes, held_out),
+            resume=req.resume,
+            overwrite=req.overwrite,
+            upgrade=upgrade_config,
+            extend=req.extend,
+        )
     goals = episode_goals(req.dataset, "train")
     slots = req.preset.model.obstacles
     obstacles = episode_obstacles(req.dataset, "train", slots) if slots else None
-    return fit(PolicyJob(policy, req.preset, goals, rank, obstacles), windows, loop, run, device, resume=req.resume,
-               label="train-policy", on_log=on_log)
+    return fit(
+        PolicyJob(policy, req.preset, goals, rank, obstacles),
+        windows,
+        loop,
+        run,
+        device,
+        resume=req.resume,
+        label="train-policy",
+        on_log=on_log,
+    )

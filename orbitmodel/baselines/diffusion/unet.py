@@ -47,8 +47,9 @@ class Conv1dBlock(nn.Sequential):
     """Conv1d -> GroupNorm -> Mish, length preserving."""
 
     def __init__(self, c_in: int, c_out: int, kernel_size: int, n_groups: int):
-        super().__init__(nn.Conv1d(c_in, c_out, kernel_size, padding=kernel_size // 2),
-                         nn.GroupNorm(n_groups, c_out), nn.Mish())
+        super().__init__(
+            nn.Conv1d(c_in, c_out, kernel_size, padding=kernel_size // 2), nn.GroupNorm(n_groups, c_out), nn.Mish()
+        )
 
 
 class ConditionalResidualBlock1D(nn.Module):
@@ -69,8 +70,15 @@ class ConditionalUnet1D(nn.Module):
     """Denoises a (B, H, A) action sequence given the step and global features: predicts its noise
     or its clean sample, as the policy's ``prediction_type`` trains it."""
 
-    def __init__(self, action_dim: int, global_cond_dim: int, down_dims: tuple[int, ...], step_embed: int,
-                 kernel_size: int, n_groups: int):
+    def __init__(
+        self,
+        action_dim: int,
+        global_cond_dim: int,
+        down_dims: tuple[int, ...],
+        step_embed: int,
+        kernel_size: int,
+        n_groups: int,
+    ):
         super().__init__()
         self.step_embedding = StepEmbedding(step_embed)
         cond = step_embed + global_cond_dim
@@ -83,15 +91,24 @@ class ConditionalUnet1D(nn.Module):
         self.down = nn.ModuleList()
         for i, (c_in, c_out) in enumerate(pairs):
             last = i == len(pairs) - 1
-            self.down.append(nn.ModuleList([block(c_in, c_out), block(c_out, c_out),
-                                            nn.Identity() if last else nn.Conv1d(c_out, c_out, 3, 2, 1)]))
+            self.down.append(
+                nn.ModuleList(
+                    [
+                        block(c_in, c_out),
+                        block(c_out, c_out),
+                        nn.Identity() if last else nn.Conv1d(c_out, c_out, 3, 2, 1),
+                    ]
+                )
+            )
         self.mid = nn.ModuleList([block(down_dims[-1], down_dims[-1]), block(down_dims[-1], down_dims[-1])])
         self.up = nn.ModuleList()
         for c_in, c_out in reversed(pairs[1:]):  # c_out: this level's width; c_in: the level above's
-            self.up.append(nn.ModuleList([block(2 * c_out, c_in), block(c_in, c_in),
-                                          nn.ConvTranspose1d(c_in, c_in, 4, 2, 1)]))
-        self.final = nn.Sequential(Conv1dBlock(down_dims[0], down_dims[0], kernel_size, n_groups),
-                                   nn.Conv1d(down_dims[0], action_dim, 1))
+            self.up.append(
+                nn.ModuleList([block(2 * c_out, c_in), block(c_in, c_in), nn.ConvTranspose1d(c_in, c_in, 4, 2, 1)])
+            )
+        self.final = nn.Sequential(
+            Conv1dBlock(down_dims[0], down_dims[0], kernel_size, n_groups), nn.Conv1d(down_dims[0], action_dim, 1)
+        )
 
     def forward(self, sample: torch.Tensor, step: torch.Tensor, global_cond: torch.Tensor) -> torch.Tensor:
         """sample (B, H, A), step (B,) int, global_cond (B, C) -> (B, H, A), the noise or the clean sample."""
