@@ -37,3 +37,22 @@ def test_help_loads_no_heavy_module(args):
     assert res.returncode == 0, res.stderr
     result = json.loads(res.stdout.strip().splitlines()[-1])
     assert result == {"code": 0, "heavy": []}
+
+
+@pytest.mark.parametrize(
+    "args, flag",
+    [
+        (["eval", "closed-loop", "--episodes", "0"], "--episodes"),
+        (["eval", "closed-loop", "--pilot", "autopilot"], "--pilot"),
+        (["train", "DATA", "--preset", "huge", "--out", "RUN"], "--preset"),
+        (["eval", "closed-loop", "--sample", "8"], "--sample"),
+    ],
+)
+def test_a_range_or_choice_error_is_one_line_naming_the_flag(args, flag):
+    """The installed `orbitmodel` program (its main()) turns click's usage errors into one line
+    that names the flag, and exits 2: no box, no pydantic wording."""
+    code = "import sys; from orbitmodel.cli.app import main; sys.argv[0] = 'orbitmodel'; main()"
+    res = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=300)
+    lines = [line for line in res.stderr.splitlines() if line.strip()]
+    assert res.returncode == 2 and len(lines) == 1, res.stderr
+    assert lines[0].startswith("error:") and flag in lines[0] and "│" not in lines[0], lines[0]
