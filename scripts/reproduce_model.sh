@@ -40,7 +40,8 @@ DPS="$OUT/dp-state"  # the policy without the camera (preset cpu-state), a secon
 # The policy trains the cpu preset's 16,000 steps, the run the test seeds report. DP_STEPS=N trains
 # a copy of it on to N steps (--resume --extend) in OUT/dp-cpu-N, which the policy's grids then fly:
 # trained on under N = 32,000 (and stopped at 28,000), its held-out MSE kept falling slowly and its
-# validation flights did not improve (docs/results.md#the-diffusion-policy).
+# one-obstacle flights on validation seed 1 (20 episodes per point, the only flights of the extension)
+# stayed at 17-18 of 20 (docs/results.md#the-diffusion-policy).
 DP_STEPS=${DP_STEPS:-}
 use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folder of their JSON
   GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed "$1") GDIR=$2
