@@ -15,7 +15,7 @@ from pathlib import Path
 
 from orbitdata.fly.config import FlightConfig
 from orbitdata.fly.pilots.config import PilotsConfig
-from orbitdata.scenario.config import ScenarioConfig
+from orbitdata.scenario.config import STATIC, ScenarioConfig
 from orbitdata.schema import LEVELS
 from orbitdata.sim.config import SimConfig
 
@@ -79,13 +79,28 @@ class GenerationConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     pilots: PilotsConfig = field(default_factory=PilotsConfig)
 
+    def __post_init__(self) -> None:
+        if self.scenario.tier != STATIC:
+            # Never silently: a dataset or grid of the tier would lack its episode record and poses.
+            raise ValueError(
+                f"scenario.tier {self.scenario.tier!r} cannot be generated or flown on a grid yet: the dataset writer "
+                "and the grid do not record its columns; fly it in orbitdata.sim.CubeSatEnv or "
+                f"gym.make('CubeSat-v1', tier={self.scenario.tier!r})"
+            )
+
     @property
     def flight(self) -> FlightConfig:
         """The sections that flying reads (a pilot factory, the evaluation grid)."""
         return FlightConfig(sim=self.sim, scenario=self.scenario, pilots=self.pilots)
 
     def to_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """Every setting, as meta/info.json records it. The static tier's record leaves the tier
+        settings out, so its datasets keep the bytes (and resume) they had before tiers existed."""
+        data = dataclasses.asdict(self)
+        if self.scenario.tier == STATIC:
+            data["scenario"].pop("tier", None)
+            data["scenario"].pop("dynamic", None)
+        return data
 
     @classmethod
     def from_dict(cls, data: dict, where: str = "config") -> "GenerationConfig":
@@ -111,7 +126,11 @@ class GenerationConfig:
 
 
 def build(cls, data, where: str):
-    """Build dataclass ``cls`` from a plain dict, strictly: unknown keys are errors."""
+    """Build dataclass ``cls`` from a plain dict, strictly: unknown keys are errors.
+
+    A scenario section starts from its tier's defaults (``ScenarioConfig.for_tier``), so
+    ``tier = "dynamic"`` alone gives the dynamic tier as a whole.
+    """
     if not isinstance(data, dict):
         raise ValueError(f"{where}: expected a table, got {type(data).__name__}")
     hints = typing.get_type_hints(cls)
@@ -131,6 +150,8 @@ def build(cls, data, where: str):
         else:
             kwargs[key] = value
     try:
+        if cls is ScenarioConfig and "tier" in kwargs:
+            return ScenarioConfig.for_tier(kwargs.pop("tier"), **kwargs)
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: {exc}") from None

@@ -80,6 +80,17 @@ DATA_FILE = "data_file"
 ROW_START = "row_start"
 ROW_END = "row_end"
 
+# ---- the dynamic tier's columns: proposed (docs/design.md), not written yet -----------------
+# A dynamic-tier dataset adds these to the tables above (a static one is unchanged).
+OBSTACLE_POSES = "privileged.obstacle_poses"  # steps: a learned pilot never reads privileged.*
+DEBRIS_MOTION = "debris_motion"
+CW = "cw"
+MEAN_MOTION = "mean_motion"
+BODY = "body"
+FAULT = "fault"
+SENSING = "sensing"
+UNSURVIVABLE_DRAWS = "unsurvivable_draws"
+
 # ---- paths --------------------------------------------------------------------------------
 DATA_DIR = "data"
 EPISODES_DIR = "episodes"
@@ -124,6 +135,12 @@ ARROW_NAMES = (
     "STEP_SCHEMA",
     "EPISODE_SCHEMA",
     "FIELDS",
+    "DEBRIS_MOTION_STRUCT",
+    "BODY_STRUCT",
+    "FAULT_STRUCT",
+    "SENSING_STRUCT",
+    "DYNAMIC_STEP_FIELDS",
+    "DYNAMIC_EPISODE_FIELDS",
 )
 
 
@@ -223,6 +240,60 @@ def _arrow() -> dict:
         Field(DATA_FILE, pa.string(), "", "the data shard that holds the episode's rows"),
         Field(ROW_START, pa.int64(), "", "first row of the episode in data_file"),
         Field(ROW_END, pa.int64(), "", "one past its last row"),
+    )
+
+    # The dynamic tier's columns (proposed; FIELDS and the schemas above leave them out until the
+    # writer records them). The struct fields are those of orbitdata.scenario.dynamics' records.
+    DEBRIS_MOTION_STRUCT = pa.struct(
+        [
+            ("velocity", VEC3),  # m/s, world frame, at t = 0
+            ("angular_velocity", VEC3),  # rad/s, world frame, constant
+            ("intercept", pa.bool_()),  # aimed at the nominal flight
+            ("t_star", pa.float32()),  # s, the nominal flight passes the aim point (null: drifting)
+            ("crossing_time", pa.float32()),  # s, the piece is at the aim point (null: drifting)
+            ("aim", VEC3),  # metres, world frame (null: drifting)
+        ]
+    )
+    BODY_STRUCT = pa.struct(
+        [
+            ("mass_scale", pa.float32()),  # factor on the dry mass
+            ("inertia_scale", VEC3),  # factors on the principal dry inertias, body x, y, z
+            ("com_offset", VEC3),  # metres, body frame, from the cube's centre
+        ]
+    )
+    FAULT_STRUCT = pa.struct(
+        [
+            ("kind", pa.string()),  # none, off, scaled, stuck
+            ("thruster", pa.int32()),  # 0..7, -1 for none
+            ("level", pa.float32()),  # scaled: factor; stuck: thrust; off: 0; none: 1
+            ("onset_step", pa.int32()),  # frame from which the thrust is faulty (onset = onset_step x dt)
+        ]
+    )
+    SENSING_STRUCT = pa.struct(
+        [
+            ("rgb_noise", pa.float32()),  # std of the Gaussian RGB noise, [0, 1] units
+            ("depth_dropout", pa.float32()),  # share of depth pixels with no return
+            ("eclipse", pa.bool_()),  # no sun: lit by the onboard light alone
+            ("onboard_light", pa.float32()),  # MuJoCo diffuse of the spotlight beside the camera
+        ]
+    )
+    DYNAMIC_STEP_FIELDS = (
+        Field(
+            OBSTACLE_POSES,
+            pa.list_(pa.list_(pa.float32(), 7)),
+            "m, 1",
+            "privileged, for oracles and validation only: each obstacle's centre (world) and quat (w, x, y, z) "
+            "at this frame",
+        ),
+    )
+    DYNAMIC_EPISODE_FIELDS = (
+        Field(DEBRIS_MOTION, pa.list_(DEBRIS_MOTION_STRUCT), "m/s, rad/s, s, m", "how each obstacle moves"),
+        Field(CW, pa.bool_(), "", "the Clohessy-Wiltshire terms act on the CubeSat and the debris"),
+        Field(MEAN_MOTION, pa.float32(), "rad/s", "mean motion n of the reference orbit"),
+        Field(BODY, BODY_STRUCT, "1, 1, m", "mass_scale, inertia_scale and com_offset of the body as built"),
+        Field(FAULT, FAULT_STRUCT, "", "the faulty thruster: kind, thruster, level and onset_step"),
+        Field(SENSING, SENSING_STRUCT, "", "rgb_noise, depth_dropout, eclipse and onboard_light"),
+        Field(UNSURVIVABLE_DRAWS, pa.int32(), "", "debris draws rejected as unsurvivable before this episode's"),
     )
 
     STEP_SCHEMA = pa.schema([(f.name, f.type) for f in STEP_FIELDS])

@@ -9,7 +9,21 @@ from __future__ import annotations
 
 import numpy as np
 
-STREAMS = {"scenario": 0, "pilot": 1, "planner": 2, "split": 3, "level": 4, "thrust-noise": 5}
+STREAMS = {
+    "scenario": 0,
+    "pilot": 1,
+    "planner": 2,
+    "split": 3,
+    "level": 4,
+    "thrust-noise": 5,
+    # the dynamic tier's draws (orbitdata.scenario.dynamic_sampler) and its camera noise (one draw per frame)
+    "orbit": 6,
+    "debris": 7,
+    "body": 8,
+    "fault": 9,
+    "sensing": 10,
+    "sensor-noise": 11,
+}
 
 
 def _fold(key: list[int]) -> int:

@@ -11,6 +11,7 @@ from orbitdata.lazy import lazy_getattr
 _LAZY = {  # name -> the module that defines it
     **dict.fromkeys(("CameraConfig", "CubeSatConfig", "SimConfig"), "orbitdata.sim.config"),
     **dict.fromkeys(("CubeSatEnv", "validate_action"), "orbitdata.sim.env"),
+    **dict.fromkeys(("DynamicWorld",), "orbitdata.sim.dynamic"),
     **dict.fromkeys(("thruster_layout", "wrench_matrix"), "orbitdata.sim.thrusters"),
 }
 

@@ -14,13 +14,23 @@ Spec (Gymnasium-style, version ``CubeSat-v1``):
 * **Reward**: +1 on success, -1 on collision, 0 otherwise (the dataset does not use it).
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``contact_substep``,
   ``min_clearance`` (m, hull to nearest obstacle surface, 0 in contact), ``fuel_kg``,
-  ``mass`` (kg), ``thrust`` (effective normalised thrust after fuel limits), ``position_world``,
-  ``step``.
+  ``mass`` (kg), ``thrust`` (the normalised thrust the thrusters gave: after a fault and the fuel
+  limits), ``position_world``, ``step`` and ``obstacle_poses`` (N, 7): each obstacle's centre (m,
+  world) and quat (w, x, y, z) at this frame. ``obstacle_poses`` is privileged: oracles and
+  validation read it, a learned pilot never does (the observation carries no obstacle pose).
 * **Arguments**: :class:`~orbitdata.sim.config.SimConfig` (physics, camera, hardware) and
-  :class:`~orbitdata.scenario.config.ScenarioConfig` (randomisation).
+  :class:`~orbitdata.scenario.config.ScenarioConfig` (randomisation; its ``tier``).
 
 Fuel: mass flow = sum(thrust) / (isp * g0); mass and inertia follow the tank; thrust stops
 when it is empty (the last step is scaled to the fuel that was left).
+
+The dynamic tier (a scenario with ``dynamics``; :mod:`orbitdata.sim.dynamic`): obstacles are
+mocap bodies moved each substep along their analytic motion; with the CW flag the
+Clohessy-Wiltshire force acts on the CubeSat's centre of mass each substep; mass, inertia and
+centre of mass are the drawn ones; the faulty thruster gives what the fault says from its onset
+frame on (fuel follows what was given); RGB carries Gaussian noise and depth drops pixels (0),
+while ``depth_low`` is pooled from the depth before dropout. The state's p and v stay those of
+the cube's centre, where the camera and thrusters are fixed.
 """
 
 from __future__ import annotations
@@ -33,6 +43,7 @@ from orbitdata.scenario.sampler import check_scenario, sample_scenario
 from orbitdata.scenario.spec import Scenario
 from orbitdata.schema import ACTION_DIM
 from orbitdata.sim.config import SimConfig
+from orbitdata.sim.dynamic import DynamicWorld
 from orbitdata.sim.mjcf import BODY, CAMERA, HULL, OBSTACLE_PREFIX, build_mjcf
 from orbitdata.sim.render import CameraRenderer, pool_depth
 from orbitdata.sim.thrusters import wrench_matrix
@@ -94,18 +105,25 @@ class CubeSatEnv:
         self._obstacles = [
             mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f"{OBSTACLE_PREFIX}{i}") for i in range(len(scn.obstacles))
         ]
+        self._world = DynamicWorld(scn, self.sim, m, self._body) if scn.dynamics is not None else None
+        self._static_poses = scn.obstacle_poses(0.0)[0] if self._world is None else None
         self._fuel = self.sim.cubesat.fuel_mass
         self._update_mass()
         d.qvel[0:3] = scn.initial_velocity  # free joint: linear velocity in the world frame
+        if self._world is not None:
+            self._world.place_debris(d, 0)  # exactly, not as the MJCF's 9 digits put it
         mujoco.mj_forward(m, d)
         self._start = d.xpos[self._body].copy()
         self._goal = np.asarray(scn.goal, dtype=np.float64)
         self.t = 0
         self.done = False
         if self.sim.render:
-            if self._renderer is not None:
-                self._renderer.close()
-            self._renderer = CameraRenderer(m, CAMERA, self.sim.camera, self.sim.gl_backend)
+            if self._world is not None and self._renderer is not None and self._renderer.can_render(m):
+                self._renderer.rebind(m, CAMERA)  # the dynamic tier's textured context, kept
+            else:
+                if self._renderer is not None:
+                    self._renderer.close()
+                self._renderer = CameraRenderer(m, CAMERA, self.sim.camera, self.sim.gl_backend)
         clearance = self._min_clearance()
         obs = self._observe()
         info = self._info(None, False, False, None, clearance, np.zeros(ACTION_DIM))
@@ -125,6 +143,9 @@ class CubeSatEnv:
             raise RuntimeError("the episode has ended; call reset()")
         a = validate_action(action)
         m, d = self.model, self.data
+        world = self._world
+        if world is not None:
+            a = world.thrust(a, self.t)
         burn = float(a.sum()) * self._mdot_per_thrust * self.sim.dt  # kg this step
         if burn > self._fuel:
             a = a * (self._fuel / burn)  # the tank empties part-way: scale the whole step
@@ -132,10 +153,19 @@ class CubeSatEnv:
         d.ctrl[:] = a
         contact_substep = None
         for k in range(self.sim.substeps):
-            mujoco.mj_step(m, d)
+            if world is None:
+                mujoco.mj_step(m, d)
+            else:
+                world.place_debris(d, self.t * self.sim.substeps + k)
+                mujoco.mj_step1(m, d)  # positions and velocities of substep k's start ...
+                if world.n:
+                    world.apply_cw(m, d)  # ... give the CW force acting over it
+                mujoco.mj_step2(m, d)
             # mj_step collides the state it started from, so this sees substep k's start.
             if contact_substep is None and d.ncon and self._hull_in_contact():
                 contact_substep = k
+        if world is not None:
+            world.place_debris(d, (self.t + 1) * self.sim.substeps)
         # Recompute kinematics and contacts of the final state (mj_step leaves them stale).
         mujoco.mj_forward(m, d)
         if contact_substep is None and d.ncon and self._hull_in_contact():
@@ -177,7 +207,10 @@ class CubeSatEnv:
         return False
 
     def _update_mass(self) -> None:
-        mass, inertia = self.sim.cubesat.mass_properties(self._fuel)
+        if self._world is None:
+            mass, inertia = self.sim.cubesat.mass_properties(self._fuel)
+        else:
+            mass, inertia = self._world.mass_properties(self._fuel)
         self.model.body_mass[self._body] = mass
         self.model.body_inertia[self._body] = inertia
         # MuJoCo 4 caches mass-derived constants: refresh them (on scratch data, since
@@ -211,10 +244,19 @@ class CubeSatEnv:
         obs = {"state": self.state()}
         if self._renderer is not None:
             rgb, depth = self._renderer.render(self.data)
+            depth_low = pool_depth(depth, self._renderer.far)  # before dropout: the scene's depth
+            if self._world is not None:
+                rgb, depth = self._world.sense(rgb, depth, self.t)
             obs["image"] = rgb
             obs["depth"] = depth
-            obs["depth_low"] = pool_depth(depth, self._renderer.far)
+            obs["depth_low"] = depth_low
         return obs
+
+    def obstacle_poses(self) -> np.ndarray:
+        """(N, 7) privileged: each obstacle's centre (m, world) and quat (w, x, y, z) now."""
+        if self._world is None:
+            return self._static_poses.copy()
+        return self._world.poses(self.t)
 
     def _info(self, outcome, collision, success, contact_substep, clearance, thrust) -> dict:
         return {
@@ -228,4 +270,5 @@ class CubeSatEnv:
             "mass": self.mass,
             "thrust": np.asarray(thrust, dtype=np.float64),
             "position_world": self.data.xpos[self._body].copy(),
+            "obstacle_poses": self.obstacle_poses(),
         }

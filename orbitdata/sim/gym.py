@@ -3,6 +3,7 @@
     import gymnasium as gym
     import orbitdata.sim.gym                          # registers CubeSat-v1
     env = gym.make("CubeSat-v1", n_obstacles=3, speed=2.0, image_size=64)
+    env = gym.make("CubeSat-v1", tier="dynamic")      # drifting debris, CW terms, faults, noisy camera
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["outcome"]                                   # None while flying; success, collision, timeout, out_of_fuel
@@ -29,15 +30,20 @@ Spec (the same world and episodes as :class:`orbitdata.sim.env.CubeSatEnv` and t
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``min_clearance`` (m),
   ``fuel_kg``, ``mass``, ``thrust`` (after fuel limits), ``position_world``, ``step``, and
   ``episode_seed``: the seed that drew the episode's world (obstacles, goal, initial velocity,
-  attitude, lighting), so ``reset(seed=episode_seed)`` flies it again.
-* **Arguments** (``gym.make`` keywords, checked there): ``n_obstacles`` (a whole number >= 0) and
-  ``speed`` (m/s, >= 0) fix those draws of every episode (None: drawn from the scenario's ranges,
-  1-5 obstacles, 0.5-2.5 m/s); ``image_size`` (px, square, a multiple of 16); ``seed``: the first
+  attitude, lighting), so ``reset(seed=episode_seed)`` flies it again, and ``obstacle_poses``
+  (N, 7), every obstacle's centre and quat at this frame: privileged, for oracles and checks.
+  The observation never carries an obstacle pose.
+* **Arguments** (``gym.make`` keywords, checked there): ``tier``: the scenario tier, ``static``
+  (the paper's scenes, the default) or ``dynamic`` (drifting, tumbling debris mostly aimed at the
+  straight path, Clohessy-Wiltshire terms, a varied body, a faulty thruster, RGB noise and depth
+  dropout, eclipses; ``ScenarioConfig.for_tier``); ``n_obstacles`` (a whole number >= 0) and
+  ``speed`` (m/s, >= 0) fix those draws of every episode (None: drawn from the tier's ranges,
+  1-5 obstacles and 0.5-2.5 m/s static, 1-10 and 0.5-3 m/s dynamic); ``image_size`` (px, square, a multiple of 16); ``seed``: the first
   ``reset``'s seed when it is given none; ``images``: render the camera (False: state and goal
   only, much faster, and no ``render_mode``); ``max_steps``: ``step`` calls before ``truncated``
   (None: the simulator's frame limit less one); ``sim`` and ``scenario``: the full
   :class:`~orbitdata.sim.config.SimConfig` and :class:`~orbitdata.scenario.config.ScenarioConfig`
-  (a dataset's are in its ``meta/info.json``). ``reset(options=...)`` takes ``n_obstacles``,
+  (a dataset's are in its ``meta/info.json``; a ``scenario`` of another tier than ``tier`` is refused). ``reset(options=...)`` takes ``n_obstacles``,
   ``speed`` or a whole ``scenario`` for one episode.
 * **Vector envs**: ``gym.make_vec("CubeSat-v1", num_envs=N, vectorization_mode="async")`` works in
   a process that has rendered already: the renderer releases its OpenGL state before a fork
@@ -45,7 +51,8 @@ Spec (the same world and episodes as :class:`orbitdata.sim.env.CubeSatEnv` and t
 
 Version history: v1, the simulator of dataset schema 1.0. The observation keys took the dataset's
 column names, ``observation.depth_low`` was added and ``max_steps`` became the number of steps
-(it had counted frames) with the simulator unchanged.
+(it had counted frames) with the simulator unchanged. ``tier`` was added with the static tier's
+episodes unchanged (``info`` gained ``obstacle_poses``).
 """
 
 from __future__ import annotations
@@ -63,7 +70,7 @@ except ImportError:  # the optional extra
     raise ImportError("CubeSat-v1 as a Gymnasium environment needs gymnasium: pip install 'orbitdata[gym]'") from None
 
 from orbitdata import schema as S
-from orbitdata.scenario.config import ScenarioConfig
+from orbitdata.scenario.config import STATIC, TIERS, ScenarioConfig
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
 
@@ -106,9 +113,10 @@ class CubeSatGymEnv(gymnasium.Env):
         sim: SimConfig | None = None,
         scenario: ScenarioConfig | None = None,
         render_mode: str | None = None,
+        tier: str | None = None,
     ):
         n_obstacles = _whole(
-            "n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0", "to draw 1-5 per episode"
+            "n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0", "to draw it per episode"
         )
         speed = _speed(speed)
         image_size = _whole(
@@ -123,6 +131,12 @@ class CubeSatGymEnv(gymnasium.Env):
         for name, value, cls in (("sim", sim, SimConfig), ("scenario", scenario, ScenarioConfig)):
             if value is not None and not isinstance(value, cls):
                 raise ValueError(f"{name}={type(value).__name__}: give an orbitdata {cls.__name__}, or None")
+        if tier is not None and tier not in TIERS:
+            raise ValueError(f"tier={tier!r}: give one of {', '.join(map(repr, TIERS))}, or None for {STATIC!r}")
+        if scenario is None:
+            scenario = ScenarioConfig.for_tier(tier or STATIC)
+        elif tier is not None and scenario.tier != tier:
+            raise ValueError(f"tier={tier!r} but scenario.tier is {scenario.tier!r}: give one of them, or both alike")
         self.metadata = {**self.metadata, "render_modes": ["rgb_array"] if images else []}
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r}: CubeSat-v1 renders 'rgb_array' (with images=True) only")
@@ -130,7 +144,8 @@ class CubeSatGymEnv(gymnasium.Env):
         camera = sim.camera if image_size is None else dataclasses.replace(sim.camera, image_size=image_size)
         frames = sim.max_steps if max_steps is None else max_steps + 1  # the simulator counts frames
         sim = dataclasses.replace(sim, camera=camera, render=images, max_steps=frames)  # checks the image size
-        self.env = CubeSatEnv(sim, scenario or ScenarioConfig())
+        self.env = CubeSatEnv(sim, scenario)
+        self.tier = scenario.tier
         self.n_obstacles, self.speed, self.render_mode = n_obstacles, speed, render_mode
         self._first_seed = seed  # the first reset's, when it is given none
         self._reset_before = False

@@ -47,9 +47,15 @@ def thruster_layout(cfg: CubeSatConfig) -> tuple[np.ndarray, np.ndarray]:
     return positions, np.array(directions)
 
 
-def wrench_matrix(cfg: CubeSatConfig) -> np.ndarray:
-    """W (6, 8): [force (N); torque (N m)] in the body frame per unit of normalised thrust."""
+def wrench_matrix(cfg: CubeSatConfig, com_offset=None) -> np.ndarray:
+    """W (6, 8): [force (N); torque (N m)] in the body frame per unit of normalised thrust.
+
+    Torques are about the centre of mass: the cube's centre, or ``com_offset`` (m, body frame)
+    from it (the dynamic tier's body).
+    """
     pos, dirs = thruster_layout(cfg)
+    if com_offset is not None:
+        pos = pos - np.asarray(com_offset, dtype=np.float64)
     force = dirs * cfg.max_thrust  # (8, 3)
     torque = np.cross(pos, force)  # (8, 3) about the centre of mass
     return np.concatenate([force, torque], axis=1).T

@@ -23,6 +23,7 @@ from orbitdata import read_meta
 from orbitdata import schema as S
 from orbitdata.codecs import decode_depth, decode_rgb, depth_to_mm, encode_rgb
 from orbitdata.config import GenerationConfig
+from orbitdata.scenario import ScenarioConfig
 
 IMAGE_KEYS = {S.IMAGE, S.DEPTH, S.DEPTH_LOW}
 
@@ -78,6 +79,30 @@ def test_make_keywords_and_the_module_form():
 def test_bad_arguments_are_refused_at_make_naming_them(kwargs, message):
     with pytest.raises(ValueError, match=message.replace("[", r"\[")):
         gym.make("CubeSat-v1", **{"images": False, **kwargs})
+
+
+def test_the_dynamic_tier_passes_the_checker_and_observes_what_the_static_tier_does():
+    env = gym.make("CubeSat-v1", tier="dynamic", image_size=64)
+    check_env(env.unwrapped)  # reset with a seed twice gives the same noisy frames, as it must
+    obs, info = env.reset(seed=2)
+    scenario = env.unwrapped.env.scenario
+    assert scenario.tier == "dynamic" and scenario.dynamics is not None
+    assert set(obs) == {S.STATE, S.GOAL} | IMAGE_KEYS  # no obstacle pose: that is privileged, in info
+    assert info["obstacle_poses"].shape == (len(scenario.obstacles), 7)
+    assert env.observation_space == gym.make("CubeSat-v1", image_size=64).observation_space
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"tier": "moving"}, "tier='moving': give one of 'static', 'dynamic'"),
+        ({"tier": "dynamic", "scenario": ScenarioConfig()}, "tier='dynamic' but scenario.tier is 'static'"),
+    ],
+)
+def test_a_bad_tier_is_refused_at_make(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        gym.make("CubeSat-v1", images=False, **kwargs)
 
 
 @pytest.mark.parametrize("max_steps", [1, 5])
