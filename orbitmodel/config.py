@@ -156,13 +156,19 @@ class TrainConfig(StageTrainConfig):
 
 KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
 INTEGRATORS = ("upstream", "coasting")
-# what the latent probe's MLP reads per step: z_k; [z_k, z_k - z_{k-1}]; and the thrusts of step k too
-INPUTS = ("latent", "latent+change", "latent+change+thrust")
+# what the latent probe's MLP reads per step: z_k; [z_k, z_k - z_{k-1}]; and the thrusts of step k
+# too; or the thrusts of step k alone, no latent (Table I's thrust-only row: what thrusts explain)
+INPUTS = ("latent", "latent+change", "latent+change+thrust", "thrust")
 
 
 def reads_thrust(inputs: str) -> bool:
     """Whether a probe with these ``inputs`` reads each step's thrusts (and so needs their width)."""
-    return inputs.endswith("+thrust")
+    return inputs == "thrust" or inputs.endswith("+thrust")
+
+
+def reads_latent(inputs: str) -> bool:
+    """Whether a probe with these ``inputs`` reads the imagined latents at all."""
+    return inputs.startswith("latent")
 
 
 @dataclass(frozen=True)
@@ -230,7 +236,8 @@ class ProbeRecipe:
         inputs: "latent" (upstream): the MLP reads z_k. "latent+change": it reads
             [z_k, z_k - z_{k-1}] (the world model predicts the change of z, and the increments are
             about change). "latent+change+thrust": also the thrusts of step k (the world model's
-            action of that step, 8 s values), which order the frames within a step.
+            action of that step, 8 s values), which order the frames within a step. "thrust": the
+            thrusts of step k alone, no latent (the thrust-only reference of Table I).
         integrator: "upstream": p' = p + dp, v' = v + dv. "coasting": zero increments hold the
             world-frame velocity and the position follows it (see ``probe.integrator``).
         hidden, layers: ``layers`` hidden layers of ``hidden`` units with GELU, then 10 outputs.

@@ -15,6 +15,15 @@ from orbitmodel.extras import MissingExtra
 
 Integrator = Enum("Integrator", {name: name for name in INTEGRATORS}, type=str)
 Inputs = Enum("Inputs", {name: name for name in INPUTS}, type=str)
+# the probe variants (orbitmodel.probe.variants, imported on use): the run's own, the paper's, the
+# thrust-only one and the latent-only candidates
+VARIANT_NAMES = ("thrust_probe", "paper_probe", "thrust_only") + tuple(
+    f"latent_probe-{tag}-{head}-{loss}"
+    for tag in ("change", "z")
+    for head in ("frames", "steps")
+    for loss in ("inc", "noinc")
+)
+Variant = Enum("Variant", {name: name for name in VARIANT_NAMES}, type=str)
 
 
 def register(app: typer.Typer, eval_app: typer.Typer) -> None:
@@ -29,6 +38,16 @@ def probe(
     state_only: Annotated[
         bool, typer.Option(help="train the state-only reference MLP (RUN/probe-state) instead")
     ] = False,
+    variant: Annotated[
+        Variant,
+        typer.Option(
+            help="which of the run's probes (Table I's rows; docs/model.md): thrust_probe is the run's own "
+            "(RUN/probe, the planner's); paper_probe reads latents only, integrated as upstream does; "
+            "thrust_only reads each step's thrusts, no latent; latent_probe-* are the no-thrust candidates "
+            "(z or [z, dz]; per-frame or per-step; with or without the increment loss), chosen by "
+            "`eval probe --split val`. Each but thrust_probe trains into RUN/probe-NAME"
+        ),
+    ] = "thrust_probe",
     epochs: Annotated[
         Optional[int], typer.Option(min=1, help="epochs (default: the probe recipe of the run's preset)")
     ] = None,
@@ -90,9 +109,18 @@ def probe(
     state at the last context frame; the loss is the MSE of the integrated states.
     """
     from orbitmodel.probe.model import probe_folder
-    from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe
+    from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe, trained_recipe
+    from orbitmodel.probe.variants import FLOWN, VARIANTS, variant_recipe
 
     kind = "state" if state_only else "latent"
+    if state_only and variant.value != FLOWN:
+        fail(f"--variant {variant.value}: the state-only reference has no variants; drop --variant or --state-only")
+    given = {"inputs": inputs and inputs.value, "integrator": integrator and integrator.value, "per_frame": per_frame}
+    given["increment_weight"] = increment_weight
+    for key, value in VARIANTS[variant.value].items():  # what makes the variant is not a flag's to change
+        if given.get(key) is not None and given[key] != value:
+            flag = "--" + key.replace("_", "-")
+            fail(f"{flag}: the {variant.value} variant sets {key} to {value}; drop {flag}")
     weights = None
     if loss_weights is not None:
         try:
@@ -104,7 +132,8 @@ def probe(
                 f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
                 "(e.g. 1,1,1,1,100)"
             )
-    recipe = run_recipe(run).with_changes(
+    base = run_recipe(run) if variant.value == FLOWN else trained_recipe(run)  # a variant changes the run's probe
+    recipe = variant_recipe(base, variant.value).with_changes(
         inputs=inputs.value if inputs else None,
         integrator=integrator.value if integrator else None,
         per_frame=per_frame,
@@ -119,9 +148,17 @@ def probe(
         seed=seed,
     )
     req = ProbeRequest(
-        run=run, dataset=dataset, recipe=recipe, kind=kind, device=device.value, resume=resume, overwrite=overwrite
+        run=run,
+        dataset=dataset,
+        recipe=recipe,
+        kind=kind,
+        device=device.value,
+        resume=resume,
+        overwrite=overwrite,
+        variant=variant.value,
     )
-    echo_trained(f"the {kind} probe", train_probe(req), probe_folder(run, kind))
+    label = f"the {kind} probe" if variant.value == FLOWN else f"the {variant.value} probe"
+    echo_trained(label, train_probe(req), probe_folder(run, kind, variant.value))
 
 
 @friendly
@@ -146,9 +183,14 @@ def eval_probe(
         ),
     ] = None,
 ) -> None:
-    """The paper's Table I: probe MAE at h = 25 and 50 steps beside the paper's, the state-only
-    MLP's and constant velocity's, on the same windows; and Figure 5."""
-    from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe, markdown
+    """The paper's Table I on the same windows, at the planner's history (2) and the model's: the
+    paper's probe (latents only), our best latent-only probe, the run's probe (the planner's), it
+    retrained on thrusts alone, the rigid-body model on the logged thrusts and constant velocity,
+    each MAE at h = 25 and 50 steps beside the paper's (RUN/eval/table1.json); the run's probe
+    beside the state-only MLP at --history (probe_table.json); and Figure 5. On --split val it
+    scores the trained latent_probe candidates and records the best (RUN/latent_probe.json)."""
+    from orbitmodel.probe import table1
+    from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe
 
     req = EvalRequest(
         run=run,
@@ -163,8 +205,18 @@ def eval_probe(
         split=split,
     )
     try:
-        result = evaluate_probe(req)
+        result = evaluate_probe(req, rigid_body(dataset))
     except MissingExtra as err:
         fail(f"{err}, or pass --no-figures", code=1)
-    typer.echo(markdown(result))
+    typer.echo(table1.markdown(result["table1"]))
     typer.echo("wrote " + ", ".join(result["files"]))
+
+
+def rigid_body(dataset: str):
+    """Table I's physics row: the planner's rigid-body model with the dataset's simulator settings
+    and all its substeps (MuJoCo's own scheme), as ``(state0 (K, 16), thrusts (K, n, 8)) -> (K, n, 16)``."""
+    from orbitdata.load import read_meta
+    from orbitmodel.plan.dynamics import RigidBodyDynamics
+
+    sim = read_meta(dataset)[0].generation_config().sim
+    return RigidBodyDynamics(sim, substeps=sim.substeps).rollout

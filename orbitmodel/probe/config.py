@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from orbitdata import schema as S
-from orbitmodel.config import INPUTS, INTEGRATORS, KINDS, reads_thrust
+from orbitmodel.config import INPUTS, INTEGRATORS, KINDS, reads_latent, reads_thrust
 
 
 @dataclass(frozen=True)
@@ -24,7 +24,8 @@ class ProbeConfig:
         dt: seconds per integration step (a latent step's / ``substeps``); the attitude integrates exp(w' dt).
         inputs: "latent" (upstream): the MLP reads z_k. "latent+change": it reads [z_k, z_k - z_{k-1}]
             (z_0 the last context latent): the world model predicts the change of z, and the
-            increments are about change.
+            increments are about change. "thrust": no latent at all, only each step's thrusts
+            (the thrust-only reference: the latents are given and ignored).
         integrator: "upstream": p' = p + dp, v' = v + dv. "coasting": zero increments hold the
             world-frame velocity and the position follows it; the increments are what thrust
             changes (see ``probe.integrator``).
@@ -75,8 +76,13 @@ class ProbeConfig:
         return reads_thrust(self.inputs)
 
     @property
+    def reads_latent(self) -> bool:
+        return reads_latent(self.inputs)
+
+    @property
     def dims(self) -> tuple[int, ...]:
-        """The latent branch's MLP: its features -> 10 increments per substep."""
+        """The latent branch's MLP: its features -> 10 increments per substep (a probe reading no
+        latent has none)."""
         d_in = 2 * self.latent_dim if self.reads_change else self.latent_dim
         return (d_in, *([self.hidden] * self.layers), 10 * self.substeps)
 

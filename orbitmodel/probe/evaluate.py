@@ -1,5 +1,9 @@
 """The paper's Table I and Figure 5 (``orbitmodel eval probe RUN DATASET``).
 
+Two tables from the same windows: ``table1.json`` (``probe.table1``: the paper's probe and the
+rows to read it against, at the planner's history and the model's) and ``probe_table.json``, the
+run's probe with the state-only MLP and constant velocity at one history (the model card's).
+
 Protocol (upstream's eval_stage2, at the paper's horizons): test-split episodes in a seeded
 random order, one random window per episode whose frames hold no collision, until ``windows``
 windows; ``context`` frames are encoded, the world model imagines the next ``max(horizons)``
@@ -22,19 +26,14 @@ import torch
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
 from orbitmodel.data import group_actions, read_dataset_meta, split_selection
-from orbitmodel.kinematics import FUEL, ROT, P, V, W, geodesic_angle, rot6d_to_matrix
+from orbitmodel.probe import table1
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
+from orbitmodel.probe.metrics import PAPER, QUANTITIES, step_errors, summarise
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
 from orbitmodel.probe.train import load_stage1
 from orbitmodel.runs import CONFIG, RunError, local_run_folder
 from orbitmodel.train.loop import resolve_device
 
-QUANTITIES = {"position": "m", "velocity": "m/s", "rotation": "rad", "angular_velocity": "rad/s", "fuel": "ratio"}
-# Table I of the paper (MAE at h = 25 and h = 50 steps of 0.04 s).
-PAPER = {
-    25: {"position": 0.0394, "velocity": 0.0636, "rotation": 0.0676, "angular_velocity": 0.0883, "fuel": 0.0019},
-    50: {"position": 0.0813, "velocity": 0.1191, "rotation": 0.2034, "angular_velocity": 0.1557, "fuel": 0.0033},
-}
 ROWS = {
     "probe": "ours: probe on imagined latents",
     "state_mlp": "state-only MLP (state, action)",
@@ -56,18 +55,6 @@ class EvalRequest:
     figures: bool = True
     history: int | None = None  # latents the world model sees per imagined step (None: its own, config.history)
     split: str = "test"  # or "val": the run's validation episodes (choices are made there; test only reports)
-
-
-def step_errors(pred: torch.Tensor, true: torch.Tensor) -> dict[str, torch.Tensor]:
-    """Per-step absolute errors (K, n) of states (K, n, 16), per quantity."""
-    d = (pred - true).abs()
-    return {
-        "position": d[..., P].mean(-1),
-        "velocity": d[..., V].mean(-1),
-        "rotation": geodesic_angle(rot6d_to_matrix(true[..., ROT]), rot6d_to_matrix(pred[..., ROT])),
-        "angular_velocity": d[..., W].mean(-1),
-        "fuel": d[..., FUEL].mean(-1),
-    }
 
 
 def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int, split: str = "test", episodes=None):
@@ -122,21 +109,6 @@ def predict(
     return {k: v.cpu() for k, v in out.items()}
 
 
-def summarise(errors: dict[str, dict[str, torch.Tensor]], horizons) -> dict:
-    """row -> quantity -> {"h25": {"mean", "std"}, ..., "per_step": [...]} from (K, n) errors."""
-    table = {}
-    for row, per_q in errors.items():
-        table[row] = {}
-        for q, e in per_q.items():
-            entry = {
-                f"h{h}": {"mean": float(e[:, :h].mean(1).mean()), "std": float(e[:, :h].mean(1).std(unbiased=False))}
-                for h in horizons
-            }
-            entry["per_step"] = [float(x) for x in e.mean(0)]
-            table[row][q] = entry
-    return table
-
-
 def _cell(row: dict | None, q: str, h: int) -> str:
     if row is None:
         return "not trained"
@@ -182,8 +154,11 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def evaluate_probe(req: EvalRequest) -> dict:
-    """Table I (JSON + markdown) and Figure 5 (PNGs) of a run's probe; returns the result dict."""
+def evaluate_probe(req: EvalRequest, physics: table1.Physics | None = None) -> dict:
+    """Table I (``table1.json``/``.md``: every row, at the planner's history and the model's), the
+    run's probe table (``probe_table.json``/``.md``, at ``req.history``) and Figure 5 (PNGs);
+    returns the probe table's result dict with Table I's under "table1". ``physics``: the
+    rigid-body model for Table I's physics row (``orbitmodel.plan``'s, passed in by the CLI)."""
     if req.windows < 1 or not req.horizons or min(req.horizons) < 1:
         raise ValueError(f"windows={req.windows}, horizons={req.horizons}: give at least one window and horizons >= 1")
     if req.out is None:
@@ -222,10 +197,18 @@ def evaluate_probe(req: EvalRequest) -> dict:
         episodes=episodes,
         columns=[S.IMAGE, S.STATE, S.ACTION],
     )
+    rows = table1.load_rows(world_model.run_dir, world_model, probe, req.split, device)
+    if physics is None:
+        rows.missing["physics"] = "the rigid-body model is the planner's; `orbitmodel eval probe` passes it in"
+    histories = table1.table_histories(world_model.config.history, req.history)
     errors: dict[str, dict[str, list]] = {}
+    errors1: dict = {}  # Table I's: history -> row -> quantity -> list of (K, n)
     first, first_frames = None, []
     for i in range(0, len(chosen), BATCH):
         batch = collate_windows(windows.__getitems__(chosen[i : i + BATCH]))
+        table1.add_errors(
+            errors1, table1.predict_rows(world_model, rows.probes, batch, context, n, device, histories, physics)
+        )
         states = predict(world_model, probe, state_mlp, batch, context, n, device, req.history)
         first = first or {"batch": batch, "states": states}
         first_frames += [int(f) for f in batch[S.FRAME_INDEX][:, 0]]
@@ -264,6 +247,16 @@ def evaluate_probe(req: EvalRequest) -> dict:
     (out / TABLE_JSON).write_text(json.dumps(result, indent=2) + "\n")
     (out / TABLE_MD).write_text(markdown(result))
     result["files"] = [str(out / TABLE_JSON), str(out / TABLE_MD)]
+    keep = ("run", "dataset", "preset", "windows", "split", "seed", "context", "frame_step", "horizons", "dt", "paper")
+    one = table1.build(rows, errors1, req.horizons, {**{k: result[k] for k in keep}, "episodes": result["episodes"]})
+    one["first_frames"] = first_frames
+    if rows.candidates:  # the validation split chooses the latent_probe row for the test split
+        where = local_run_folder(req.run, "choosing the latent_probe")
+        one["choice_file"] = str(table1.save_choice(where, one, rows, world_model.fingerprint))
+    (out / table1.TABLE1_JSON).write_text(json.dumps(one, indent=2) + "\n")
+    (out / table1.TABLE1_MD).write_text(table1.markdown(one))
+    result["table1"] = one
+    result["files"] += [str(out / table1.TABLE1_JSON), str(out / table1.TABLE1_MD)]
     if req.figures:
         from orbitmodel.probe.figures import figure5
 

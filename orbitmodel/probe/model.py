@@ -7,7 +7,8 @@
 ``config.integrator``: upstream's p += dp, v += dv, or "coasting", where zero increments hold
 the world-frame velocity; see ``probe.integrator``; ``config.substeps`` u > 1: the MLP gives u
 increments per latent, (B, n u, 10), integrated over dt each, so a world model stepping s = u
-frames gets a state for every frame, the per-frame head.)
+frames gets a state for every frame, the per-frame head; ``config.inputs`` "thrust": no latent,
+each step's thrusts alone, the thrust-only reference of Table I.)
 
 x_0 is the true state at the last context frame. An increment is a change between frames, and a
 latent alone says where the craft is, not what just changed (``docs/model.md`` measures what
@@ -32,21 +33,23 @@ from orbitmodel.kinematics import interpolate_frames
 from orbitmodel.model.world_model import mlp
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import INCREMENT_DIM, integrate
+from orbitmodel.probe.variants import FLOWN, folder_name, train_command
 from orbitmodel.runs import CONFIG, RunError, load_weights, resolve_run
 
-PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a Stage I run
+PROBE_FOLDER = {"latent": "probe", "state": "probe-state"}  # sub-folders of a Stage I run (variants: probe-NAME)
 
 
 class Increments(nn.Module):
     """MLP features (..., d_in) -> increments (..., 10), in physical units; a probe reading thrusts
     adds a second MLP's increments from the step's (standardised) thrusts. Each frame's rate change
     is linear in its thrusts; concatenated to the latent features they are learnt slowly, so they
-    get a branch of their own (docs/model.md)."""
+    get a branch of their own (docs/model.md). A probe reading thrusts alone (inputs "thrust") has
+    the thrust branch only: no weight sees a latent."""
 
     def __init__(self, config: ProbeConfig):
         super().__init__()
         self.config = config
-        self.net = mlp(config.dims)
+        self.net = mlp(config.dims) if config.reads_latent else None
         self.thrust_net = mlp(config.thrust_dims) if config.reads_thrust else None
         self.register_buffer("scale", torch.ones(INCREMENT_DIM))
         self.initialize_weights()
@@ -67,8 +70,8 @@ class Increments(nn.Module):
     def forward(self, x: torch.Tensor, thrust: torch.Tensor | None = None) -> torch.Tensor:
         """(B, n, d_in) [and thrusts (B, n, action_dim)] -> (B, n substeps, 10): each step's
         increments in time order."""
-        out = self.net(x)
-        if self.thrust_net is not None:
+        out = self.net(x) if self.net is not None else self.thrust_net(thrust)
+        if self.net is not None and self.thrust_net is not None:
             out = out + self.thrust_net(thrust)
         return out.reshape(*out.shape[:-2], out.shape[-2] * self.config.substeps, -1) * self.scale
 
@@ -106,7 +109,8 @@ class PhysicsProbe(nn.Module):
         frame t -> states (B, n substeps, 16) after each integration step (float32). A probe
         that reads latent changes (``config.inputs`` "latent+change...") also needs z_last (B, D),
         the latent of frame t (the last context latent); one that reads thrusts needs actions
-        (B, n, action_dim), the action that led to each imagined latent."""
+        (B, n, action_dim), the action that led to each imagined latent. One that reads thrusts
+        alone (inputs "thrust") takes z_future for its shape only."""
         inc = self.step_increments(z_future, z_last, actions)
         return integrate(state0, inc, self.config.dt, self.config.coasting)
 
@@ -165,26 +169,30 @@ class PhysicsProbe(nn.Module):
         device: str | torch.device = "cpu",
         world_model: str | None = None,
         revision: str | None = None,
+        variant: str = FLOWN,
     ) -> "PhysicsProbe":
         """The probe trained by ``orbitmodel probe RUN``, from ``RUN/probe/`` of a run folder or a Hub
         model repo id (``orbitmodel push``), in eval mode; ``world_model``: the fingerprint of the
-        world model it must have been trained on."""
-        return from_run(cls, run_dir, "latent", device, world_model, revision)
+        world model it must have been trained on; ``variant``: another of the run's probes
+        (``probe.variants``, ``RUN/probe-NAME``)."""
+        return from_run(cls, run_dir, "latent", device, world_model, revision, variant)
 
 
-def probe_folder(run_dir: str | Path, kind: str) -> Path:
-    return Path(run_dir) / PROBE_FOLDER[kind]
+def probe_folder(run_dir: str | Path, kind: str, variant: str = FLOWN) -> Path:
+    """The folder of a run's probe of ``kind``; for the latent kind, of its ``variant``."""
+    return Path(run_dir) / (folder_name(variant) if kind == "latent" else PROBE_FOLDER[kind])
 
 
 def load_probe(
-    run_dir: str | Path, kind: str, world_model: str | None = None
+    run_dir: str | Path, kind: str, world_model: str | None = None, variant: str = FLOWN
 ) -> tuple[ProbeConfig, dict[str, torch.Tensor]]:
-    """(config, weights) of a Stage I run's probe of ``kind``; RunError with the fix if it is
-    absent, or if ``world_model`` (a weights fingerprint) is not the one it was trained on."""
-    folder = probe_folder(run_dir, kind)
-    command = f"orbitmodel probe {run_dir} DATASET" + (" --state-only" if kind == "state" else "")
+    """(config, weights) of a Stage I run's probe of ``kind`` (and ``variant``); RunError with the
+    fix if it is absent, or if ``world_model`` (a weights fingerprint) is not the one it was
+    trained on."""
+    folder = probe_folder(run_dir, kind, variant)
+    command = train_command(run_dir, variant) + (" --state-only" if kind == "state" else "")
     if not (folder / CONFIG).is_file():
-        what = "physics probe" if kind == "latent" else "state-only reference"
+        what = "state-only reference" if kind == "state" else "physics probe" if variant == FLOWN else variant
         raise RunError(f"{run_dir} has no {what} ({folder} is missing); train it with `{command}`")
     raw = json.loads((folder / CONFIG).read_text())
     try:
@@ -212,10 +220,12 @@ def from_run(
     device: str | torch.device = "cpu",
     world_model: str | None = None,
     revision: str | None = None,
+    variant: str = FLOWN,
 ):
     """A probe module of class ``cls`` (built from a ProbeConfig) with the weights of ``run_dir``'s
-    ``kind`` probe, in eval mode (see :func:`load_probe`); ``run_dir`` may be a Hub repo id."""
-    config, weights = load_probe(resolve_run(run_dir, revision), kind, world_model)
+    ``kind`` probe (its ``variant``), in eval mode (see :func:`load_probe`); ``run_dir`` may be a
+    Hub repo id."""
+    config, weights = load_probe(resolve_run(run_dir, revision), kind, world_model, variant)
     module = cls(config)
     module.load_state_dict(weights)
     return module.to(device).eval()

@@ -17,11 +17,15 @@ frames directly rather than through every later state.
 The world model stays in eval mode (BatchNorm running statistics, no dropout) with
 ``requires_grad`` off, so its weights and buffers end the run bit-for-bit as they started.
 The probe is written to ``RUN/probe/`` (``RUN/probe-state/`` for the reference), a run folder
-of its own: config.json, checkpoints/, metrics.jsonl, model.safetensors.
+of its own: config.json, checkpoints/, metrics.jsonl, model.safetensors. A named variant of the
+run's probe (``probe.variants``: the paper's, the thrust-only one, the latent-only candidates)
+goes to ``RUN/probe-NAME/``, and reuses the latents the run's probe imagined when its windows
+are the same.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass
 from importlib.metadata import version
 from pathlib import Path
@@ -52,7 +56,9 @@ from orbitmodel.probe.cache import (
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import increments_of, integrate
 from orbitmodel.probe.model import PhysicsProbe, probe_folder
+from orbitmodel.probe.variants import FLOWN, check_variant
 from orbitmodel.runs import (
+    CONFIG,
     PROBE,
     RunDir,
     RunError,
@@ -157,6 +163,7 @@ class ProbeRequest:
     device: str = "auto"
     resume: bool = False
     overwrite: bool = False
+    variant: str = FLOWN  # which of the run's probes (``probe.variants``); the recipe is already the variant's
 
 
 def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
@@ -175,6 +182,25 @@ def load_stage1(run: str | Path, meta: DatasetMeta | None = None) -> WorldModel:
 def run_recipe(run: str | Path) -> ProbeRecipe:
     """The probe recipe a Stage I run's preset prescribes (``Preset.probe``)."""
     return read_run_config(run).preset.probe
+
+
+def trained_recipe(run: str | Path) -> ProbeRecipe:
+    """The recipe the run's probe (``RUN/probe``) was trained with, flags included; the preset's
+    when it has none yet. A variant of the run's probe (``probe.variants``) changes this one, so
+    that it differs from the probe it stands beside only in what the variant names."""
+    path = probe_folder(run, "latent") / CONFIG
+    if not path.is_file():
+        return run_recipe(run)
+    raw = upgrade_probe_config(json.loads(path.read_text()))
+    p = raw["probe"]
+    return ProbeRecipe(
+        inputs=p["inputs"],
+        integrator=p["integrator"],
+        hidden=p["hidden"],
+        layers=p["layers"],
+        per_frame=p["substeps"] > 1,
+        train=ProbeTrainConfig.from_dict(raw["train"]),
+    )
 
 
 def increment_scale(
@@ -213,27 +239,39 @@ def imagined(
     folder: Path,
     held_out: tuple[int, ...] = (),
 ) -> dict:
-    """The latents of the chosen windows: from the probe folder when it holds exactly these, else imagined."""
+    """The latents of the chosen windows: from the probe folder when it holds exactly these (or from
+    the run's own probe folder, for a variant on the same windows), else imagined."""
     # The rollout depends on the weights, the model's config (its history) and the code that
     # rolls out: a new release (orbitmodel ships in the orbitdata distribution) imagines again,
     # and so does --overwrite.
     t = req.recipe.train
-    key = cache_key(
-        world_model=wm_print,
-        config=asdict(world_model.config),
-        package=version("orbitdata"),
-        dataset=meta.to_dict(),
-        windows=chosen,
-        context=t.context,
-        horizon=t.horizon,
-        stride=t.window_stride,
-        **({"held_out": list(held_out)} if held_out else {}),
-        **({"frame_states": True} if getattr(windows, "frame_states", False) else {}),
-    )
-    cached = load_cache(folder, key)
+
+    def key(frame_states: bool) -> str:
+        return cache_key(
+            world_model=wm_print,
+            config=asdict(world_model.config),
+            package=version("orbitdata"),
+            dataset=meta.to_dict(),
+            windows=chosen,
+            context=t.context,
+            horizon=t.horizon,
+            stride=t.window_stride,
+            **({"held_out": list(held_out)} if held_out else {}),
+            **({"frame_states": True} if frame_states else {}),
+        )
+
+    per_frame = getattr(windows, "frame_states", False)
+    own = key(per_frame)
+    # a probe scored on model steps can train on latents cached with every frame's states too
+    usable = [own] if per_frame else [own, key(True)]
+    # --overwrite imagines again: the flown probe's cache may come from other model code
+    folders = (folder,) if req.overwrite else dict.fromkeys((folder, probe_folder(req.run, "latent")))
+    cached = next((c for f in folders for k in usable if (c := load_cache(f, k)) is not None), None)
+    if cached is not None and not per_frame:
+        cached.pop(FRAME_STATES, None)
     if cached is None:
         cached = imagine(world_model.to(device), windows, chosen, t.context, device)
-        save_cache(folder, key, cached)
+        save_cache(folder, own, cached)
     return cached
 
 
@@ -274,6 +312,8 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     """Train (or resume) the probe of a Stage I run; returns the loop's summary."""
     if req.kind not in KINDS:
         raise ValueError(f"probe kind {req.kind!r}: choose one of {', '.join(KINDS)}")
+    if req.kind != "latent" and check_variant(req.variant) != FLOWN:
+        raise ValueError(f"variant {req.variant}: the state-only reference has no variants; drop one of them")
     local_run_folder(req.run, "training a probe")
     meta = read_dataset_meta(req.dataset)
     world_model = load_stage1(req.run, meta)
@@ -294,7 +334,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
             "only; pass --increment-weight 0 with --state-only"
         )
     config = probe_config(req.recipe, req.kind, stage1.preset.model.latent_dim, frame_step)
-    out = probe_folder(req.run, req.kind)
+    out = probe_folder(req.run, req.kind, req.variant)
     if req.overwrite:
         # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
         # again must not reuse latents imagined by another version of the model code.
@@ -303,6 +343,8 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     parts = {"probe": config.to_dict(), "train": t.to_dict(), "dataset": meta.to_dict(), "stage1_run": str(req.run)}
     if latent:
         parts["world_model"] = wm_print  # a probe reads one world model's latents only
+    if req.variant != FLOWN:
+        parts["variant"] = req.variant
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
     windows = load_model_windows(

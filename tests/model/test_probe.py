@@ -299,3 +299,44 @@ def test_a_probe_reading_thrusts_standardises_them_with_the_data_stats():
     assert torch.equal(probe.thrust_mean, torch.full((16,), 0.1)) and "thrust_std" in probe.state_dict()
     assert torch.allclose(probe(z, state, z_last, thrusts), raw, atol=1e-6)
     assert "thrust_mean" not in PhysicsProbe(ProbeConfig(latent_dim=4, hidden=8)).state_dict()  # others load as before
+
+
+def test_a_thrust_only_probe_has_no_latent_input():
+    """inputs "thrust": the thrust branch alone, so no weight sees a latent: random latents give
+    the same states, other thrusts other states (every frame of a 2-frame step, as the flown head)."""
+    config = ProbeConfig(latent_dim=8, hidden=16, inputs="thrust", action_dim=16, substeps=2, integrator="coasting")
+    probe = PhysicsProbe(config)
+    assert probe.increments.net is None and probe.increments.thrust_net[0].in_features == 16
+    torch.nn.init.normal_(probe.increments.thrust_net[-1].weight, generator=torch.Generator().manual_seed(0))
+    g = torch.Generator().manual_seed(1)
+    state, thrusts = make_state(2, v=(0.4, 0, 0), w=(0, 0, 0.2)), torch.rand(2, 3, 16, generator=g)
+    out = probe.per_frame(torch.randn(2, 3, 8, generator=g), state, torch.randn(2, 8, generator=g), 2, thrusts)
+    assert out.shape == (2, 6, 16) and not torch.allclose(out, constant_velocity(state, 6), atol=1e-4)
+    again = probe.per_frame(torch.randn(2, 3, 8, generator=g) * 10, state, None, 2, thrusts)
+    assert torch.equal(out, again)
+    assert not torch.allclose(out, probe.per_frame(torch.zeros(2, 3, 8), state, None, 2, thrusts.flip(-1)))
+    with pytest.raises(ValueError, match="thrusts"):
+        probe(torch.zeros(2, 3, 8), state)
+
+
+def test_the_variants_change_only_what_they_name():
+    """probe.variants: the paper's probe reads z_k with upstream's integrator and no increment loss;
+    the thrust-only one reads thrusts alone; a candidate reads no thrusts; the rest is the recipe's."""
+    from orbitmodel.cli.probe import VARIANT_NAMES
+    from orbitmodel.config import get_preset
+    from orbitmodel.probe.variants import CANDIDATES, VARIANTS, folder_name, variant_recipe
+
+    flown = get_preset("cpu-step5").probe
+    assert tuple(VARIANTS) == VARIANT_NAMES  # the CLI's choices, spelt there to keep its start light
+    paper = variant_recipe(flown, "paper_probe")
+    assert (paper.inputs, paper.integrator, paper.train.increment_weight) == ("latent", "upstream", 0.0)
+    assert paper.per_frame and paper.train.loop == flown.train.loop and paper.train.weights == flown.train.weights
+    only = variant_recipe(flown, "thrust_only")
+    assert only.inputs == "thrust" and only == flown.with_changes(inputs="thrust")
+    assert variant_recipe(flown, "thrust_probe") == flown and folder_name("thrust_probe") == "probe"
+    for name in CANDIDATES:
+        recipe = variant_recipe(flown, name)
+        assert recipe.inputs in ("latent", "latent+change") and folder_name(name) == f"probe-{name}"
+    assert variant_recipe(flown, "latent_probe-change-frames-inc") == flown.with_changes(inputs="latent+change")
+    with pytest.raises(ValueError, match="choose one of"):
+        variant_recipe(flown, "latent_probe")
