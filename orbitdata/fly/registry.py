@@ -26,18 +26,43 @@ ENTRY_POINT_GROUP = "orbitdata.pilots"
 PilotFactory = Callable[..., "Pilot"]  # factory(config: FlightConfig, **options) -> Pilot
 
 
-def _expert(config: FlightConfig, plan_draw=0, noise_draw=0) -> Pilot:
-    """``plan_draw`` / ``noise_draw`` k > 0: another RRT* plan / thrust noise of the same task."""
-    from orbitdata.fly.pilots.control import Controller
-    from orbitdata.fly.pilots.expert import ExpertPilot
-
+def _draws(plan_draw, noise_draw) -> dict[str, int]:
     draws = {}
     for name, value in (("plan_draw", plan_draw), ("noise_draw", noise_draw)):
         text = str(value).strip()  # option values arrive as text; "1.5" and "True" are no whole numbers
         if not text.isdecimal():
             raise ValueError(f"--pilot-option {name}={value}: give a whole number >= 0 (0: the episode's own)")
         draws[name] = int(text)
+    return draws
+
+
+def _expert(config: FlightConfig, plan_draw=0, noise_draw=0) -> Pilot:
+    """The tier's expert, by ``config.scenario.tier``: static, RRT* + PD; dynamic, MPPI over the
+    episode's true dynamics. ``plan_draw`` / ``noise_draw`` k > 0: another plan (RRT* tree or MPPI
+    sampling) / thrust noise of the same task."""
+    from orbitdata.scenario.config import DYNAMIC
+
+    draws = _draws(plan_draw, noise_draw)
+    if config.scenario.tier == DYNAMIC:
+        from orbitdata.fly.pilots.config import DynamicExpertConfig
+        from orbitdata.fly.pilots.dynamic_expert import DynamicExpertPilot
+
+        return DynamicExpertPilot(
+            DynamicExpertConfig(), config.sim.cubesat, config.pilots.gains, config.sim.max_steps, **draws
+        )
+    from orbitdata.fly.pilots.control import Controller
+    from orbitdata.fly.pilots.expert import ExpertPilot
+
     return ExpertPilot(config.pilots.expert, controller=Controller(config.sim.cubesat, config.pilots.gains), **draws)
+
+
+def _expert_snapshot(config: FlightConfig, plan_draw=0, noise_draw=0) -> Pilot:
+    """The static expert on any tier: one RRT* plan around the obstacles as they stand at t = 0."""
+    from orbitdata.fly.pilots.control import Controller
+    from orbitdata.fly.pilots.snapshot import SnapshotExpertPilot
+
+    controller = Controller(config.sim.cubesat, config.pilots.gains)
+    return SnapshotExpertPilot(config.pilots.expert, controller=controller, **_draws(plan_draw, noise_draw))
 
 
 def _risky(config: FlightConfig) -> Pilot:
@@ -54,8 +79,13 @@ def _exploratory(config: FlightConfig) -> Pilot:
     return ExploratoryPilot(config.pilots.exploratory, controller=Controller(config.sim.cubesat, config.pilots.gains))
 
 
-# The dataset's levels (orbitdata.schema.LEVELS), in that order.
-_FACTORIES: dict[str, PilotFactory] = {"expert": _expert, "risky": _risky, "exploratory": _exploratory}
+# The dataset's levels (orbitdata.schema.LEVELS), in that order, then the dynamic tier's weak expert.
+_FACTORIES: dict[str, PilotFactory] = {
+    "expert": _expert,
+    "risky": _risky,
+    "exploratory": _exploratory,
+    "expert-snapshot": _expert_snapshot,
+}
 
 
 def _entry_points() -> dict[str, metadata.EntryPoint]:

@@ -102,3 +102,53 @@ class PilotsConfig:
     expert: ExpertConfig = field(default_factory=ExpertConfig)
     risky: RiskyConfig = field(default_factory=RiskyConfig)
     exploratory: ExploratoryConfig = field(default_factory=ExploratoryConfig)
+
+
+@dataclass(frozen=True)
+class DynamicExpertConfig:
+    """The dynamic tier's expert: MPPI over world-frame acceleration sequences, each flown in its
+    rollout by the attitude PD and the episode's own thrust allocation, with the true body, fault
+    and orbit (see :mod:`orbitdata.fly.pilots.dynamic_expert`). Lengths in metres, times in
+    control steps of 0.04 s unless named otherwise; costs are unitless weights, per control step.
+    ``make_pilot("expert", config)`` flies these defaults on the dynamic tier (they are not a
+    section of :class:`PilotsConfig`, whose record the static tier's datasets keep byte for byte).
+    """
+
+    samples: int = 48  # K candidate sequences per replan (the warm start and the fan included)
+    horizon: int = 30  # control steps per rollout (1.2 s)
+    stride: int = 2  # control steps per rollout step: the plan holds each acceleration this long
+    replan_every: int = 8  # control steps between replans while the path ahead is clear ...
+    replan_near: int = 2  # ... and while the best candidate passes within ``margin`` of debris
+    knot_every: int = 5  # control steps between the knots of a random perturbation
+    sample_std: float = 1.5  # m/s^2, standard deviation of a knot's perturbation
+    max_accel: float = 3.0  # m/s^2, cap on a commanded acceleration
+    temperature: float = 5.0  # lambda of the softmin weights, in cost units
+    cruise: float = 2.0  # m/s; the initial speed if that is faster
+    max_speed: float = 3.5  # m/s, faster is penalised
+    look_bias: float = 0.3  # m/s of goal direction added to the velocity the camera looks along
+    # Cost weights.
+    goal: float = 1.0  # per metre to the goal, per step until it is reached
+    terminal: float = 10.0  # per metre to the goal at the horizon's end, when not reached
+    collision: float = 1.0e4  # once, for a rollout that touches debris (earlier costs more)
+    clearance: float = 200.0  # per step, times (margin - clearance)^2 within the margin
+    margin: float = 0.4  # m of hull clearance below which the clearance cost applies
+    contact: float = 0.03  # m of hull clearance that counts as a collision in a rollout
+    effort: float = 0.1  # per unit of thrust (sum over thrusters) per step
+    attitude: float = 1.0  # per step, times 1 - cos(angle between camera axis and velocity)
+    speed: float = 10.0  # per step, times (speed - max_speed)^2 above max_speed
+    noise_std: float = 0.02  # normalised thrust, i.i.d. per step and thruster, as the static expert's
+
+    def __post_init__(self) -> None:
+        for name in ("horizon", "stride", "replan_every", "replan_near", "knot_every"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"dynamic_expert.{name} must be >= 1, got {getattr(self, name)}")
+        if self.samples < 2:
+            raise ValueError(f"dynamic_expert.samples must be >= 2, got {self.samples}")
+        for name in ("sample_std", "max_accel", "temperature", "cruise", "max_speed"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"dynamic_expert.{name} must be > 0, got {getattr(self, name)}")
+        for name in ("goal", "terminal", "collision", "clearance", "margin", "contact", "effort", "attitude"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"dynamic_expert.{name} must be >= 0, got {getattr(self, name)}")
+        if self.speed < 0 or self.noise_std < 0 or self.look_bias < 0:
+            raise ValueError("dynamic_expert.speed, noise_std and look_bias must be >= 0")
