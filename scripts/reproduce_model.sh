@@ -25,6 +25,10 @@
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
 # is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each:
 # both cores busy.
+# BATCH=N flies each eval closed-loop grid N episodes at a time in lockstep (--batch N), and
+# EXECUTOR=ray spreads its chunks over the Ray cluster that RAY_ADDRESS names (docs/planner.md);
+# without them the grids fly as reported (one episode at a time, here). A grid flown with either is
+# another command, so it is flown again.
 set -euo pipefail
 OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}")
 N=${2:-20}
@@ -43,6 +47,9 @@ DPS="$OUT/dp-state"  # the policy without the camera (preset cpu-state), a secon
 # one-obstacle flights on validation seed 1 (20 episodes per point, the only flights of the extension)
 # stayed at 17-18 of 20 (docs/results.md#the-diffusion-policy).
 DP_STEPS=${DP_STEPS:-}
+AT_SCALE=()  # eval closed-loop's --batch and --executor, only when asked for (the recorded commands stay as they were)
+[ "${BATCH:-1}" = 1 ] || AT_SCALE+=(--batch "$BATCH")
+[ "${EXECUTOR:-local}" = local ] || AT_SCALE+=(--executor "$EXECUTOR")
 use_grid() {  # use_grid SEED DIR: the grid the flights below fly, and the folder of their JSON
   GRID=(--obstacles 1,3,5 --speeds 1,2 --episodes "$N" --seed "$1") GDIR=$2
   mkdir -p "$GDIR"
@@ -96,7 +103,7 @@ fly_run() {  # fly_run RUN NAME PILOT [OPTIONS...]: a planning pilot on RUN -> g
   local run=$1 name=$2 pilot=$3
   shift 3
   fly "$GDIR/$name.json" "$BIN/orbitmodel" eval closed-loop "$run" --pilot "$pilot" --preset cpu "${GRID[@]}" \
-    "${FLIGHT[@]}" "$@"
+    "${FLIGHT[@]}" "${AT_SCALE[@]}" "$@"
 }
 fly_model() { fly_run "$WMS" "$@"; }  # fly_model NAME PILOT [OPTIONS...]: on the planner's run
 fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.json
@@ -108,11 +115,12 @@ fly_data() {  # fly_data PILOT [OPTIONS...]: an orbitdata pilot -> grid/PILOT.js
 # trailing spacing, the camera through the dataset's JPEG codec, chosen on validation seeds
 # (docs/results/validation/diffusion/). Its camera-less variant was reported with the reference's sampler.
 fly_policy() {  # the Diffusion Policy run, flown by eval closed-loop like the planner -> grid/diffusion.json
-  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" --preset cpu "${GRID[@]}" "${FLIGHT[@]}"
+  fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DP" --preset cpu "${GRID[@]}" "${FLIGHT[@]}" \
+    "${AT_SCALE[@]}"
 }
 fly_policy_state() {  # the policy without the camera -> grid/diffusion-state.json
   fly "$GDIR/diffusion-state.json" "$BIN/orbitmodel" eval closed-loop "$DPS" --preset reference "${GRID[@]}" \
-    "${FLIGHT[@]}"
+    "${FLIGHT[@]}" "${AT_SCALE[@]}"
 }
 train_wm() {  # train_wm RUN PRESET [OPTIONS...]: Stage I, resuming a cut run
   local run=$1 preset=$2 resume=()

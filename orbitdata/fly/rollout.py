@@ -3,7 +3,8 @@
 Both ``orbitdata fly`` (evaluation grid) and ``orbitdata generate`` (the dataset) use this
 loop, so the data and the success tables come from the same code. The pilot gets the
 :class:`~orbitdata.fly.pilot.Task` and each observation; only a privileged pilot also gets the
-scenario (the true obstacles).
+scenario (the true obstacles). :class:`Flight` is the loop a frame at a time, for callers that
+step several episodes together (``orbitmodel``'s lockstep flights).
 """
 
 from __future__ import annotations
@@ -64,6 +65,98 @@ def pilot_view(obs: dict, pilot, image_quality: int | None = None) -> dict:
     return seen
 
 
+class Flight:
+    """One episode in flight, a frame at a time: constructing it resets ``env`` with ``seed`` (or
+    the given scenario) and the pilot with the task, and records frame 0; :meth:`step` executes
+    one action and records the frame it leads to; :meth:`result` is the record once :attr:`done`.
+
+    :func:`fly_episode` is this loop with the pilot's own ``act``; ``orbitmodel``'s lockstep
+    flights (``orbitmodel.evaluate.lockstep``) step several flights with one batched call.
+    ``image_quality``: hand the pilot its camera through the dataset's JPEG codec (see
+    :func:`pilot_view`); the recorded frames stay the raw renders.
+    """
+
+    def __init__(
+        self,
+        env: CubeSatEnv,
+        pilot: Pilot,
+        seed: int,
+        n_obstacles: int | None = None,
+        speed: float | None = None,
+        scenario: Scenario | None = None,
+        frame_sink: FrameSink | None = None,
+        image_quality: int | None = None,
+    ):
+        options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
+        if pilot.needs_images and not env.sim.render:
+            raise ValueError(
+                f"pilot {pilot.name!r} needs camera images, but the env does not render: use SimConfig(render=True)"
+            )
+        self.env, self.pilot, self.seed = env, pilot, seed
+        self.frame_sink, self.image_quality = frame_sink, image_quality
+        self.obs, self.info = env.reset(seed=seed, options=options)
+        scn = env.scenario
+        task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)
+        if pilot.privileged:
+            pilot.reset(task, scenario=scn)
+        else:
+            pilot.reset(task)
+        max_frames = env.sim.max_steps
+        self.states = np.zeros((max_frames, STATE_DIM), np.float32)
+        self.actions = np.zeros((max_frames, ACTION_DIM), np.float32)
+        self.collision = np.zeros(max_frames, bool)
+        self.success = np.zeros(max_frames, bool)
+        self.clearance = np.zeros(max_frames, np.float32)
+        self.depth_low = np.zeros((max_frames, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE), np.float32) if env.sim.render else None
+        self.t = 0
+        self._record()
+
+    @property
+    def done(self) -> bool:
+        """The episode has ended (its outcome is known)."""
+        return self.info["outcome"] is not None
+
+    def view(self) -> dict:
+        """What the pilot is handed of the current observation (:func:`pilot_view`)."""
+        return pilot_view(self.obs, self.pilot, self.image_quality)
+
+    def step(self, action) -> None:
+        """Execute ``action`` (8,) thrusts from the current frame; record the next frame."""
+        action = np.asarray(action, dtype=np.float32)
+        self.actions[self.t] = action
+        self.obs, _, _, _, self.info = self.env.step(action.astype(np.float64))
+        self.t += 1
+        self._record()
+
+    def _record(self) -> None:
+        t, obs, info = self.t, self.obs, self.info
+        self.states[t] = obs["state"]
+        self.clearance[t] = info["min_clearance"]
+        self.collision[t] = info["collision"]
+        self.success[t] = info["success"]
+        if self.depth_low is not None:
+            self.depth_low[t] = obs["depth_low"]
+        if self.frame_sink is not None and "image" in obs:
+            self.frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
+
+    def result(self) -> EpisodeResult:
+        """The episode's record (frames 0..t)."""
+        length = self.t + 1
+        return EpisodeResult(
+            scenario=self.env.scenario,
+            pilot=self.pilot.name,
+            seed=self.seed,
+            outcome=self.info["outcome"],
+            states=self.states[:length],
+            actions=self.actions[:length],
+            collision=self.collision[:length],
+            success=self.success[:length],
+            min_clearance=self.clearance[:length],
+            depth_low=None if self.depth_low is None else self.depth_low[:length],
+            pilot_info=self.pilot.metadata(),
+        )
+
+
 def fly_episode(
     env: CubeSatEnv,
     pilot: Pilot,
@@ -77,52 +170,7 @@ def fly_episode(
     """Reset ``env`` with ``seed`` (or the given scenario), fly ``pilot`` until the episode ends.
     ``image_quality``: hand the pilot its camera through the dataset's JPEG codec (see
     :func:`pilot_view`); the recorded frames stay the raw renders."""
-    options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
-    if pilot.needs_images and not env.sim.render:
-        raise ValueError(
-            f"pilot {pilot.name!r} needs camera images, but the env does not render: use SimConfig(render=True)"
-        )
-    obs, info = env.reset(seed=seed, options=options)
-    scn = env.scenario
-    task = Task(goal=scn.goal, goal_radius=scn.goal_radius, initial_velocity=scn.initial_velocity, seed=seed)
-    if pilot.privileged:
-        pilot.reset(task, scenario=scn)
-    else:
-        pilot.reset(task)
-    max_frames = env.sim.max_steps
-    states = np.zeros((max_frames, STATE_DIM), np.float32)
-    actions = np.zeros((max_frames, ACTION_DIM), np.float32)
-    collision = np.zeros(max_frames, bool)
-    success = np.zeros(max_frames, bool)
-    clearance = np.zeros(max_frames, np.float32)
-    depth_low = np.zeros((max_frames, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE), np.float32) if env.sim.render else None
-    t = 0
-    while True:
-        states[t] = obs["state"]
-        clearance[t] = info["min_clearance"]
-        collision[t] = info["collision"]
-        success[t] = info["success"]
-        if depth_low is not None:
-            depth_low[t] = obs["depth_low"]
-        if frame_sink is not None and "image" in obs:
-            frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
-        if info["outcome"] is not None:
-            break
-        action = np.asarray(pilot.act(pilot_view(obs, pilot, image_quality)), dtype=np.float32)
-        actions[t] = action
-        obs, _, _, _, info = env.step(action.astype(np.float64))
-        t += 1
-    length = t + 1
-    return EpisodeResult(
-        scenario=env.scenario,
-        pilot=pilot.name,
-        seed=seed,
-        outcome=info["outcome"],
-        states=states[:length],
-        actions=actions[:length],
-        collision=collision[:length],
-        success=success[:length],
-        min_clearance=clearance[:length],
-        depth_low=None if depth_low is None else depth_low[:length],
-        pilot_info=pilot.metadata(),
-    )
+    flight = Flight(env, pilot, seed, n_obstacles, speed, scenario, frame_sink, image_quality)
+    while not flight.done:
+        flight.step(pilot.act(flight.view()))
+    return flight.result()

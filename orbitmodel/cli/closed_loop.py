@@ -13,7 +13,7 @@ from orbitmodel.cli.errors import fail, friendly
 from orbitmodel.plan.variant import Variant
 
 PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
-VideoFormat = Enum("VideoFormat", {"mp4": "mp4", "gif": "gif"}, type=str)
+Executor = Enum("Executor", {"local": "local", "ray": "ray"}, type=str)
 
 
 def register(app: typer.Typer) -> None:
@@ -74,8 +74,16 @@ def closed_loop(
     json_out: Annotated[Optional[Path], typer.Option("--json", help="write the table and every episode here")] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
-    video: Annotated[Optional[Path], typer.Option(help="write a video of each episode to this folder")] = None,
-    video_format: Annotated[VideoFormat, typer.Option(help="mp4 or gif")] = "mp4",
+    batch: Annotated[
+        int, typer.Option(min=1, help="episodes flown in lockstep, one batched model call per control step")
+    ] = 1,
+    executor: Annotated[
+        Executor,
+        typer.Option(
+            help="local, or ray: the grid's chunks as Ray tasks (the cluster RAY_ADDRESS names, else a local one)"
+        ),
+    ] = "local",
+    video: Annotated[Optional[Path], typer.Option(help="write an mp4 video of each episode to this folder")] = None,
     config: Annotated[
         Optional[Path], typer.Option(help="TOML config (scenario/sim settings), as orbitdata fly")
     ] = None,
@@ -84,6 +92,8 @@ def closed_loop(
 
     Seeds are orbitdata fly's, so `orbitdata fly --pilot expert --json E.json` flies the same
     episodes; `orbitmodel eval figure6 E.json P.json ... --out fig6.png` plots them together.
+    `--batch 8` flies 8 episodes at a time, one model call for all of them per control step
+    (docs/planner.md); `--executor ray` spreads the grid over a Ray cluster, the same episodes.
     """
     import torch
 
@@ -106,7 +116,8 @@ def closed_loop(
         config=GenerationConfig.from_toml(config) if config else GenerationConfig(),
         max_steps=max_steps,
         video_dir=video,
-        video_format=f".{video_format.value}",
+        batch=batch,
+        executor=executor.value,
     )
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     report = loop.report(_fly_with_progress(loop, json_out))
@@ -178,6 +189,8 @@ def print_table(report: dict, episodes: int) -> None:
         line += f"; planning per control step {step['median']:.1f} ms median, {step['p95']:.1f} ms p95" + (
             f" (per replan {replan['median']:.1f} / {replan['p95']:.1f} ms)" if replan["median"] is not None else ""
         )
+        if report.get("batch", 1) > 1:
+            line += f", each step for up to {report['batch']} episodes in lockstep"
     if report["time_share"]:
         line += "; time: " + ", ".join(f"{k} {100 * v:.0f} %" for k, v in report["time_share"].items())
     console.print(line)

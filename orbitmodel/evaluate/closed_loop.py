@@ -6,7 +6,8 @@ the planner, its oracles, the Diffusion Policy, the expert and the risky pilot f
 same episodes. None of those seeds generated a training episode: :func:`check_unseen_seeds`
 checks it against the run's dataset before flying. A run folder is flown as what it holds: a
 Stage I run by the planning pilot of ``variant``, a policy run (``orbitmodel train-policy``) by
-its own pilot.
+its own pilot. ``batch`` episodes fly in lockstep (``evaluate.lockstep``), chunk by chunk here or
+as Ray tasks (``evaluate.executors``).
 """
 
 from __future__ import annotations
@@ -21,10 +22,11 @@ import torch
 
 from orbitdata.config import GenerationConfig
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
-from orbitdata.fly.rollout import fly_episode
 from orbitdata.seeding import episode_seed, grid_seed
 from orbitdata.sim.env import CubeSatEnv
 from orbitmodel.baselines.diffusion.sampling import PolicySampling
+from orbitmodel.evaluate.executors import EXECUTORS, run_local, run_ray
+from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode, GridEpisode, chunks, fly_lockstep
 from orbitmodel.kinematics import FUEL, P
 from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config
 from orbitmodel.plan.factory import build_pilot, camera_for_run
@@ -51,6 +53,10 @@ class ClosedLoopRequest:
         config: scenario and simulator settings (the camera is set to the run's).
         max_steps: frames per episode at most (None: the simulator's 300).
         video_dir, video_format: one video per episode (".mp4" or ".gif").
+        batch: episodes flown in lockstep, one batched pilot call per control step
+            (``evaluate.lockstep``; 1: one at a time, exactly the unbatched flight).
+        executor: "local" (this process) or "ray": the grid's chunks as Ray tasks
+            (``evaluate.executors``), the same episodes as a local flight with the same batch.
     """
 
     variant: Variant = Variant.PLANNER
@@ -65,6 +71,8 @@ class ClosedLoopRequest:
     max_steps: int | None = None
     video_dir: Path | None = None
     video_format: str = ".mp4"
+    batch: int = 1
+    executor: str = "local"
 
 
 def pilot_settings(run: str | Path | None, preset: str | None = None, **options) -> tuple[PilotSettings, str]:
@@ -97,10 +105,15 @@ class ClosedLoopResult:
     timings: dict[str, float]  # seconds per phase, summed
 
 
-def grid_seeds(obstacles, speeds, episodes: int, seed: int) -> list[tuple[int, float, int, int]]:
+def grid_seeds(obstacles, speeds, episodes: int, seed: int) -> list[GridEpisode]:
     """(obstacles, speed, episode, episode seed) of every grid episode, setting by setting
     (:meth:`ClosedLoop.fly` flies them round-robin: episode k of every setting, then k + 1)."""
-    return [(n, float(v), k, grid_seed(seed, n, v, k)) for n in obstacles for v in speeds for k in range(episodes)]
+    return [
+        GridEpisode(n, float(v), k, grid_seed(seed, n, v, k))
+        for n in obstacles
+        for v in speeds
+        for k in range(episodes)
+    ]
 
 
 def dataset_seeds(root_seed: int, episodes: int) -> set[int]:
@@ -187,8 +200,17 @@ class ClosedLoop:
             raise ValueError(f"video format {req.video_format!r}: use .mp4 or .gif")
         if req.max_steps is not None and req.max_steps < 2:
             raise ValueError(f"max_steps={req.max_steps}: an episode needs at least 2 frames")
+        if req.batch < 1:
+            raise ValueError(f"batch={req.batch}: fly 1 or more episodes at a time")
+        if req.executor not in EXECUTORS:
+            raise ValueError(f"executor {req.executor!r}: use {' or '.join(EXECUTORS)}")
+        if req.executor == "ray" and req.video_dir is not None:
+            raise ValueError("videos are written where the episodes fly: fly --video with the local executor")
         self.req = req
         self.seeds = grid_seeds(req.obstacles, req.speeds, req.episodes, req.seed)
+        # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
+        # early has covered every setting alike. Each episode's seed is fixed by (n, v, k).
+        self.order = sorted(self.seeds, key=lambda cell: cell.episode)
         run = None if req.run is None else resolve_run(req.run)  # a folder, or a Hub repo id downloaded once
         if run is not None:
             meta = run_dataset(run)
@@ -210,43 +232,88 @@ class ClosedLoop:
             **report,
             "pilot_settings": None if planning else self.pilot.metadata(),
             "threads": torch.get_num_threads(),
+            "batch": self.req.batch,
         }
 
     def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
-        req, pilot = self.req, self.pilot
-        env = CubeSatEnv(self.sim, req.config.scenario)
+        """Fly every grid episode, ``req.batch`` at a time, chunk by chunk (:func:`lockstep.chunks`)
+        here or on Ray; ``on_episode(cell, record)`` as each episode lands (on Ray, as its chunk does)."""
+        req = self.req
         cells = {
             (n, float(v)): CellResult(obstacles=n, speed=float(v), episodes=req.episodes)
             for n in req.obstacles
             for v in req.speeds
         }
-        out = ClosedLoopResult(list(cells.values()), [], [], [], {})
-        self.timings.clear()
-        # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
-        # early has covered every setting alike. Each episode's seed is fixed by (n, v, k).
-        order = sorted(self.seeds, key=lambda cell: cell[2])
-        try:
-            for n, v, k, seed in order:
-                frames: list[np.ndarray] = []
-                sink = (lambda t, rgb, *_: frames.append(rgb)) if req.video_dir is not None else None
-                result = fly_episode(env, pilot, seed, n, v, frame_sink=sink, image_quality=self.image_quality)
-                cell = cells[(n, v)]
-                cell.add(result.outcome)
-                record = episode_record(n, v, k, seed, result)
-                out.episodes.append(record)
-                out.step_ms += [1e3 * s for s in getattr(pilot, "step_seconds", [])]
-                out.replan_ms += [1e3 * s for s in getattr(pilot, "replan_seconds", [])]
-                if req.video_dir is not None:
-                    from orbitmodel.evaluate.video import write_episode_video
+        flown: list[FlownEpisode] = []
+        timings: dict[str, float] = {}
 
-                    name = f"{self.name}-obst{n}-v{v:g}-ep{k:03d}-{result.outcome}{req.video_format}"
-                    write_episode_video(Path(req.video_dir) / name, frames, result, getattr(pilot, "replans", []))
-                if on_episode:
-                    on_episode(cell, record)
-        finally:
-            env.close()
-        out.timings = self.timings.snapshot()
-        return out
+        def land(entry: FlownEpisode) -> None:
+            cell = cells[(entry.record["obstacles"], entry.record["speed"])]
+            cell.add(entry.record["outcome"])
+            flown.append(entry)
+            if on_episode:
+                on_episode(cell, entry.record)
+
+        parts = chunks(len(self.order), req.batch)
+        if req.executor == "ray":
+            threads = torch.get_num_threads()
+            done = run_ray(fly_chunk_task, [(req, part, threads) for part in parts], cpus=threads)
+        else:
+            done = run_local(lambda part: self.fly_chunk(part, land), [(part,) for part in parts])
+        for chunk in done:
+            if req.executor == "ray":
+                for entry in chunk.episodes:
+                    land(entry)
+            for phase, seconds in chunk.timings.items():
+                timings[phase] = timings.get(phase, 0.0) + seconds
+        flown.sort(key=lambda entry: entry.index)  # grid order, however the chunks and batches landed
+        return ClosedLoopResult(
+            list(cells.values()),
+            [e.record for e in flown],
+            [ms for e in flown for ms in e.step_ms],
+            [ms for e in flown for ms in e.replan_ms],
+            timings,
+        )
+
+    def fly_chunk(self, part: range, on_landed: Callable[[FlownEpisode], None] | None = None) -> ChunkResult:
+        """Fly the episodes ``part`` of the flight order in lockstep, ``req.batch`` at a time."""
+        req = self.req
+        self.timings.clear()
+        flown: list[FlownEpisode] = []
+
+        def landed(i: int, result, pilot, frames) -> None:
+            n, v, k, seed = self.order[part[i]]
+            entry = FlownEpisode(
+                part[i],
+                episode_record(n, v, k, seed, result),
+                [1e3 * s for s in getattr(pilot, "step_seconds", [])],
+                [1e3 * s for s in getattr(pilot, "replan_seconds", [])],
+            )
+            flown.append(entry)
+            if frames is not None:
+                from orbitmodel.evaluate.video import write_episode_video
+
+                name = f"{self.name}-obst{n}-v{v:g}-ep{k:03d}-{result.outcome}{req.video_format}"
+                write_episode_video(Path(req.video_dir) / name, frames, result, getattr(pilot, "replans", []))
+            if on_landed:
+                on_landed(entry)
+
+        fly_lockstep(
+            self.pilot,
+            lambda: CubeSatEnv(self.sim, req.config.scenario),
+            [self.order[j] for j in part],
+            req.batch,
+            landed,
+            self.image_quality,
+            keep_frames=req.video_dir is not None,
+        )
+        return ChunkResult(flown, self.timings.snapshot())
+
+
+def fly_chunk_task(req: ClosedLoopRequest, part: range, threads: int) -> ChunkResult:
+    """A Ray task: load ``req``'s pilot and fly the episodes ``part`` on ``threads`` torch threads."""
+    torch.set_num_threads(threads)
+    return ClosedLoop(req).fly_chunk(part)
 
 
 def fly_closed_loop(req: ClosedLoopRequest, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:

@@ -11,6 +11,7 @@
   scored by :mod:`~orbitmodel.plan.depth_bands`;
 * :mod:`~orbitmodel.plan.cost`: collision, progress, effort, spin, heading, speed;
 * :mod:`~orbitmodel.plan.pilot`: the pilots (``orbitdata.fly`` interface) and their variants;
+* :mod:`~orbitmodel.plan.batch`: one control step of several pilots at once (lockstep flights);
 * :mod:`~orbitmodel.plan.factory`: a pilot from a run folder.
 
 Names import on first use (MuJoCo and the model load only when needed).
@@ -35,6 +36,7 @@ _LAZY = {
     "refit_depth_head": "orbitmodel.plan.depth_refit",
     "PlannerPilot": "orbitmodel.plan.pilot",
     "OraclePilot": "orbitmodel.plan.pilot",
+    "plan_batch": "orbitmodel.plan.batch",
     "Variant": "orbitmodel.plan.variant",
     "build_pilot": "orbitmodel.plan.factory",
     "pilot_factory": "orbitmodel.plan.factory",

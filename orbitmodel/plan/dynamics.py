@@ -7,10 +7,15 @@ states after each action (frames t+1..t+H), in the dataset's convention (``orbit
   ``history`` encoded frames, and the physics probe reads states out of them (the planner);
 * :class:`RigidBodyDynamics`: the rigid-body model the simulator integrates, batched in torch
   (the oracles' "true dynamics").
+
+Each episode has its own instance (:meth:`fork`: the learned one keeps the episode's latents);
+``rollout_many`` imagines the candidates of several episodes in one call, as the lockstep
+flights do (``plan.batch``).
 """
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from typing import Protocol
 
@@ -22,6 +27,12 @@ from orbitdata.sim.thrusters import wrench_matrix
 from orbitmodel.kinematics import FUEL, ROT, P, V, W, matrix_to_rot6d, rot6d_to_matrix, so3_exp
 from orbitmodel.plan.frames import FrameEncoder
 from orbitmodel.plan.timing import Timings
+
+
+def joined(parts: list[torch.Tensor]) -> torch.Tensor:
+    """The parts concatenated along dim 0; one part is passed on as it is (a batch of one computes
+    exactly what the unbatched call did)."""
+    return parts[0] if len(parts) == 1 else torch.cat(parts)
 
 
 class Probe(Protocol):
@@ -68,6 +79,10 @@ class RigidBodyDynamics:
     def reset(self) -> None:
         pass
 
+    def fork(self) -> "RigidBodyDynamics":
+        """Stateless: every episode shares it."""
+        return self
+
     def observe(self, obs: dict, previous_action: np.ndarray | None) -> None:
         """Markov: the state alone is enough."""
 
@@ -76,6 +91,18 @@ class RigidBodyDynamics:
         """state0 (16,) or (K, 16), actions (K, H, 8) thrust in [0,1] -> states (K, H, 16)."""
         with self.timings("rollout"):
             return self._rollout(state0, actions)
+
+    @staticmethod
+    @torch.inference_mode()
+    def rollout_many(
+        members: list["RigidBodyDynamics"], state0s: list[torch.Tensor], actions: list[torch.Tensor]
+    ) -> list[torch.Tensor]:
+        """Every episode's candidates in one call: state0s N x (16,), actions N x (K, H, 8) -> N x (K, H, 16)."""
+        lead = members[0]
+        with lead.timings("rollout"):
+            start = joined([s.float().expand(len(a), -1) for s, a in zip(state0s, actions)])  # (N K, 16)
+            states = lead._rollout(start, joined(actions))  # (N K, H, 16)
+        return list(states.split([len(a) for a in actions]))
 
     def _rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         # Everything but the attitude chain is a cumulative sum, so it runs as a few batched
@@ -159,6 +186,12 @@ class LearnedDynamics:
         self._z: deque[torch.Tensor] = deque(maxlen=span + 1)  # (D,) per observed frame
         self._actions: deque[torch.Tensor] = deque(maxlen=max(span, 1))  # (8,) each, between frames
 
+    def fork(self) -> "LearnedDynamics":
+        """The same model, probe and settings with an episode's context of its own (empty)."""
+        twin = copy.copy(self)
+        twin.reset()
+        return twin
+
     @torch.inference_mode()
     def observe(self, obs: dict, previous_action: np.ndarray | None) -> None:
         """Encode the new frame; ``previous_action`` led to it from the last observed frame."""
@@ -166,6 +199,10 @@ class LearnedDynamics:
             cls, _ = self.frames(obs["image"])  # (1, width)
             state = torch.as_tensor(obs["state"], dtype=torch.float32)[None]  # (1, 16)
             z = self.model.latent_from_cls(cls, state)[0]  # (D,)
+        self.push(z, previous_action)
+
+    def push(self, z: torch.Tensor, previous_action: np.ndarray | None) -> None:
+        """Take the new frame's latent z (D,), encoded already (``plan.batch`` encodes N frames at once)."""
         if previous_action is not None and len(self._z):
             self._actions.append(torch.as_tensor(previous_action, dtype=torch.float32))
         elif len(self._z):  # a gap in the action record: the old context no longer leads here
@@ -185,25 +222,51 @@ class LearnedDynamics:
         assert len(taken) == (m - 1) * s, "one action between each pair of observed frames"
         return z, torch.stack(taken).reshape(m - 1, s * taken[0].shape[-1])
 
-    @torch.inference_mode()
     def rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """state0 (16,) observed at the newest frame, actions (K, H, 8) -> states (K, H, 16)."""
-        if not self._z:
-            raise RuntimeError("observe() a frame before rollout()")
-        K, H, _ = actions.shape
-        s = self.step
-        if H % s:
-            raise ValueError(
-                f"a plan of {H} frames does not split into the world model's steps of {s} frames; "
-                f"give a horizon that is a multiple of {s}"
-            )
-        with self.timings("rollout"):
-            z, past = self.context()
-            z_ctx = z[None].expand(K, -1, -1)  # (K, m, D)
-            planned = actions.float().reshape(K, H // s, s * actions.shape[-1])  # (K, H / s, 8 s)
-            if past is not None:
-                planned = torch.cat([past[None].expand(K, -1, -1), planned], 1)  # (K, m-1+H/s, 8 s)
-            z_future = self.model.rollout(z_ctx, planned, self.history)  # (K, H / s, D)
-        with self.timings("probe"):
-            start = state0.float().expand(K, -1)
-            return self.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -(H // s) :])  # (K, H, 16)
+        return self.rollout_many([self], [state0], [actions])[0]
+
+    @staticmethod
+    @torch.inference_mode()
+    def rollout_many(
+        members: list["LearnedDynamics"], state0s: list[torch.Tensor], actions: list[torch.Tensor]
+    ) -> list[torch.Tensor]:
+        """Several episodes' candidates, one world-model call and one probe call for all of them:
+        ``members`` the episodes' dynamics (forks of one), state0s N x (16,), actions N x (K, H, 8)
+        -> N x (K, H, 16). Episodes whose context holds as many latents share a call (an episode's
+        first frames have fewer)."""
+        lead = members[0]
+        s = lead.step
+        for d, a in zip(members, actions):
+            if not d._z:
+                raise RuntimeError("observe() a frame before rollout()")
+            if a.shape[1] % s:
+                raise ValueError(
+                    f"a plan of {a.shape[1]} frames does not split into the world model's steps of {s} frames; "
+                    f"give a horizon that is a multiple of {s}"
+                )
+        contexts = [d.context() for d in members]
+        groups: dict[int, list[int]] = {}
+        for i, (z, _) in enumerate(contexts):
+            groups.setdefault(len(z), []).append(i)
+        out: list[torch.Tensor | None] = [None] * len(members)
+        for rows in groups.values():
+            sizes = [len(actions[i]) for i in rows]
+            steps = actions[rows[0]].shape[1] // s
+            with lead.timings("rollout"):
+                z_ctx, planned = [], []
+                for i, K in zip(rows, sizes):
+                    z, past = contexts[i]
+                    z_ctx.append(z[None].expand(K, -1, -1))  # (K, m, D)
+                    plan = actions[i].float().reshape(K, steps, s * actions[i].shape[-1])  # (K, H / s, 8 s)
+                    if past is not None:
+                        plan = torch.cat([past[None].expand(K, -1, -1), plan], 1)  # (K, m-1+H/s, 8 s)
+                    planned.append(plan)
+                z_ctx, planned = joined(z_ctx), joined(planned)  # (G K, m, D), (G K, m-1+H/s, 8 s)
+                z_future = lead.model.rollout(z_ctx, planned, lead.history)  # (G K, H / s, D)
+            with lead.timings("probe"):
+                start = joined([state0s[i].float().expand(K, -1) for i, K in zip(rows, sizes)])  # (G K, 16)
+                states = lead.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -steps:])  # (G K, H, 16)
+            for i, part in zip(rows, states.split(sizes)):
+                out[i] = part
+        return out

@@ -10,42 +10,18 @@ import dataclasses
 from pathlib import Path
 
 import numpy as np
-import torch
 
 from orbitdata.sim.config import SimConfig
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import PlannerConfig, planner_config
 from orbitmodel.plan.depth_refit import refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
-from orbitmodel.plan.frames import FrameEncoder
+from orbitmodel.plan.frames import FrameEncoder, PredictedDepth
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.probe import PhysicsProbe
 from orbitmodel.runs import RunError, resolve_run
-
-
-class PredictedDepth:
-    """A depth head on the current frame: observation -> (16, 16) z-depth, metres.
-
-    ``head``: the refitted head (``orbitmodel depth``); None for the one trained in Stage I.
-    ``frames``: the encoder pass shared with the learned dynamics (``plan.frames``): the frame's
-    ViT pass is then timed under "encode", where the dynamics ran it first, and "depth-head" is
-    the head alone.
-    """
-
-    def __init__(self, model, timings: Timings | None = None, head=None, frames: FrameEncoder | None = None):
-        self.model = model.eval()
-        self.timings = timings or Timings()
-        self.head = head
-        self.frames = frames or FrameEncoder(self.model)
-        self.name = "stage1" if head is None else "refit"
-
-    @torch.inference_mode()
-    def __call__(self, obs: dict) -> np.ndarray:
-        with self.timings("depth-head"):
-            _, patches = self.frames(obs["image"])  # (1, P, width)
-            return self.model.depth_from_patches(patches, self.head)[0].numpy()  # (16, 16) metres
 
 
 def sensor_depth(obs: dict) -> np.ndarray:

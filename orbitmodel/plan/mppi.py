@@ -136,15 +136,26 @@ class MPPI:
         """Run ``iterations`` sample-and-reweight rounds on the nominal and return the result."""
         result = None
         for _ in range(self.config.iterations):
-            candidates = (self.nominal[None] + self.sample_noise(generator)).clamp(self.low, self.high)  # (K, H, A)
-            costs = cost(candidates).float()  # (K,)
-            if costs.shape != (len(candidates),):
-                raise ValueError(f"the cost returned shape {tuple(costs.shape)}; expected ({len(candidates)},)")
-            # A non-finite cost (a diverged model) gets no weight; if all are, U stays the plain mean.
-            finite = torch.isfinite(costs)
-            ranked = torch.where(finite, costs, torch.inf)  # (K,)
-            logits = -(ranked - ranked.min()) / self.config.temperature if finite.any() else torch.zeros_like(costs)
-            weights = torch.softmax(logits, 0)  # (K,)
-            self.nominal = (weights[:, None, None] * candidates).sum(0)  # (H, A) inside the box
-            result = PlanResult(self.nominal, candidates, costs, weights, int(ranked.argmin()))
+            candidates = self.propose(generator)
+            result = self.update(candidates, cost(candidates))
         return result
+
+    def propose(self, generator: torch.Generator) -> torch.Tensor:
+        """(K, H, A) candidates of one round: the nominal perturbed by draws of ``generator``, clipped."""
+        return (self.nominal[None] + self.sample_noise(generator)).clamp(self.low, self.high)  # (K, H, A)
+
+    @torch.inference_mode()
+    def update(self, candidates: torch.Tensor, costs: torch.Tensor) -> PlanResult:
+        """Move the nominal to the softmin-weighted mean of ``candidates`` (K, H, A) by their ``costs`` (K,).
+        :meth:`optimize` is propose, cost, update; the lockstep flights cost many episodes' candidates
+        in one call between the two (``plan.batch``)."""
+        costs = costs.float()  # (K,)
+        if costs.shape != (len(candidates),):
+            raise ValueError(f"the cost returned shape {tuple(costs.shape)}; expected ({len(candidates)},)")
+        # A non-finite cost (a diverged model) gets no weight; if all are, U stays the plain mean.
+        finite = torch.isfinite(costs)
+        ranked = torch.where(finite, costs, torch.inf)  # (K,)
+        logits = -(ranked - ranked.min()) / self.config.temperature if finite.any() else torch.zeros_like(costs)
+        weights = torch.softmax(logits, 0)  # (K,)
+        self.nominal = (weights[:, None, None] * candidates).sum(0)  # (H, A) inside the box
+        return PlanResult(self.nominal, candidates, costs, weights, int(ranked.argmin()))

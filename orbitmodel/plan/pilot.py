@@ -17,12 +17,13 @@ oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 
 Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
 planner never sees the obstacle list. The classes are ``orbitdata.fly.Pilot`` subclasses, so
-``orbitdata fly --pilot planner --pilot-option run=RUN`` flies them too.
+``orbitdata fly --pilot planner --pilot-option run=RUN`` flies them too. Several episodes fly in
+lockstep with a :meth:`PlannerPilot.fork` each and :meth:`PlannerPilot.act_batch` (``plan.batch``).
 """
 
 from __future__ import annotations
 
-import time
+import copy
 from dataclasses import dataclass
 from typing import Callable
 
@@ -34,8 +35,8 @@ from orbitdata.seeding import rng
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitmodel.kinematics import P
+from orbitmodel.plan.batch import plan_batch
 from orbitmodel.plan.config import PlannerConfig
-from orbitmodel.plan.cost import trajectory_cost
 from orbitmodel.plan.mppi import MPPI
 from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, depth_to_points
 from orbitmodel.plan.timing import Timings
@@ -119,16 +120,24 @@ class PlannerPilot(Pilot):
 
     def act(self, obs: dict) -> np.ndarray:
         """(8,) thrusts in [0, 1]: replan (every ``replan_every`` steps), execute the first step."""
-        start = time.perf_counter()
-        self.dynamics.observe(obs, self._previous)
-        if self._step % self.config.replan_every == 0:
-            self._replan(obs)
-        action = self._safe(self.mppi.nominal[0].numpy())
-        self.mppi.shift()
-        self._previous = action
-        self._step += 1
-        self.step_seconds.append(time.perf_counter() - start)
-        return action
+        return plan_batch([self], [obs])[0]
+
+    @staticmethod
+    def act_batch(pilots: list["PlannerPilot"], observations: list[dict]) -> list[np.ndarray]:
+        """:meth:`act` for several episodes in lockstep, each flown by its own :meth:`fork`, with
+        one call per model for all of them (``plan.batch``)."""
+        return plan_batch(pilots, observations)
+
+    def fork(self) -> "PlannerPilot":
+        """A pilot for another episode flown beside this one: the same models, depth source,
+        settings and timings; its own MPPI nominal, point memory, latent history and generator."""
+        twin = copy.copy(self)
+        twin.mppi = MPPI(self.config.mppi, noise_basis=self.mppi.basis)
+        twin.memory = PointMemory(self.config.memory_frames)
+        twin.dynamics = self.dynamics.fork()
+        twin._true = None
+        twin._reset_episode(seed=0)
+        return twin
 
     def metadata(self) -> dict:
         """Per-episode facts: replans, effective samples, sanitised thrusts, latency."""
@@ -165,10 +174,11 @@ class PlannerPilot(Pilot):
         self.clipped_actions = 0
         self.replans: list[Replan] = []
 
-    def _obstacles(self, obs: dict):
+    def _obstacles(self, obs: dict, depth: np.ndarray | None):
+        """What to plan around: the true obstacles (oracles), else the memory of the points seen,
+        with ``depth`` (16, 16) metres, this frame's map, added."""
         if self._true is not None:
             return self._true
-        depth = self.depth(obs)  # (16, 16) metres; the depth head times itself
         with self.timings("points"):
             points, radii = depth_to_points(
                 depth, obs["state"], self.camera, self.config.max_range, self.config.footprint, self.config.support
@@ -178,26 +188,23 @@ class PlannerPilot(Pilot):
         self.cloud_sizes.append(len(cloud))
         return cloud
 
-    def _replan(self, obs: dict) -> None:
-        start = time.perf_counter()
-        field = self._obstacles(obs)
-        state0 = torch.as_tensor(obs["state"], dtype=torch.float32)
-        imagined: dict[str, torch.Tensor] = {}
-
-        def cost(actions: torch.Tensor) -> torch.Tensor:  # (K, H, 8) -> (K,)
-            states = self.dynamics.rollout(state0, actions)  # (K, H, 16)
-            with self.timings("cost"):
-                total, _ = trajectory_cost(states, actions, self.goal, self.goal_radius, field, self.config.cost)
-            imagined["states"] = states
-            return total
-
-        result = self.mppi.optimize(cost, self.generator)
+    def _planned(self, result, field, states: torch.Tensor, seconds: float) -> None:
+        """Keep what a replan found: its effective samples, its time, and with ``record`` the best
+        candidate's imagined path (``states`` (K, H, 16) of the last round) and the points."""
         self.effective_samples.append(result.effective_samples)
-        self.replan_seconds.append(time.perf_counter() - start)
+        self.replan_seconds.append(seconds)
         if self.config.record:
             points = getattr(field, "points", np.zeros((0, 3)))
-            path = imagined["states"][result.best, :, P].numpy().copy()
+            path = states[result.best, :, P].numpy().copy()
             self.replans.append(Replan(self._step, path, np.asarray(points).copy(), float(result.costs[result.best])))
+
+    def _execute(self) -> np.ndarray:
+        """The plan's first step, made safe; the plan moves on by one step."""
+        action = self._safe(self.mppi.nominal[0].numpy())
+        self.mppi.shift()
+        self._previous = action
+        self._step += 1
+        return action
 
     def _safe(self, action: np.ndarray) -> np.ndarray:
         """NaN / Inf -> 0 and out-of-range -> clipped, counted: nothing invalid reaches the simulator."""

@@ -389,7 +389,7 @@ class ChunkPolicy(torch.nn.Module):
         self.config, self.samples, self.noise_scales = PRESET.model, 0, []
         self.rows = rows  # the offset of each row of a batch (B,) or of each row and frame (B, H), when not 10 i
 
-    def sample_actions(self, images, states, goal, generator=None, use_ema=True, sampling=None):
+    def sample_actions(self, images, states, goal, generator=None, use_ema=True, sampling=None, noise=None):
         c = self.config
         self.noise_scales.append(sampling.noise_scale)
         chunk = torch.arange(c.horizon, dtype=torch.float32) - c.action_start + 100 * self.samples  # (H,)

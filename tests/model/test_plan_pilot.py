@@ -150,10 +150,14 @@ def test_nan_and_out_of_range_thrusts_never_reach_the_simulator():
     pilot = sensor_planner()
     pilot.reset(Task((5.0, 0, 0), 0.5, (0.0, 0, 0), 0))
 
-    def broken(cost, generator):  # a planner gone wrong: NaN and 1.5
-        pilot.mppi.nominal = torch.tensor([[float("nan"), 1.5, -0.2, 0.5, 0, 0, 0, 0]] * 5)
+    update = pilot.mppi.update
 
-    pilot._replan = lambda obs: broken(None, None)
+    def broken(candidates, costs):  # a planner gone wrong: NaN and 1.5
+        result = update(candidates, costs)
+        pilot.mppi.nominal = torch.tensor([[float("nan"), 1.5, -0.2, 0.5, 0, 0, 0, 0]] * 5)
+        return result
+
+    pilot.mppi.update = broken
     obs = {"state": AT_REST, "depth_low": np.full((16, 16), 50.1, np.float32)}
     action = pilot.act(obs)
     assert np.isfinite(action).all() and action.min() >= 0 and action.max() <= 1

@@ -22,6 +22,7 @@ This is the only module that knows the ``orbitdata.fly`` interface.
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from pathlib import Path
 
@@ -88,6 +89,33 @@ class DiffusionPilot(Pilot):
 
     def act(self, obs: dict) -> np.ndarray:
         """(8,) thrusts in [0, 1] from obs["image"] (S, S, 3) uint8 and obs["state"] (16,)."""
+        return self.act_batch([self], [obs])[0]
+
+    @staticmethod
+    @torch.no_grad()
+    def act_batch(pilots: list["DiffusionPilot"], observations: list[dict]) -> list[np.ndarray]:
+        """:meth:`act` for several episodes in lockstep, each flown by its own :meth:`fork`: the
+        chunks due at this step are sampled in one denoising pass, each episode's noise drawn
+        from its own generator."""
+        steps = [p._observe(obs) for p, obs in zip(pilots, observations)]
+        due = [i for i, (p, t) in enumerate(zip(pilots, steps)) if p._chunk_due(t)]
+        chunks = dict(zip(due, sample_chunks([pilots[i] for i in due]))) if due else {}
+        return [p._execute(t, chunks.get(i)) for i, (p, t) in enumerate(zip(pilots, steps))]
+
+    def fork(self) -> "DiffusionPilot":
+        """A pilot for another episode flown beside this one: the same policy and sampling, its
+        own observation history, chunks and generator."""
+        twin = copy.copy(self)
+        twin._goal = None
+        twin._history = deque(maxlen=self.policy.config.n_obs_steps)
+        twin._queue = deque()
+        twin._chunks = []
+        twin._t = 0
+        twin._generator = torch.Generator()
+        return twin
+
+    def _observe(self, obs: dict) -> int:
+        """Take the frame into the observation history; its step in the episode."""
         if self._goal is None:
             raise RuntimeError("call reset(task) before act(obs)")
         c = self.policy.config
@@ -105,29 +133,40 @@ class DiffusionPilot(Pilot):
             self._history.append(frame)
         self._history.append(frame)
         t, self._t = self._t, self._t + 1
+        return t
+
+    def _chunk_due(self, t: int) -> bool:
+        """Step t samples a new chunk: the queue ran out, or (ensembling) every ``action_steps``."""
+        return not self._queue if self.ensemble is None else t % self.action_steps == 0
+
+    def _execute(self, t: int, chunk: np.ndarray | None) -> np.ndarray:
+        """The action of step t, ``chunk`` (n, 8) the one sampled at it, if one was."""
         if self.ensemble is None:
-            if not self._queue:
-                self._queue.extend(self._sample()[: self.action_steps])
+            if chunk is not None:
+                self._queue.extend(chunk[: self.action_steps])
             return self._queue.popleft()
-        if t % self.action_steps == 0:
-            self._chunks.append((t, self._sample()))
+        if chunk is not None:
+            self._chunks.append((t, chunk))
         self._chunks = [(t0, a) for t0, a in self._chunks if t - t0 < len(a)]  # those that cover frame t
         votes = np.stack([a[t - t0] for t0, a in self._chunks])  # (n, 8), oldest first
         weights = np.exp(-self.ensemble * np.arange(len(votes)))
         return (weights @ votes / weights.sum()).astype(np.float32)
 
-    def _sample(self) -> np.ndarray:
-        """A chunk from the last observations: (n, 8) thrusts for the current frame on."""
-        n = self.sampling.draws
+    def _inputs(self) -> tuple[torch.Tensor | None, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """This episode's draws for a chunk: images (N, To, 3, S, S) or None, states (N, To, 16),
+        goal (N, 3) and their initial noise (N, H, 8), drawn from the episode's generator."""
+        n, c = self.sampling.draws, self.policy.config
         images = (
             torch.stack([f[0] for f in self._history])[None].expand(n, -1, -1, -1, -1)  # (N, To, 3, S, S)
-            if self.policy.config.images
+            if c.images
             else None
         )
         states = torch.stack([f[1] for f in self._history])[None].expand(n, -1, -1)  # (N, To, 16)
-        draws = self.policy.sample_actions(
-            images, states, self._goal.expand(n, -1), self._generator, self.use_ema, sampling=self.sampling
-        )  # (N, H, 8)
+        noise = self.sampling.noise_scale * torch.randn((n, c.horizon, c.action_dim), generator=self._generator)
+        return images, states, self._goal.expand(n, -1), noise
+
+    def _chunk(self, draws: torch.Tensor) -> np.ndarray:
+        """A chunk from this episode's draws (N, H, 8): (n, 8) thrusts for the current frame on."""
         c = self.policy.config
         if self.sampling.pick == "central":
             executed = draws[:, c.action_start : c.action_start + self.action_steps]
@@ -139,6 +178,27 @@ class DiffusionPilot(Pilot):
     def metadata(self) -> dict:
         """The flight preset's name and every sampling setting it flew with."""
         return {"preset": self.preset, **self.sampling.to_dict()}
+
+
+def sample_chunks(pilots: list[DiffusionPilot]) -> list[np.ndarray]:
+    """A chunk for each of ``pilots`` (forks of one) from its last observations, all of their
+    draws denoised together in one pass."""
+    inputs = [p._inputs() for p in pilots]
+    lead = pilots[0]
+
+    def cat(parts):  # one episode's tensors pass as they are: a batch of one samples as act always did
+        return parts[0] if len(parts) == 1 else torch.cat(parts)
+
+    images = None if inputs[0][0] is None else cat([i[0] for i in inputs])  # (sum N, To, 3, S, S)
+    draws = lead.policy.sample_actions(
+        images,
+        cat([i[1] for i in inputs]),  # (sum N, To, 16)
+        cat([i[2] for i in inputs]),  # (sum N, 3)
+        use_ema=lead.use_ema,
+        sampling=lead.sampling,
+        noise=cat([i[3] for i in inputs]),  # (sum N, H, 8)
+    )  # (sum N, H, 8)
+    return [p._chunk(d) for p, d in zip(pilots, draws.split([len(i[1]) for i in inputs]))]
 
 
 def load_policy_pilot(

@@ -232,6 +232,7 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         use_ema: bool = True,
         obstacles: torch.Tensor | None = None,
         sampling: PolicySampling | None = None,
+        noise: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """A sampled action sequence (B, H, 8), thrust in [0, 1], for frames t-1 .. t+H-2, from
         observations of frames t-To+1 .. t (see :meth:`condition`). Execute
@@ -241,7 +242,9 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         and spacing, and ``noise_scale``, which scales the initial noise that DDIM's deterministic
         reverse process starts from: 1 samples as trained; below 1 the samples gather towards the
         chunk that the zero noise gives (0: that one chunk for every draw). The generator
-        advances alike whatever the scale."""
+        advances alike whatever the scale. ``noise`` (B, H, 8): that initial noise, drawn and
+        scaled by the caller (the lockstep flights draw each episode's rows from its own
+        generator); DDIM's reverse process draws nothing more."""
         sampling = sampling or PolicySampling()
         sampler = self.sampler_for(sampling)
         net = self.ema if use_ema else self.net
@@ -250,7 +253,11 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         obstacles = obstacles.to(device).float() if obstacles is not None else None
         cond = self.condition(net, images, states.to(device).float(), goal.to(device).float(), obstacles)
         c = self.config
-        x = sampling.noise_scale * torch.randn((len(cond), c.horizon, c.action_dim), generator=generator).to(device)
+        if noise is None:
+            noise = sampling.noise_scale * torch.randn((len(cond), c.horizon, c.action_dim), generator=generator)
+        elif noise.shape != (len(cond), c.horizon, c.action_dim):
+            raise ValueError(f"noise of shape {tuple(noise.shape)}; expected {(len(cond), c.horizon, c.action_dim)}")
+        x = noise.to(device)
         x = denoise(sampler, lambda xk, k: net.unet(xk, k, cond), x, generator)
         return self.unnormalise_actions(x)
 

@@ -1,0 +1,176 @@
+"""Lockstep flights (``eval closed-loop --batch N``) and grids on Ray (``--executor ray``): a batch of
+one is the unbatched flight, a batch of N flies the same episodes, an episode that ends mid-batch
+keeps its own frames, and a Ray grid is the local grid."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from orbitdata.fly.rollout import fly_episode
+from orbitdata.sim.env import CubeSatEnv
+from orbitmodel.baselines.diffusion.config import get_policy_preset
+from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
+from orbitmodel.cli.app import app
+from orbitmodel.evaluate import lockstep
+from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, episode_record, pilot_settings
+from orbitmodel.evaluate.lockstep import fly_lockstep
+from orbitmodel.plan.config import planner_config
+from orbitmodel.plan.pilot import Variant
+from orbitmodel.runs import POLICY, stage_of
+
+torch.set_num_threads(1)
+runner = CliRunner()
+GRID = dict(obstacles=(1, 3), speeds=(1.0, 2.0), episodes=2, seed=7)
+SMALL = planner_config("cpu", samples=8, horizon=5)
+
+
+@pytest.fixture(scope="module")
+def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
+    """A copy of the tiny run with a real physics probe (two tiny epochs)."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.probe.train import ProbeRequest, train_probe
+
+    run = tmp_path_factory.mktemp("probed") / "tiny"
+    shutil.copytree(tiny_run, run)
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
+    return run
+
+
+@pytest.fixture(scope="module")
+def policy_run(tmp_path_factory):
+    """An untrained tiny Diffusion Policy as a run folder: the interface does not care."""
+    from test_diffusion_pilot import save_policy_run
+
+    torch.manual_seed(0)
+    policy = DiffusionPolicy(get_policy_preset("tiny").model).eval()
+    return save_policy_run(policy, tmp_path_factory.mktemp("dp") / "run").path
+
+
+def request(run, batch: int, **changes) -> ClosedLoopRequest:
+    """The test grid for ``run`` (a planner run flies SMALL, a policy run its cpu flight preset)."""
+    settings = SMALL if run is None or stage_of(run) != POLICY else pilot_settings(run, "cpu")[0]
+    return ClosedLoopRequest(run=run, settings=settings, preset="cpu", max_steps=25, batch=batch, **{**GRID, **changes})
+
+
+def without_latency(info: dict) -> dict:
+    return {k: v for k, v in info.items() if not k.endswith(("ms_median", "ms_p95"))}
+
+
+def records(req: ClosedLoopRequest) -> list[dict]:
+    """The grid's episode records, without the measured latencies."""
+    return [without_latency(e) for e in ClosedLoop(req).fly().episodes]
+
+
+def unbatched(loop: ClosedLoop) -> list:
+    """Today's flight: every grid episode in turn, fly_episode with the pilot's own act."""
+    env = CubeSatEnv(loop.sim, loop.req.config.scenario)
+    try:
+        return [
+            fly_episode(env, loop.pilot, seed, n, v, image_quality=loop.image_quality) for n, v, _, seed in loop.order
+        ]
+    finally:
+        env.close()
+
+
+def lockstep_results(loop: ClosedLoop, batch: int) -> list:
+    landed = {}
+    make_env = lambda: CubeSatEnv(loop.sim, loop.req.config.scenario)  # noqa: E731
+    fly_lockstep(loop.pilot, make_env, loop.order, batch, lambda i, r, *_: landed.update({i: r}), loop.image_quality)
+    return [landed[i] for i in range(len(loop.order))]
+
+
+def same_episode(a, b) -> bool:
+    arrays = ("states", "actions", "collision", "success", "min_clearance", "depth_low")
+    return a.outcome == b.outcome and all(np.array_equal(getattr(a, k), getattr(b, k)) for k in arrays)
+
+
+@pytest.mark.parametrize("pilot", ["planner", "diffusion"])
+def test_a_batch_of_one_is_exactly_the_unbatched_flight(pilot, probed_run, policy_run):
+    run = probed_run if pilot == "planner" else policy_run
+    loop = ClosedLoop(request(run, batch=1))
+    expected, got = unbatched(loop), lockstep_results(loop, 1)
+    assert all(same_episode(a, b) for a, b in zip(expected, got)) and len(got) == 8
+    assert [without_latency(r.pilot_info) for r in got] == [without_latency(r.pilot_info) for r in expected]
+    flown = ClosedLoop(request(run, batch=1)).fly().episodes
+    assert [e["frames"] for e in flown] == [r.length for r in expected]
+    assert [e["min_clearance_m"] for e in flown] == [float(r.min_clearance.min()) for r in expected]
+
+
+@pytest.mark.parametrize("pilot", ["planner", "diffusion"])
+def test_a_batch_of_three_flies_the_same_episodes(pilot, probed_run, policy_run):
+    """Each episode draws from its own generators, so only the float reduction order of the batched
+    calls differs: no outcome flips on this grid, the same frames, the closest approach within 1 mm."""
+    run = probed_run if pilot == "planner" else policy_run
+    one, three = records(request(run, batch=1)), records(request(run, batch=3))
+    assert [e["seed"] for e in three] == [e["seed"] for e in one]  # reported in grid order
+    assert [e["outcome"] for e in three] == [e["outcome"] for e in one]
+    assert [e["frames"] for e in three] == [e["frames"] for e in one]
+    assert np.allclose([e["min_clearance_m"] for e in three], [e["min_clearance_m"] for e in one], atol=1e-3)
+
+
+def test_an_episode_that_ends_mid_batch_keeps_its_own_frames():
+    """The true oracle reaches the goal after 107 to 149 frames or times out at 150: episodes end
+    at different steps, the next grid episode takes the freed slot, and every record is its own."""
+    req = dataclasses.replace(
+        request(None, batch=3),
+        variant=Variant.ORACLE_TRUE,
+        max_steps=150,
+        settings=planner_config("cpu", samples=32, horizon=25),
+    )
+    loop = ClosedLoop(req)
+    expected, got = unbatched(loop), lockstep_results(loop, 3)
+    frames = [r.length for r in expected]
+    assert len(set(frames[:3])) > 1 and min(frames) < 150  # the first batch ends at different steps
+    assert [r.length for r in got] == frames
+    for a, b in zip(expected, got):
+        assert b.length == len(b.states) == len(b.actions) == len(b.min_clearance)
+        assert b.outcome == a.outcome and not b.actions[-1].any()  # the terminal frame has no action
+        assert b.pilot_info["replans"] == b.length - 1  # its own pilot's count, not its slot's
+        assert np.allclose(b.states, a.states, atol=1e-4)
+    flown = ClosedLoop(req).fly().episodes
+    assert [e["frames"] for e in flown] == frames
+    assert [e["outcome"] for e in flown] == [r.outcome for r in expected]
+    assert [episode_record(n, v, k, s, r)["frames"] for (n, v, k, s), r in zip(loop.order, got)] == frames
+
+
+def test_a_grid_on_ray_is_the_local_grid(probed_run, monkeypatch):
+    """Chunks of one batch each (four Ray tasks on a local Ray instance): the same records as the
+    local flight with the same batch size, episode for episode."""
+    ray = pytest.importorskip("ray", reason="the Ray executor is the orbitdata[ray] extra")
+    monkeypatch.setattr(lockstep, "ROUNDS_PER_CHUNK", 1)
+    assert len(lockstep.chunks(8, 2)) == 4
+    local = records(request(probed_run, batch=2))
+    ray.init(num_cpus=2, include_dashboard=False)
+    try:
+        remote = records(request(probed_run, batch=2, executor="ray"))
+    finally:
+        ray.shutdown()
+    assert remote == local
+
+
+def test_the_cli_flies_a_batch_and_keeps_to_fifteen_options(tmp_path):
+    import click
+    import typer
+
+    command = typer.main.get_command(app).commands["eval"].commands["closed-loop"]
+    options = [p for p in command.get_params(click.Context(command)) if isinstance(p, click.Option)]
+    assert len(options) <= 15  # --help included (issue 36)
+    out = tmp_path / "oracle.json"
+    grid = ["--pilot", "oracle-true", "--obstacles", "1", "--speeds", "1,2", "--episodes", "2", "--max-steps", "6"]
+    small = ["--set", "samples=8", "--set", "horizon=5"]
+    res = runner.invoke(app, ["eval", "closed-loop", *grid, *small, "--batch", "3", "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    report = json.loads(out.read_text())
+    assert report["batch"] == 3 and [e["frames"] for e in report["episodes"]] == [6] * 4
+    assert [(e["episode"], e["speed"]) for e in report["episodes"]] == [(0, 1.0), (0, 2.0), (1, 1.0), (1, 2.0)]
+    res = runner.invoke(app, ["eval", "closed-loop", *grid, "--executor", "ray", "--video", str(tmp_path / "v")])
+    assert res.exit_code == 2 and res.output.startswith("error:") and "local executor" in res.output
+    res = runner.invoke(app, ["eval", "closed-loop", *grid, "--batch", "0"])
+    assert res.exit_code == 2 and "--batch" in res.output
