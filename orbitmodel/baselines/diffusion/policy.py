@@ -117,8 +117,16 @@ class DiffusionPolicy(NormalisedStates, nn.Module):
         self.register_buffer("action_low", torch.zeros(config.action_dim))
         self.register_buffer("action_high", torch.ones(config.action_dim))
         self.register_buffer("goal_scale", torch.tensor(1.0))  # metres per unit of the goal input
-        self.noise_scheduler, self.sampler = make_schedulers(config)
-        self._samplers: dict[tuple[str, int], object] = {}  # DDIM schedulers by (spacing, steps), built once
+        self.noise_scheduler, own = make_schedulers(config)
+        s = PolicySampling().resolved(config)
+        self._samplers: dict[tuple[str, int], object] = {
+            (s.timestep_spacing, s.inference_steps): own
+        }  # by DDIM setting
+
+    @property
+    def sampler(self):
+        """The run's own DDIM scheduler (its config's spacing and steps): ``sampler_for(None)``."""
+        return self.sampler_for()
 
     def sampler_for(self, sampling: PolicySampling | None = None):
         """The DDIM scheduler that ``sampling`` asks for (None: the run's own). Training does not
