@@ -2,6 +2,7 @@
 
     python benchmarks/bench_plan.py [--run RUN] [--planner paper|cpu] [--samples K] [--horizon H]
         [--history N] [--threads 1] [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile]
+        [--probe NAME ...]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,
@@ -18,6 +19,10 @@ predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and thro
 faster, whatever K, so it says whether the 40 ms goal is reachable by sampling fewer candidates.
 ``--compile`` runs the planner's imagined step through ``torch.compile``; it compiles during the
 untimed warm-up steps that fill the context.
+``--probe NAME`` (repeatable) also times the planner reading another of the run's probes
+(``PlannerConfig.probe``: a Table I variant such as ``thrust_only``, or ``latent_probe``), each
+line beside the run's own probe's; without ``--run``, an untrained probe of that variant's recipe.
+A probe that reads no latent skips the world model's rollout, so its line has no rollout share.
 """
 
 from __future__ import annotations
@@ -33,29 +38,33 @@ from orbitdata.fly.pilot import Task
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitmodel.config import PRESETS, get_preset
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.config import PLANNER_PRESETS, planner_config
+from orbitmodel.plan.config import PLANNER_PRESETS, PROBES, planner_config
 from orbitmodel.plan.dynamics import LearnedDynamics
-from orbitmodel.plan.factory import PredictedDepth
+from orbitmodel.plan.factory import PredictedDepth, load_planner_probe
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.probe import PhysicsProbe
 from orbitmodel.probe.train import probe_config
+from orbitmodel.probe.variants import FLOWN, LATENT, variant_recipe
 
 
-def make_pilot(args, samples: int | None, horizon: int | None, replan_every: int) -> tuple[PlannerPilot, Timings]:
+def make_pilot(
+    args, samples: int | None, horizon: int | None, replan_every: int, probe_name: str = ""
+) -> tuple[PlannerPilot, Timings]:
     if args.run:
         model = WorldModel.from_pretrained(args.run)
-        probe = PhysicsProbe.from_pretrained(args.run, world_model=model.fingerprint)
+        probe = load_planner_probe(args.run, model.fingerprint, probe_name)
     else:
         preset = get_preset(args.preset)
         torch.manual_seed(0)
         model = WorldModel(preset.model).eval()
-        probe = PhysicsProbe(probe_config(preset.probe, "latent", preset.model.latent_dim, preset.model.frame_step))
+        recipe = variant_recipe(preset.probe, probe_name or FLOWN)
+        probe = PhysicsProbe(probe_config(recipe, "latent", preset.model.latent_dim, preset.model.frame_step))
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
     changes = {k: v for k, v in dict(samples=samples, horizon=horizon, history=args.history).items() if v is not None}
-    config = planner_config(args.planner, replan_every=replan_every, compile=args.compile, **changes)
+    config = planner_config(args.planner, replan_every=replan_every, compile=args.compile, probe=probe_name, **changes)
     if args.compile:
         model.compile_rollout()
     dynamics = LearnedDynamics(model, probe.eval(), timings, history=config.history or None)
@@ -80,8 +89,8 @@ def synthetic_observation(rng: np.random.Generator, t: int, size: int) -> dict:
     return {"image": rng.integers(0, 255, (size, size, 3), dtype=np.uint8), "state": state, "depth_low": depth}
 
 
-def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
-    pilot, timings = make_pilot(args, samples, horizon, replan_every)
+def measure(args, samples: int, horizon: int, replan_every: int, probe_name: str = "") -> dict:
+    pilot, timings = make_pilot(args, samples, horizon, replan_every, probe_name)
     pilot.reset(Task(goal=(10.0, 0.0, 0.0), goal_radius=0.5, initial_velocity=(1.0, 0.0, 0.0), seed=0))
     rng = np.random.default_rng(0)
     size = pilot.dynamics.model.config.image_size
@@ -99,6 +108,7 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
     steps, replans = 1e3 * np.array(pilot.step_seconds), 1e3 * np.array(pilot.replan_seconds)
     phases = timings.snapshot()
     return {
+        "probe": probe_name or FLOWN,
         "samples": pilot.config.mppi.samples,
         "horizon": pilot.config.mppi.horizon,
         "replan_every": replan_every,
@@ -115,7 +125,7 @@ def measure(args, samples: int, horizon: int, replan_every: int) -> dict:
 def report(m: dict) -> str:
     shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in m["share"].items())
     return (
-        f"K={m['samples']:4d} H={m['horizon']:3d} history {m['history']} replan every {m['replan_every']}: per control step "
+        f"probe {m['probe']:14s} K={m['samples']:4d} H={m['horizon']:3d} history {m['history']} replan every {m['replan_every']}: per control step "
         f"{m['step_median']:7.1f} ms median {m['step_p95']:7.1f} p95; per replan {m['replan_median']:7.1f} / "
         f"{m['replan_p95']:7.1f} ms   [{shares}]"
     )
@@ -177,7 +187,20 @@ def main() -> None:
     parser.add_argument(
         "--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)"
     )
+    parser.add_argument(
+        "--probe",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="also time the planner reading this probe of the run (a Table I variant or latent_probe), repeatable",
+    )
     args = parser.parse_args()
+    unknown = [p for p in args.probe if p not in PROBES]
+    if unknown:
+        parser.error(f"--probe {unknown[0]}: choose {LATENT} or a probe variant ({', '.join(PROBES[2:])})")
+    if LATENT in args.probe and not args.run:
+        parser.error(f"--probe {LATENT}: the choice is a trained run's (RUN/latent_probe.json); give --run RUN")
+    probes = ["", *(p for p in args.probe if p not in ("", FLOWN))]  # the run's own first, then each asked
     torch.set_num_threads(args.threads)
     model = args.run or f"untrained {args.preset} preset"
     print(
@@ -186,7 +209,8 @@ def main() -> None:
     )
     with torch.inference_mode():
         if not args.sweep:
-            print(report(measure(args, args.samples, args.horizon, args.replan_every)), flush=True)
+            for name in probes:
+                print(report(measure(args, args.samples, args.horizon, args.replan_every, name)), flush=True)
             if args.floor:
                 print(sequential_floor(args, args.horizon))
             return
@@ -199,7 +223,8 @@ def main() -> None:
             (256, 50, 5),
             (64, 25, 5),
         ]:
-            print(report(measure(args, samples, horizon, every)), flush=True)
+            for name in probes:
+                print(report(measure(args, samples, horizon, every, name)), flush=True)
 
 
 if __name__ == "__main__":

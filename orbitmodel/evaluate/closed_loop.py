@@ -28,7 +28,7 @@ from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.evaluate.executors import EXECUTORS, run_local, run_ray
 from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode, GridEpisode, chunks, fly_lockstep
 from orbitmodel.kinematics import FUEL, P
-from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config
+from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config, recorded
 from orbitmodel.plan.factory import build_pilot, camera_for_run
 from orbitmodel.plan.pilot import Variant
 from orbitmodel.plan.timing import Timings
@@ -341,7 +341,7 @@ def closed_loop_report(
             "run": None if req.run is None else str(req.run),
             "preset": req.preset,
             "planner_preset": req.preset if planning else None,
-            "planner": dataclasses.asdict(req.settings) if planning else None,
+            "planner": recorded(req.settings) if planning else None,
             "image_codec": image_codec,
             "max_steps": req.max_steps or req.config.sim.max_steps,  # an episode's frames at most (300: 12 s)
             "latency_ms": {"step": _stats(result.step_ms), "replan": _stats(result.replan_ms)},

@@ -94,7 +94,7 @@ def pool_seeds(reports: list[dict]) -> dict:
     """One pilot's grid flown on several root seeds, as one table: per setting, the episodes and
     outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
     and ``worst_setting`` names the lowest-rate (seed, setting). Refuses reports of different
-    pilots, grids, pilot settings (a policy's sampling, the camera codec) or a repeated seed:
+    pilots, grids, pilot settings (a policy's sampling, the camera codec, the planner's probe) or a repeated seed:
     pooling is for fresh episodes of one way of flying only."""
     if not reports:
         raise ValueError("give the grid results of at least one seed")
@@ -120,6 +120,12 @@ def pool_seeds(reports: list[dict]) -> dict:
                     f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
                     f"{first.get(key)!r}: pool one way of flying"
                 )
+        probe, first_probe = ((x.get("planner") or {}).get("probe") or "the run's own" for x in (r, first))
+        if probe != first_probe:  # the planner reading another of the run's probes is another way of flying
+            raise ValueError(
+                f"seed {r['seed']} was flown with probe {probe}, seed {first['seed']} with {first_probe}: "
+                "pool one way of flying"
+            )
         mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
         if sorted(mine) != keys:
             raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")

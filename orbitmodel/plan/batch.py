@@ -3,8 +3,8 @@
 Each episode keeps its own pilot (a :meth:`PlannerPilot.fork` of one: its MPPI nominal, point
 memory, latent history and random generator), and :func:`plan_batch` serves all of them with
 one call per model: the encoder on their N frames, the depth head on those that replan, and per
-MPPI round one imagined rollout of their N x K candidates (world model and probe, or the
-rigid-body model). The obstacle points and the cost stay per episode (each its own cloud and
+MPPI round one imagined rollout of their N x K candidates (world model and probe, the probe
+alone when it reads no latent, or the rigid-body model). The obstacle points and the cost stay per episode (each its own cloud and
 goal). ``PlannerPilot.act`` is a batch of one, so an episode flown alone and one flown in a batch
 differ only in the float reduction order of the batched calls.
 """

@@ -6,7 +6,7 @@ model: K = 32, H = 50, a history of 2 latents (its latency: ``benchmarks/bench_p
 --planner cpu``). Without a name, a CUDA machine flies ``paper`` and a CPU ``cpu``
 (:func:`default_planner_preset`). ``orbitmodel eval closed-loop --preset NAME --set KEY=VALUE``
 (or ``--pilot-option``) changes single fields of the chosen preset; the result files record
-the preset and every field.
+the preset and every field (``probe`` only when it is not the run's own: :func:`recorded`).
 """
 
 from __future__ import annotations
@@ -18,6 +18,9 @@ from typing import Callable
 from orbitmodel.plan.cost import CostConfig
 from orbitmodel.plan.depth_recipe import MAX_RANGE
 from orbitmodel.plan.mppi import MPPIConfig
+from orbitmodel.probe.variants import FLOWN, LATENT, VARIANTS
+
+PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run's own (RUN/probe)
 
 
 @dataclass(frozen=True)
@@ -51,6 +54,11 @@ class PlannerConfig:
         record: keep each replan's best imagined path and the believed points (for videos).
         image_codec: hand the pilot its camera through the dataset's JPEG codec (the reported
             grids fly raw renders).
+        probe: which of the run's probes reads the imagined states: "" the run's own (``RUN/probe``,
+            the flown one; ``thrust_probe`` names it too), a Table I variant (``RUN/probe-NAME``,
+            ``orbitmodel probe RUN DATA --variant NAME``), or "latent_probe", the candidate chosen
+            on the validation episodes (``RUN/latent_probe.json``). One that reads no latent
+            (``thrust_only``) makes the planner skip the world model's rollout (``LearnedDynamics``).
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -69,6 +77,7 @@ class PlannerConfig:
     compile: bool = False
     record: bool = False
     image_codec: bool = False
+    probe: str = ""
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -81,11 +90,25 @@ class PlannerConfig:
             raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
+        if self.probe not in PROBES:
+            raise ValueError(
+                f"probe={self.probe!r}: give {LATENT} (the one chosen on validation) or a probe variant of the "
+                f"run ({', '.join(VARIANTS)}); leave it out for the run's own ({FLOWN})"
+            )
         if self.reach < self.cost.margin + self.cost.hull_radius:
             raise ValueError(
                 f"reach={self.reach} m is shorter than the collision ramp "
                 f"({self.cost.hull_radius + self.cost.margin:.2f} m)"
             )
+
+
+def recorded(config: PlannerConfig) -> dict:
+    """The settings a result file records: every field, with ``probe`` left out when it is the run's
+    own (the default), so that the flights of the run's own probe all record the same settings."""
+    out = dataclasses.asdict(config)
+    if not config.probe:
+        del out["probe"]
+    return out
 
 
 PLANNER_PRESETS: dict[str, Callable[[], PlannerConfig]] = {

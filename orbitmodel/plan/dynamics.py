@@ -156,6 +156,11 @@ class LearnedDynamics:
     state; one giving the state every s frames has the frames between interpolated linearly
     (position, velocity, attitude columns, rates, fuel), so the cost sees one state per frame
     whatever the model's step (``PhysicsProbe.per_frame``).
+
+    A probe that reads no latent (``ProbeConfig.reads_latent`` false: the ``thrust_only``
+    variant) is a model of the dynamics by itself: the rollout then never calls the world model's
+    predictor, and the probe reads each candidate's planned thrusts from the observed state. The
+    frames are still encoded, for the depth head that shares the encoder pass.
     """
 
     needs_images = True
@@ -170,6 +175,7 @@ class LearnedDynamics:
     ):
         self.model = model.eval()
         self.probe = probe
+        self.reads_latent = getattr(getattr(probe, "config", None), "reads_latent", True)
         self.frames = frames or FrameEncoder(self.model)  # share it with the depth head: one ViT pass a frame
         self.step = int(model.config.frame_step)
         self.history = model.config.history if history is None else int(history)
@@ -245,6 +251,8 @@ class LearnedDynamics:
                     f"a plan of {a.shape[1]} frames does not split into the world model's steps of {s} frames; "
                     f"give a horizon that is a multiple of {s}"
                 )
+        if not lead.reads_latent:
+            return lead._thrusts_alone(state0s, actions)
         contexts = [d.context() for d in members]
         groups: dict[int, list[int]] = {}
         for i, (z, _) in enumerate(contexts):
@@ -270,3 +278,16 @@ class LearnedDynamics:
             for i, part in zip(rows, states.split(sizes)):
                 out[i] = part
         return out
+
+    def _thrusts_alone(self, state0s: list[torch.Tensor], actions: list[torch.Tensor]) -> list[torch.Tensor]:
+        """``rollout_many`` with a probe that reads no latent: one probe call on every episode's
+        candidates, each from its observed state, and no world-model rollout. The probe is handed
+        zero latents for their shape only (``PhysicsProbe.forward``)."""
+        s, sizes = self.step, [len(a) for a in actions]
+        steps = actions[0].shape[1] // s
+        with self.timings("probe"):
+            planned = joined([a.float().reshape(len(a), steps, s * a.shape[-1]) for a in actions])  # (N K, H / s, 8 s)
+            start = joined([x.float().expand(K, -1) for x, K in zip(state0s, sizes)])  # (N K, 16)
+            z_future = planned.new_zeros(()).expand(len(planned), steps, self.model.config.latent_dim)
+            states = self.probe.per_frame(z_future, start, None, s, planned)  # (N K, H, 16)
+        return list(states.split(sizes))

@@ -21,6 +21,7 @@ from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
 from orbitmodel.probe import PhysicsProbe
+from orbitmodel.probe.variants import FLOWN, LATENT
 from orbitmodel.runs import RunError, resolve_run
 
 
@@ -34,6 +35,18 @@ def load_world_model(run: str | Path | None, variant: Variant):
     if run is None:
         raise ValueError(f"pilot {variant.value} plans with the world model: give the run folder (RUN)")
     return WorldModel.from_pretrained(run)
+
+
+def load_planner_probe(run: Path, world_model: str, name: str = "") -> PhysicsProbe:
+    """The probe a planner reads (``PlannerConfig.probe``): "" the run's own (``RUN/probe``), a
+    variant's (``RUN/probe-NAME``), or "latent_probe", the candidate chosen on the validation
+    episodes (``RUN/latent_probe.json``); ``world_model``: the run's weights fingerprint, which the
+    probe must have been trained on. RunError naming the command that makes a missing one."""
+    if name == LATENT:
+        from orbitmodel.probe.table1 import load_choice
+
+        return load_choice(run, world_model)[1]
+    return PhysicsProbe.from_pretrained(run, world_model=world_model, variant=name or FLOWN)
 
 
 def camera_for_run(sim: SimConfig, model) -> SimConfig:
@@ -64,7 +77,8 @@ def build_pilot(
     """The pilot of ``variant`` and the simulator settings it must fly in (the run's camera).
     ``run``: a run folder or a Hub model repo id (``owner/name[@revision]``, ``orbitmodel push``).
 
-    Raises RunError (a ValueError) for a run without weights or probe, or with another camera.
+    Raises RunError (a ValueError) for a run without weights or the probe ``config.probe`` names,
+    or with another camera.
     """
     variant = Variant(variant)
     timings = timings or Timings()
@@ -84,9 +98,14 @@ def build_pilot(
             )
         if config.compile:
             model.compile_rollout()
-        probe = PhysicsProbe.from_pretrained(run, world_model=model.fingerprint)
+        probe = load_planner_probe(run, model.fingerprint, config.probe)
         dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)
     else:
+        if config.probe:
+            raise ValueError(
+                f"probe={config.probe}: pilot {variant.value} plans with the rigid-body model, which reads no probe; "
+                "drop the probe setting or fly a pilot that plans with the world model"
+            )
         dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
     depth = {
         "depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head), frames),

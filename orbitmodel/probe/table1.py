@@ -71,6 +71,13 @@ def _choose_command(run) -> str:
     return f"orbitmodel eval probe {run} DATASET --split val"
 
 
+def _untrained(run_dir) -> str:
+    return (
+        f"no {LATENT} candidate is trained; train them with `{train_command(run_dir, next(iter(CANDIDATES)))}` "
+        f"and the other {LATENT}-* variants, then choose with `{_choose_command(run_dir)}`"
+    )
+
+
 def load_rows(run_dir: Path, world_model, flown: PhysicsProbe, split: str, device) -> Rows:
     """The run's probes for Table I on ``split``: the flown one, the paper's and the thrust-only
     one when trained; on "val" every trained latent_probe candidate (to choose among), on "test"
@@ -88,10 +95,6 @@ def load_rows(run_dir: Path, world_model, flown: PhysicsProbe, split: str, devic
             rows.missing[row] = str(err)
     rows.probes[FLOWN] = flown
     trained = [c for c in CANDIDATES if (probe_folder(run_dir, "latent", c) / CONFIG).is_file()]
-    untrained = (
-        f"no {LATENT} candidate is trained; train them with `{train_command(run_dir, next(iter(CANDIDATES)))}` "
-        f"and the other {LATENT}-* variants, then choose with `{_choose_command(run_dir)}`"
-    )
     if split == "val":
         for c in trained:
             try:
@@ -100,31 +103,38 @@ def load_rows(run_dir: Path, world_model, flown: PhysicsProbe, split: str, devic
             except RunError as err:
                 rows.missing[c] = str(err)
         if not rows.candidates:
-            rows.missing[LATENT] = untrained
+            rows.missing[LATENT] = _untrained(run_dir)
         return rows
+    try:
+        rows.choice, rows.probes[LATENT] = load_choice(run_dir, fp, device)
+    except RunError as err:
+        rows.missing[LATENT] = str(err)
+    return rows
+
+
+def load_choice(run_dir: Path, world_model: str, device="cpu") -> tuple[dict, PhysicsProbe]:
+    """The ``latent_probe`` chosen on the validation episodes (``CHOICE_FILE``) and its probe, for the
+    test split's row and for the planner (``--set probe=latent_probe``). RunError naming the fix when
+    none is chosen, or the choice was made for another world model (a weights fingerprint) or
+    before its probe was trained again."""
+    run_dir = Path(run_dir)
     path = run_dir / CHOICE_FILE
     if not path.is_file():
-        rows.missing[LATENT] = (
+        trained = [c for c in CANDIDATES if (probe_folder(run_dir, "latent", c) / CONFIG).is_file()]
+        raise RunError(
             f"no {LATENT} chosen among the {len(trained)} trained candidates; "
             f"choose it with `{_choose_command(run_dir)}`"
             if trained
-            else untrained
+            else _untrained(run_dir)
         )
-        return rows
     choice = json.loads(path.read_text())
-    try:
-        probe = load(choice["chosen"])
-    except RunError as err:
-        rows.missing[LATENT] = str(err)
-        return rows
-    if choice.get("world_model") != fp or choice.get("probe") != fingerprint(probe.state_dict()):
-        rows.missing[LATENT] = (
+    probe = PhysicsProbe.from_pretrained(run_dir, world_model=world_model, variant=choice["chosen"]).to(device)
+    if choice.get("world_model") != world_model or choice.get("probe") != fingerprint(probe.state_dict()):
+        raise RunError(
             f"{path} chose {choice['chosen']} for another world model or before it was trained again; "
             f"choose again with `{_choose_command(run_dir)}`"
         )
-        return rows
-    rows.probes[LATENT], rows.choice = probe, choice
-    return rows
+    return choice, probe
 
 
 @torch.no_grad()
