@@ -7,6 +7,7 @@
 * :mod:`~orbitmodel.plan.dynamics`: the world model + probe, and the rigid-body oracle;
 * :mod:`~orbitmodel.plan.frames`: one encoder pass per observed frame, shared by dynamics and depth;
 * :mod:`~orbitmodel.plan.obstacles`: depth -> world points, and the true obstacles (oracles);
+* :mod:`~orbitmodel.plan.tracker`: depth points clustered into moving tracks (``obstacle_motion="tracker"``);
 * :mod:`~orbitmodel.plan.depth_refit`: the depth head refitted for near cells (``orbitmodel depth``),
   scored by :mod:`~orbitmodel.plan.depth_bands`;
 * :mod:`~orbitmodel.plan.cost`: collision, progress, effort, spin, heading, speed;
@@ -28,6 +29,8 @@ _LAZY = {
     "PointCloud": "orbitmodel.plan.obstacles",
     "TrueObstacles": "orbitmodel.plan.obstacles",
     "depth_to_points": "orbitmodel.plan.obstacles",
+    "Tracker": "orbitmodel.plan.tracker",
+    "TrackerConfig": "orbitmodel.plan.tracker",
     "PlannerConfig": "orbitmodel.plan.config",
     "PLANNER_PRESETS": "orbitmodel.plan.config",
     "planner_config": "orbitmodel.plan.config",

@@ -4,9 +4,10 @@ Each episode keeps its own pilot (a :meth:`PlannerPilot.fork` of one: its MPPI n
 memory, latent history and random generator), and :func:`plan_batch` serves all of them with
 one call per model: the encoder on their N frames, the depth head on those that replan, and per
 MPPI round one imagined rollout of their N x K candidates (world model and probe, the probe
-alone when it reads no latent, or the rigid-body model). The obstacle points and the cost stay per episode (each its own cloud and
-goal). ``PlannerPilot.act`` is a batch of one, so an episode flown alone and one flown in a batch
-differ only in the float reduction order of the batched calls.
+alone when it reads no latent, or the rigid-body model). The obstacle points and the cost stay
+per episode (each its own cloud, goal and clock). ``PlannerPilot.act`` is a batch of one, so an
+episode flown alone and one flown in a batch differ only in the float reduction order of the
+batched calls.
 """
 
 from __future__ import annotations
@@ -90,7 +91,7 @@ def replan_batch(pilots: list, observations: list[dict], patches: torch.Tensor |
         imagined = type(lead.dynamics).rollout_many(dynamics, state0, candidates)  # N x (K, H, 16)
         with lead.timings("cost"):
             costs = [
-                trajectory_cost(s, a, p.goal, p.goal_radius, f, p.config.cost)[0]
+                trajectory_cost(s, a, p.goal, p.goal_radius, f, p.config.cost, p.plan_times())[0]
                 for p, s, a, f in zip(pilots, imagined, candidates, fields)
             ]  # N x (K,)
         results = [p.mppi.update(a, c) for p, a, c in zip(pilots, candidates, costs)]

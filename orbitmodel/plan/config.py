@@ -6,7 +6,8 @@ model: K = 32, H = 50, a history of 2 latents (its latency: ``benchmarks/bench_p
 --planner cpu``). Without a name, a CUDA machine flies ``paper`` and a CPU ``cpu``
 (:func:`default_planner_preset`). ``orbitmodel eval closed-loop --preset NAME --set KEY=VALUE``
 (or ``--pilot-option``) changes single fields of the chosen preset; the result files record
-the preset and every field (``probe`` only when it is not the run's own: :func:`recorded`).
+the preset and every field (``probe`` only when it is not the run's own, ``obstacle_motion`` and
+the tracker's knobs only when the obstacles are not taken to stand still: :func:`recorded`).
 """
 
 from __future__ import annotations
@@ -18,9 +19,13 @@ from typing import Callable
 from orbitmodel.plan.cost import CostConfig
 from orbitmodel.plan.depth_recipe import MAX_RANGE
 from orbitmodel.plan.mppi import MPPIConfig
+from orbitmodel.plan.tracker import TrackerConfig
 from orbitmodel.probe.variants import FLOWN, LATENT, VARIANTS
 
 PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run's own (RUN/probe)
+# How the planner expects the obstacles to move over a plan's horizon: "static" and "tracker" for
+# the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
+OBSTACLE_MOTIONS = ("static", "tracker", "true", "frozen")
 
 
 @dataclass(frozen=True)
@@ -59,6 +64,12 @@ class PlannerConfig:
             ``orbitmodel probe RUN DATA --variant NAME``), or "latent_probe", the candidate chosen
             on the validation episodes (``RUN/latent_probe.json``). One that reads no latent
             (``thrust_only``) makes the planner skip the world model's rollout (``LearnedDynamics``).
+        obstacle_motion: where each rollout step's clearance is taken. "static": the obstacles
+            stand still (the point memory; an oracle's true obstacles, which must not move). "tracker":
+            the depth points clustered into tracks, each carried along its fitted velocity to the
+            step's time (``plan.tracker``). Oracles only: "true", each obstacle where its exact
+            motion puts it at the step's time; "frozen", where it is at the replan.
+        tracker: the tracker's knobs (``obstacle_motion="tracker"`` only); see :class:`TrackerConfig`.
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -78,6 +89,8 @@ class PlannerConfig:
     record: bool = False
     image_codec: bool = False
     probe: str = ""
+    obstacle_motion: str = "static"
+    tracker: TrackerConfig = field(default_factory=TrackerConfig)
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -95,6 +108,11 @@ class PlannerConfig:
                 f"probe={self.probe!r}: give {LATENT} (the one chosen on validation) or a probe variant of the "
                 f"run ({', '.join(VARIANTS)}); leave it out for the run's own ({FLOWN})"
             )
+        if self.obstacle_motion not in OBSTACLE_MOTIONS:
+            raise ValueError(
+                f"obstacle_motion={self.obstacle_motion!r}: use static or tracker (pilots that see the obstacles), "
+                "true or frozen (oracles handed the scenario)"
+            )
         if self.reach < self.cost.margin + self.cost.hull_radius:
             raise ValueError(
                 f"reach={self.reach} m is shorter than the collision ramp "
@@ -104,10 +122,15 @@ class PlannerConfig:
 
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
-    own (the default), so that the flights of the run's own probe all record the same settings."""
+    own (the default), ``obstacle_motion`` when "static" (the default) and ``tracker`` when no tracker
+    flies, so that the flights of the defaults all record the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
         del out["probe"]
+    if config.obstacle_motion == "static":
+        del out["obstacle_motion"]
+    if config.obstacle_motion != "tracker":
+        del out["tracker"]
     return out
 
 
@@ -126,17 +149,19 @@ def default_planner_preset() -> str:
 
 def planner_config(preset: str | None = None, **options) -> PlannerConfig:
     """The planner preset ``preset`` with single fields changed: ``options`` are MPPIConfig,
-    CostConfig and PlannerConfig field names (values may be strings, as a command line gives them).
+    CostConfig, TrackerConfig and PlannerConfig field names (values may be strings, as a command line gives them).
     ``preset`` None: :func:`default_planner_preset`."""
     preset = preset or default_planner_preset()
     if preset not in PLANNER_PRESETS:
         raise ValueError(f"unknown planner preset {preset!r}; choose one of {', '.join(PLANNER_PRESETS)}")
     base = PLANNER_PRESETS[preset]()
-    parts: dict[type, dict] = {MPPIConfig: {}, CostConfig: {}, PlannerConfig: {}}
+    parts: dict[type, dict] = {MPPIConfig: {}, CostConfig: {}, TrackerConfig: {}, PlannerConfig: {}}
     for key, value in options.items():
         owner = next((cls for cls in parts if key in {f.name for f in dataclasses.fields(cls)}), None)
-        if owner is None or key in ("mppi", "cost"):
-            raise ValueError(f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig or PlannerConfig")
+        if owner is None or key in ("mppi", "cost", "tracker"):
+            raise ValueError(
+                f"unknown planner option {key!r}; use a field of MPPIConfig, CostConfig, TrackerConfig or PlannerConfig"
+            )
         kind = type(getattr(owner(), key))
         if kind is bool and isinstance(value, str) and value.lower() not in ("1", "true", "yes", "0", "false", "no"):
             raise ValueError(f"planner option {key}={value!r}: give true or false")
@@ -150,5 +175,6 @@ def planner_config(preset: str | None = None, **options) -> PlannerConfig:
         base,
         mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),
         cost=dataclasses.replace(base.cost, **parts[CostConfig]),
+        tracker=dataclasses.replace(base.tracker, **parts[TrackerConfig]),
         **parts[PlannerConfig],
     )

@@ -1,7 +1,9 @@
 """The planner's objective: reach the goal, never touch an obstacle, spend little, fly steadily.
 
 For imagined states (K, H, 16) and their thrusts (K, H, 8), per candidate and summed over the
-steps before it reaches the goal (the episode ends there, so nothing after counts)::
+steps before it reaches the goal (the episode ends there, so nothing after counts). Step k's
+clearance is taken against the obstacles where the field puts them at ``times[k]`` (the rollout
+step's time; a field of still obstacles ignores it)::
 
     collision  w_c  * u_k * ramp(clearance)^2        ramp: 1 at the hull, 0 at hull + margin (+ margin_per_speed |v|)
                                                       u_k = 1 + urgency (1 - k / H): a contact sooner costs more
@@ -25,8 +27,10 @@ from orbitmodel.kinematics import HULL_RADIUS, P, V, W
 
 
 class ObstacleField(Protocol):
-    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
-        """(..., 3) metres -> (...,) metres to the nearest obstacle surface (+inf if none near)."""
+    def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., H, 3) metres, row h at ``times[h]`` (H,) seconds into the episode -> (..., H)
+        metres to the nearest obstacle surface then (+inf if none near). Obstacles that do not
+        move ignore ``times``; None: where the field holds them now."""
 
 
 @dataclass(frozen=True)
@@ -97,8 +101,11 @@ def trajectory_cost(
     goal_radius: float,
     obstacles: ObstacleField,
     config: CostConfig = CostConfig(),
+    times: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict]:
-    """states (K, H, 16), actions (K, H, 8) thrust in [0,1], goal (3,) metres -> cost (K,) and its terms."""
+    """states (K, H, 16), actions (K, H, 8) thrust in [0,1], goal (3,) metres -> cost (K,) and its terms.
+    ``times`` (H,) seconds: when each step's state is reached, for a field whose obstacles move
+    (None: the field's obstacles as they stand, the static planner's call)."""
     c = config
     H = states.shape[1]
     p = states[..., P]  # (K, H, 3) metres, world
@@ -107,7 +114,7 @@ def trajectory_cost(
     arrived = torch.cummax((dist < c.goal_fraction * goal_radius).int(), 1).values.bool()  # (K, H)
     # The step that arrives still counts (it must be collision-free); the ones after do not.
     live = torch.cat([torch.ones_like(arrived[:, :1]), ~arrived[:, :-1]], 1).float()  # (K, H)
-    clearance = obstacles.clearance(p)  # (K, H) metres
+    clearance = obstacles.clearance(p) if times is None else obstacles.clearance(p, times)  # (K, H) metres
     speed = v.norm(dim=-1)  # (K, H)
     urgency = 1 + c.urgency * (1 - torch.arange(H, dtype=states.dtype, device=states.device) / H)  # (H,) sooner: more
     terms = {

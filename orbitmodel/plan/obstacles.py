@@ -1,12 +1,15 @@
 """What the planner believes is in the way: clearance from a point to the nearest obstacle.
 
-Two sources answer ``clearance(positions (..., 3)) -> (...,)`` metres (negative inside, +inf
-when nothing is near):
+Each source answers ``clearance(positions (..., H, 3), times (H,) | None) -> (..., H)`` metres
+(negative inside, +inf when nothing is near), row h of the positions at ``times[h]`` seconds
+into the episode; a field of obstacles that do not move ignores the times:
 
 * :class:`PointCloud`: the 16x16 depth map of the current frame (the depth head's prediction,
   or the rendered ``depth_low``) back-projected through the camera into the world frame with the
   current state, each point a sphere as wide as its cell (what a learned pilot knows);
-* :class:`TrueObstacles`: the scenario's obstacles, exact signed distances (oracles only).
+* :class:`TrueObstacles`: the scenario's obstacles, exact signed distances (oracles only): on the
+  dynamic tier where each will be at each time ("true"), or held where they are now ("frozen").
+The tracker's moving clouds (``plan.tracker``) answer the same call.
 
 Camera facts (``orbitdata.sim``): the camera sits on the body's +x face looking along body +x,
 image up = body +z; ``depth_low`` is the 4x4 (at 64 px) area mean of the *z-depth* along the
@@ -101,6 +104,22 @@ def supported_cells(depth: np.ndarray, near: np.ndarray, support: int, tolerance
     return near & (count >= support)
 
 
+def kept_cells(depth: np.ndarray, camera: Camera, max_range: float = 20.0, support: int = 0) -> np.ndarray:
+    """(16, 16) bool: the cells of a z-depth map (metres) that :func:`depth_to_points` turns into points."""
+    depth = np.asarray(depth, dtype=np.float64)
+    keep = np.isfinite(depth) & (depth > 0) & (depth < min(max_range, 0.99 * camera.far))
+    return supported_cells(depth, keep, support) if support else keep
+
+
+def border_points(depth: np.ndarray, camera: Camera, max_range: float = 20.0, support: int = 0) -> np.ndarray:
+    """(N,) bool, one per point of :func:`depth_to_points` (same order): whether its cell lies on
+    the image's border, where the view may cut an object short."""
+    side = np.asarray(depth).shape[0]
+    border = np.ones((side, side), bool)
+    border[1:-1, 1:-1] = False
+    return border[kept_cells(depth, camera, max_range, support)]
+
+
 def depth_to_points(
     depth: np.ndarray,
     state: np.ndarray,
@@ -118,9 +137,7 @@ def depth_to_points(
     its depth, so the spheres of neighbouring cells touch and a seen surface has no holes.
     """
     depth = np.asarray(depth, dtype=np.float64)
-    keep = np.isfinite(depth) & (depth > 0) & (depth < min(max_range, 0.99 * camera.far))
-    if support:
-        keep = supported_cells(depth, keep, support)
+    keep = kept_cells(depth, camera, max_range, support)
     d = depth[keep]  # (N,)
     body = np.asarray(camera.position) + d[:, None] * camera.cell_rays(depth.shape[0])[keep]  # (N, 3)
     s = np.asarray(state, dtype=np.float64)
@@ -149,8 +166,9 @@ class PointCloud:
     def __len__(self) -> int:
         return len(self.points)
 
-    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
-        """(..., 3) metres -> (...,) distance to the nearest sphere surface (+inf beyond reach)."""
+    def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., 3) metres -> (...,) distance to the nearest sphere surface (+inf beyond reach).
+        The points stand still: ``times`` is not read."""
         shape = positions.shape[:-1]
         if self._tree is None:
             return torch.full(shape, math.inf)
@@ -190,6 +208,39 @@ def _quat_matrix(quat) -> torch.Tensor:
     return torch.tensor(quat_to_matrix(quat), dtype=torch.float32)
 
 
+def quat_matrices(quats: np.ndarray) -> torch.Tensor:
+    """(..., 4) unit quaternions (w, x, y, z) -> (..., 3, 3) float32 rotations (local -> world),
+    ``orbitdata.state.quat_to_matrix`` over many at once."""
+    w, x, y, z = np.moveaxis(np.asarray(quats, dtype=np.float64), -1, 0)
+    R = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+    return torch.from_numpy(R).float()
+
+
+def local_distance(shape: str, size, local: torch.Tensor) -> torch.Tensor:
+    """(..., 3) points in an obstacle's own frame -> (...,) metres to its surface, negative inside."""
+    lx, ly, lz = local.unbind(-1)
+    a, b, c = size
+    if shape == "sphere":
+        return local.norm(dim=-1) - a
+    if shape == "box":
+        q = local.abs() - torch.tensor([a, b, c], dtype=torch.float32)
+        return q.clamp(min=0).norm(dim=-1) + q.amax(-1).clamp(max=0)
+    if shape == "capsule":
+        return torch.stack([lx, ly, lz - lz.clamp(-b, b)], -1).norm(dim=-1) - a
+    if shape == "cylinder":
+        dr, dz = torch.hypot(lx, ly) - a, lz.abs() - b
+        return torch.maximum(dr, dz).clamp(max=0) + torch.hypot(dr.clamp(min=0), dz.clamp(min=0))
+    k = (local / torch.tensor([a, b, c], dtype=torch.float32)).norm(dim=-1)  # ellipsoid
+    return (k - 1) * min(a, b, c)
+
+
 def signed_distance(ob: Obstacle, x: torch.Tensor) -> torch.Tensor:
     """(..., 3) world points -> (...,) metres to the surface of ``ob``, negative inside.
 
@@ -197,31 +248,49 @@ def signed_distance(ob: Obstacle, x: torch.Tensor) -> torch.Tensor:
     except the ellipsoid's conservative lower bound).
     """
     local = (x - torch.tensor(ob.center, dtype=torch.float32)) @ _quat_matrix(ob.quat)  # R^T (x - c)
-    lx, ly, lz = local.unbind(-1)
-    a, b, c = ob.size
-    if ob.shape == "sphere":
-        return local.norm(dim=-1) - a
-    if ob.shape == "box":
-        q = local.abs() - torch.tensor([a, b, c], dtype=torch.float32)
-        return q.clamp(min=0).norm(dim=-1) + q.amax(-1).clamp(max=0)
-    if ob.shape == "capsule":
-        return torch.stack([lx, ly, lz - lz.clamp(-b, b)], -1).norm(dim=-1) - a
-    if ob.shape == "cylinder":
-        dr, dz = torch.hypot(lx, ly) - a, lz.abs() - b
-        return torch.maximum(dr, dz).clamp(max=0) + torch.hypot(dr.clamp(min=0), dz.clamp(min=0))
-    k = (local / torch.tensor([a, b, c], dtype=torch.float32)).norm(dim=-1)  # ellipsoid
-    return (k - 1) * min(a, b, c)
+    return local_distance(ob.shape, ob.size, local)
+
+
+MOTIONS = ("true", "frozen")  # how an oracle's true obstacles move in its plans
 
 
 class TrueObstacles:
-    """The scenario's obstacles (privileged: only the oracles get them)."""
+    """The scenario's obstacles (privileged: only the oracles get them).
 
-    def __init__(self, scenario: Scenario):
-        self.obstacles = tuple(scenario.obstacles)
+    In a scenario whose debris moves (the dynamic tier), ``motion`` "true" puts each obstacle
+    where it will be at each queried time (the exact drift and tumble of
+    ``Scenario.obstacle_poses``: the oracles' true debris motion), and "frozen" holds them at
+    their pose at ``time`` s (what a planner that believes in a still scene assumes; the pilot
+    takes :meth:`now` at each replan). Static obstacles are the same either way.
+    """
 
-    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
-        """(..., 3) metres -> (...,) signed distance to the nearest obstacle surface."""
+    def __init__(self, scenario: Scenario, motion: str = "true", time: float = 0.0):
+        if motion not in MOTIONS:
+            raise ValueError(f"motion={motion!r}: use {' or '.join(MOTIONS)}")
+        self.scenario, self.motion, self.time = scenario, motion, float(time)
+        self.moving = scenario.dynamics is not None and motion == "true"
+        self.obstacles = tuple(scenario.obstacles_at(self.time))
+
+    def now(self, time: float) -> "TrueObstacles":
+        """The field to plan with at ``time`` s: this one, or the obstacles frozen where they are then."""
+        if self.scenario.dynamics is None or self.motion == "true":
+            return self
+        return TrueObstacles(self.scenario, self.motion, time)
+
+    def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., H, 3) metres, row h at ``times[h]`` (H,) s -> (..., H) signed distance to the nearest
+        obstacle surface then. Without times, or when nothing moves: (..., 3) -> (...,) against the
+        obstacles at this field's time."""
         out = torch.full(positions.shape[:-1], math.inf)
-        for ob in self.obstacles:
-            out = torch.minimum(out, signed_distance(ob, positions.float()))
+        if not self.moving or times is None:
+            for ob in self.obstacles:
+                out = torch.minimum(out, signed_distance(ob, positions.float()))
+            return out
+        poses = self.scenario.obstacle_poses(np.asarray(times, dtype=np.float64))  # (H, N, 7)
+        centres = torch.from_numpy(poses[..., :3]).float()  # (H, N, 3)
+        rotations = quat_matrices(poses[..., 3:])  # (H, N, 3, 3) local -> world
+        x = positions.float()
+        for i, ob in enumerate(self.scenario.obstacles):
+            local = torch.einsum("...hj,hji->...hi", x - centres[:, i], rotations[:, i])  # R^T (x - c)
+            out = torch.minimum(out, local_distance(ob.shape, ob.size, local))
         return out

@@ -16,7 +16,11 @@ oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 ==========================  ==================  ======================  ===========
 
 Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
-planner never sees the obstacle list. The classes are ``orbitdata.fly.Pilot`` subclasses, so
+planner never sees the obstacle list. ``PlannerConfig.obstacle_motion`` says where each rollout
+step meets the obstacles (the step's time is counted in control steps since the reset): still
+("static"), carried by the tracker ("tracker", ``plan.tracker``), or for the oracles of a
+scenario whose debris moves, along their exact motion ("true") or held where they are at the
+replan ("frozen"). The classes are ``orbitdata.fly.Pilot`` subclasses, so
 ``orbitdata fly --pilot planner --pilot-option run=RUN`` flies them too. Several episodes fly in
 lockstep with a :meth:`PlannerPilot.fork` each and :meth:`PlannerPilot.act_batch` (``plan.batch``).
 """
@@ -31,6 +35,7 @@ import numpy as np
 import torch
 
 from orbitdata.fly import Pilot
+from orbitdata.schema import DT
 from orbitdata.seeding import rng
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
@@ -38,8 +43,9 @@ from orbitmodel.kinematics import P
 from orbitmodel.plan.batch import plan_batch
 from orbitmodel.plan.config import PlannerConfig
 from orbitmodel.plan.mppi import MPPI
-from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, depth_to_points
+from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, border_points, depth_to_points
 from orbitmodel.plan.timing import Timings
+from orbitmodel.plan.tracker import Tracker
 from orbitmodel.plan.variant import Variant
 
 
@@ -96,6 +102,11 @@ class PlannerPilot(Pilot):
             raise ValueError(f"variant {variant.value} needs {'OraclePilot' if variant.privileged else 'PlannerPilot'}")
         if (depth is None) != (variant.obstacles == "true"):
             raise ValueError(f"variant {variant.value}: give a depth source exactly when it plans around depth")
+        motions = ("static", "true", "frozen") if variant.privileged else ("static", "tracker")
+        if config.obstacle_motion not in motions:
+            raise ValueError(
+                f"obstacle_motion={config.obstacle_motion}: pilot {variant.value} takes {', '.join(motions)}"
+            )
         self.variant, self.config = variant, config
         self.name = variant.value
         self.needs_images = bool(dynamics.needs_images or depth is not None)
@@ -106,6 +117,7 @@ class PlannerPilot(Pilot):
         basis = wrench_noise_basis(sim, config.torque_noise) if config.noise == "wrench" else None
         self.mppi = MPPI(config.mppi, noise_basis=basis)
         self.memory = PointMemory(config.memory_frames)
+        self.tracker = Tracker(config.tracker) if config.obstacle_motion == "tracker" else None
         self._true: TrueObstacles | None = None
         self.goal = torch.zeros(3)
         self.goal_radius = 0.5
@@ -134,6 +146,7 @@ class PlannerPilot(Pilot):
         twin = copy.copy(self)
         twin.mppi = MPPI(self.config.mppi, noise_basis=self.mppi.basis)
         twin.memory = PointMemory(self.config.memory_frames)
+        twin.tracker = None if self.tracker is None else Tracker(self.config.tracker)
         twin.dynamics = self.dynamics.fork()
         twin._true = None
         twin._reset_episode(seed=0)
@@ -164,6 +177,8 @@ class PlannerPilot(Pilot):
         self.mppi.reset()
         self.dynamics.reset()
         self.memory.reset()
+        if self.tracker is not None:
+            self.tracker.reset()
         self._previous: np.ndarray | None = None
         self._step = 0
         self.step_seconds: list[float] = []
@@ -175,18 +190,29 @@ class PlannerPilot(Pilot):
         self.replans: list[Replan] = []
 
     def _obstacles(self, obs: dict, depth: np.ndarray | None):
-        """What to plan around: the true obstacles (oracles), else the memory of the points seen,
-        with ``depth`` (16, 16) metres, this frame's map, added."""
+        """What to plan around: the true obstacles (oracles), else the memory of the points seen (or
+        the tracker's moving clouds), with ``depth`` (16, 16) metres, this frame's map, added."""
         if self._true is not None:
-            return self._true
+            return self._true.now(self._step * DT)
+        c = self.config
         with self.timings("points"):
-            points, radii = depth_to_points(
-                depth, obs["state"], self.camera, self.config.max_range, self.config.footprint, self.config.support
-            )
-            self.memory.add(points, radii)
-            cloud = self.memory.cloud(self.config.reach)
+            points, radii = depth_to_points(depth, obs["state"], self.camera, c.max_range, c.footprint, c.support)
+            if self.tracker is None:
+                self.memory.add(points, radii)
+                cloud = self.memory.cloud(c.reach)
+            else:
+                edge = border_points(depth, self.camera, c.max_range, c.support)
+                self.tracker.add(points, radii, self._step * DT, edge)
+                cloud = self.tracker.field(self._step * DT, c.reach)
         self.cloud_sizes.append(len(cloud))
         return cloud
+
+    def plan_times(self) -> torch.Tensor | None:
+        """(H,) seconds into the episode of the rollout's states (frames t+1..t+H of frame t, this
+        step), for obstacles that move; None when the planner takes them to stand still."""
+        if self.config.obstacle_motion == "static":
+            return None
+        return (self._step + 1 + torch.arange(self.config.mppi.horizon, dtype=torch.float64)) * DT
 
     def _planned(self, result, field, states: torch.Tensor, seconds: float) -> None:
         """Keep what a replan found: its effective samples, its time, and with ``record`` the best
@@ -228,5 +254,11 @@ class OraclePilot(PlannerPilot):
         """``scenario``: the ground truth (orbitdata.fly passes it to privileged pilots only)."""
         if scenario is None:
             raise ValueError(f"the {self.name} oracle plans around the true obstacles: reset(task, scenario=...)")
-        self._true = TrueObstacles(scenario)
+        motion = self.config.obstacle_motion
+        if motion == "static" and scenario.dynamics is not None:
+            raise ValueError(
+                f"the debris of this scenario moves: fly the {self.name} oracle with obstacle_motion=true "
+                "(their exact motion) or obstacle_motion=frozen (held where they are at each replan)"
+            )
+        self._true = TrueObstacles(scenario, "true" if motion == "static" else motion)
         super().reset(task)

@@ -1,0 +1,215 @@
+"""A non-learned tracker of moving obstacles in the depth point memory (issue 40's way (b)).
+
+Each frame's world-frame points (``obstacles.depth_to_points``) are clustered into obstacles:
+the connected components of points closer than ``link`` plus their two cell radii (the spheres of
+a surface's neighbouring cells touch, so one surface is one component at any range). A cluster
+continues the track whose points, carried along the track's velocity to this frame's time, come
+nearest to it, their spheres within ``gate`` metres (nearest pairs first, one cluster per
+track); a cluster that continues none starts a track. A track's velocity is the least-squares
+slope of its clusters' centroids against time over its last ``window`` frames, capped at
+``speed_cap``, and zero until ``min_frames`` of those frames fed the fit.
+
+A depth map sees only the near face of an object, so the centroid of what is seen moves when the
+view changes, and most when the image's border cuts the object: a cluster with a point on the
+border keeps its points but is left out of the velocity fit. The planner plans around each
+track's points of its last ``point_frames`` frames, each carried along the track's velocity to the
+queried time (:class:`MovingCloud`); a track unseen for ``forget`` frames is dropped. With every
+velocity zero this is the static planner's point memory, kept per obstacle.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from orbitmodel.plan.obstacles import PointCloud
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """The tracker's knobs (to be chosen on validation seeds; these defaults are a reasoned start).
+
+    Args:
+        window: frames of a track whose centroids the velocity is fitted to (25 = 1 s: the 16x16
+            map's coarse cells make each centroid noisy, and debris drifts at a near-constant
+            velocity, so a long fit loses little).
+        point_frames: frames of a track whose points it plans around (its newest; more fill the
+            holes of one view, and each older one carries the velocity's error further).
+        link: metres beyond the two points' cell radii within which they are one obstacle (wide
+            enough to join the cells of a steep surface, such as a sphere's limb, to its face).
+        gate: metres: the widest gap between a cluster's spheres and a track's carried ones for
+            the cluster to continue the track.
+        min_frames: frames off the image border a track needs in its window before it moves
+            (fewer: velocity zero, the tracker does not invent motion from a glimpse).
+        speed_cap: m/s, the fastest a track may move (the dynamic tier draws debris up to 1 m/s).
+        forget: frames a track is kept, carried along its velocity, after it was last seen.
+    """
+
+    window: int = 25
+    point_frames: int = 10
+    link: float = 0.5
+    gate: float = 0.5
+    min_frames: int = 8
+    speed_cap: float = 1.5
+    forget: int = 50
+
+    def __post_init__(self):
+        if not 2 <= self.min_frames <= self.window or not 1 <= self.point_frames <= self.window:
+            raise ValueError(
+                f"min_frames={self.min_frames} must be in 2..window={self.window} and "
+                f"point_frames={self.point_frames} in 1..window"
+            )
+        if self.link < 0 or self.gate <= 0 or self.speed_cap < 0 or self.forget < 1:
+            raise ValueError(
+                f"link={self.link} must be >= 0, gate={self.gate} > 0, speed_cap={self.speed_cap} >= 0 "
+                f"and forget={self.forget} >= 1"
+            )
+
+
+def clusters(points: np.ndarray, radii: np.ndarray, link: float) -> np.ndarray:
+    """(N,) labels 0..C-1 of the connected components of ``points`` (N, 3) metres, two points
+    joined when they are at most ``link`` + their two ``radii`` (N,) apart."""
+    from scipy.sparse.csgraph import connected_components
+
+    if len(points) == 0:
+        return np.zeros(0, int)
+    gap = np.linalg.norm(points[:, None] - points[None], axis=-1) - radii[:, None] - radii[None]  # (N, N)
+    return connected_components(gap <= link, directed=False)[1]
+
+
+def fit_velocity(times: np.ndarray, centroids: np.ndarray) -> np.ndarray:
+    """(3,) m/s: the least-squares slope of ``centroids`` (F, 3) metres against ``times`` (F,) s."""
+    dt = times - times.mean()
+    spread = (dt**2).sum()
+    return (dt[:, None] * (centroids - centroids.mean(0))).sum(0) / spread if spread > 0 else np.zeros(3)
+
+
+@dataclass
+class Frame:
+    """One frame's cluster of a track."""
+
+    time: float  # s
+    points: np.ndarray  # (n, 3) metres, world
+    radii: np.ndarray  # (n,) metres
+    clipped: bool  # cut by the image border: its centroid is left out of the velocity fit
+
+    @property
+    def centroid(self) -> np.ndarray:
+        return self.points.mean(0)
+
+
+@dataclass
+class Track:
+    """One obstacle followed across frames."""
+
+    frames: deque  # of Frame, the last ``window``
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))  # m/s, world
+    unseen: int = 0  # frames since it was last seen
+
+    def carried(self, time: float, frames: int) -> tuple[np.ndarray, np.ndarray]:
+        """The points (n, 3) of its newest ``frames`` frames moved along its velocity to ``time`` s,
+        and their radii (n,)."""
+        newest = list(self.frames)[-frames:]
+        points = [f.points + self.velocity * (time - f.time) for f in newest]
+        return np.concatenate(points), np.concatenate([f.radii for f in newest])
+
+    def refit(self, config: TrackerConfig) -> None:
+        fed = [f for f in self.frames if not f.clipped]
+        if len(fed) < config.min_frames:
+            self.velocity = np.zeros(3)
+            return
+        v = fit_velocity(np.array([f.time for f in fed]), np.stack([f.centroid for f in fed]))
+        speed = float(np.linalg.norm(v))
+        self.velocity = v * (config.speed_cap / speed) if speed > config.speed_cap else v
+
+
+class Tracker:
+    """The tracks of one episode, fed one frame's points at a time (:meth:`add`)."""
+
+    def __init__(self, config: TrackerConfig = TrackerConfig()):
+        self.config = config
+        self.tracks: list[Track] = []
+
+    def reset(self) -> None:
+        self.tracks = []
+
+    def add(self, points: np.ndarray, radii: np.ndarray, time: float, edge: np.ndarray | None = None) -> None:
+        """Fold in a frame: ``points`` (N, 3) metres, world, ``radii`` (N,) metres, seen at ``time`` s;
+        ``edge`` (N,) bool: the points of cells on the image's border (None: none are)."""
+        c = self.config
+        points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+        edge = np.zeros(len(points), bool) if edge is None else np.asarray(edge, bool)
+        labels = clusters(points, radii, c.link)
+        count = int(labels.max()) + 1 if len(labels) else 0
+        pairs = []  # (distance, cluster, track) within the gate
+        for j, track in enumerate(self.tracks):
+            near = _gaps(*track.carried(time, c.point_frames), points, radii)  # (N,) metres
+            distance = np.full(count, math.inf)
+            np.minimum.at(distance, labels, near)
+            pairs += [(float(d), i, j) for i, d in enumerate(distance) if d <= c.gate]
+        matched: dict[int, Track] = {}  # cluster -> the track it continues
+        for _, i, j in sorted(pairs):
+            if i not in matched and all(t is not self.tracks[j] for t in matched.values()):
+                matched[i] = self.tracks[j]
+        continued = {id(t) for t in matched.values()}
+        for track in self.tracks:
+            track.unseen = 0 if id(track) in continued else track.unseen + 1
+        self.tracks = [t for t in self.tracks if t.unseen < c.forget]
+        for i in range(count):
+            mine = labels == i
+            track = matched.get(i)
+            if track is None:
+                track = Track(deque(maxlen=c.window))
+                self.tracks.append(track)
+            track.frames.append(Frame(time, points[mine], radii[mine], bool(edge[mine].any())))
+            track.refit(c)
+
+    def field(self, time: float, reach: float = 2.0) -> "MovingCloud":
+        """What to plan around from ``time`` s: each track's points carried along its velocity."""
+        frames = self.config.point_frames
+        return MovingCloud([(*t.carried(time, frames), t.velocity) for t in self.tracks], time, reach)
+
+
+def _gaps(reference: np.ndarray, reference_radii: np.ndarray, points: np.ndarray, radii: np.ndarray) -> np.ndarray:
+    """(N,) metres between the sphere of each of ``points`` (N, 3), ``radii`` (N,) and the sphere of
+    the nearest centre of ``reference`` (M, 3), ``reference_radii`` (M,)."""
+    from scipy.spatial import cKDTree
+
+    if len(points) == 0 or len(reference) == 0:
+        return np.full(len(points), math.inf)
+    distance, index = cKDTree(reference).query(points)
+    return distance - radii - reference_radii[index]
+
+
+class MovingCloud:
+    """Obstacles as clouds of spheres, each cloud moving at its own constant velocity.
+
+    ``clouds``: (points (n, 3) metres at ``time`` s, radii (n,), velocity (3,) m/s) per obstacle.
+    A position at time t is tested against each cloud where it is then, that is the position
+    moved back by velocity x (t - ``time``) against the cloud as it stands now.
+    """
+
+    def __init__(self, clouds: list[tuple[np.ndarray, np.ndarray, np.ndarray]], time: float, reach: float = 2.0):
+        self.time = float(time)
+        self.clouds = [(PointCloud(p, r, reach), torch.tensor(v, dtype=torch.float32)) for p, r, v in clouds]
+        self.points = np.concatenate([c.points for c, _ in self.clouds]) if self.clouds else np.zeros((0, 3))
+        self.velocities = np.array([v.numpy() for _, v in self.clouds]).reshape(-1, 3)
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
+        """(..., H, 3) metres, row h at ``times[h]`` (H,) s -> (..., H) metres to the nearest sphere
+        surface then (+inf beyond reach). Without times: (..., 3) -> (...,) at this field's time."""
+        out = torch.full(positions.shape[:-1], math.inf)
+        if times is not None:
+            ahead = (torch.as_tensor(times, dtype=torch.float64) - self.time).float()[:, None]  # (H, 1) s
+        for cloud, velocity in self.clouds:
+            moved = positions if times is None or not velocity.any() else positions - ahead * velocity
+            out = torch.minimum(out, cloud.clearance(moved))
+        return out

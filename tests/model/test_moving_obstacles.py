@@ -1,0 +1,320 @@
+"""Moving obstacles in the planner's cost: each rollout step meets the obstacles where they will be
+then (the oracles' exact motion, or the tracker's estimate), and the static planner is unchanged.
+
+The tracker is fed the points a depth map of synthetic spheres gives: each cell's z-depth is cast
+exactly from the camera to the nearest sphere, then back-projected by the planner's own
+``depth_to_points``, so it sees only the near faces, through the 16x16 map's coarse cells.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from orbitdata.fly.pilot import Task
+from orbitdata.fly.rollout import fly_episode
+from orbitdata.scenario.dynamics import DebrisMotion, Dynamics
+from orbitdata.scenario.spec import Obstacle, Scenario
+from orbitdata.schema import DT
+from orbitdata.seeding import grid_seed
+from orbitdata.sim.config import CameraConfig, SimConfig
+from orbitdata.sim.env import CubeSatEnv
+from orbitmodel.plan.config import PlannerConfig, planner_config, recorded
+from orbitmodel.plan.cost import trajectory_cost
+from orbitmodel.plan.dynamics import RigidBodyDynamics
+from orbitmodel.plan.factory import sensor_depth
+from orbitmodel.plan.mppi import MPPIConfig
+from orbitmodel.plan.obstacles import Camera, PointCloud, TrueObstacles, border_points, depth_to_points, signed_distance
+from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
+from orbitmodel.plan.tracker import MovingCloud, Tracker, TrackerConfig
+
+torch.set_num_threads(1)
+CAMERA = Camera.from_sim(SimConfig())
+H = 50  # a 2 s plan
+
+
+def state_at(position) -> np.ndarray:
+    """(16,) state at ``position`` (m), at rest, identity attitude (the camera looks along +x)."""
+    return np.r_[position, np.zeros(3), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32)
+
+
+def depth_map(position, spheres) -> np.ndarray:
+    """(16, 16) z-depth (m) of ``spheres`` [(centre, radius)] seen from a body at ``position``
+    with identity attitude: each cell's ray cast exactly; the far plane where it meets none."""
+    rays = CAMERA.cell_rays()  # (16, 16, 3) body = world here, unit z-depth
+    origin = np.asarray(position, float) + np.asarray(CAMERA.position)
+    depth = np.full(rays.shape[:2], CAMERA.far)
+    for centre, radius in spheres:
+        oc = origin - np.asarray(centre, float)
+        a, b, c = (rays * rays).sum(-1), (rays * oc).sum(-1), oc @ oc - radius**2
+        disc = b * b - a * c
+        s = (-b - np.sqrt(np.maximum(disc, 0))) / a
+        depth = np.where((disc >= 0) & (s > 0) & (s < depth), s, depth)
+    return depth
+
+
+def watch(tracker: Tracker, spheres, frames: int, camera_velocity=(0.0, 0.0, 0.0)) -> float:
+    """Feed ``tracker`` ``frames`` frames of ``spheres`` [(centre at t = 0, velocity, radius)] seen
+    from a body drifting at ``camera_velocity`` from the origin; returns the last frame's time."""
+    for f in range(frames):
+        t = f * DT
+        position = np.asarray(camera_velocity) * t
+        depth = depth_map(position, [(np.add(c, np.multiply(v, t)), r) for c, v, r in spheres])
+        points, radii = depth_to_points(depth, state_at(position), CAMERA, support=1)
+        tracker.add(points, radii, t, border_points(depth, CAMERA, support=1))
+    return (frames - 1) * DT
+
+
+def exact_gap(x: np.ndarray, centre, velocity, radius: float, t: float) -> np.ndarray:
+    return np.linalg.norm(x - (np.asarray(centre) + np.asarray(velocity) * t), axis=-1) - radius
+
+
+def facing_shell(centre: np.ndarray, radius: float, viewpoint: np.ndarray) -> np.ndarray:
+    """(30, 3) points 0 to 0.4 m off the surface of a sphere, spread over the side facing ``viewpoint``."""
+    toward = (viewpoint - centre) / np.linalg.norm(viewpoint - centre)
+    side = np.cross(toward, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    up = np.cross(side, toward)
+    out = []
+    for gap in (0.0, 0.2, 0.4):
+        for a in (-0.8, -0.4, 0.0, 0.4, 0.8):
+            for b in (-0.4, 0.4):
+                d = toward + a * side + b * up
+                out.append(centre + (radius + gap) * d / np.linalg.norm(d))
+    return np.array(out)
+
+
+def the_track(tracker: Tracker, centre) -> object:
+    """The track whose newest points lie nearest to ``centre``."""
+    return min(tracker.tracks, key=lambda t: np.linalg.norm(t.frames[-1].points.mean(0) - centre))
+
+
+# ---- the tracker ---------------------------------------------------------------------------------
+def test_the_tracker_estimates_a_moving_sphere_velocity_and_predicts_where_it_will_be():
+    centre, velocity, radius = np.array([2.6, -0.6, 0.3]), np.array([-0.4, 0.7, -0.2]), 0.6
+    tracker = Tracker()
+    now = watch(tracker, [(centre, velocity, radius)], 30, camera_velocity=(0.5, 0.0, 0.0))
+    assert len(tracker.tracks) == 1
+    error = np.linalg.norm(tracker.tracks[0].velocity - velocity)
+    assert error < 0.15, (tracker.tracks[0].velocity, velocity)  # the truth is 0.83 m/s
+    # 1 s ahead, around the face it will show: the exact clearance of the moved sphere, to within
+    # the cloud's cells (a point is a sphere half a cell wide) and the velocity's error.
+    ahead = now + 1.0
+    x = facing_shell(centre + velocity * ahead, radius, np.r_[0.5 * now, 0, 0])
+    field = tracker.field(now, reach=5.0)
+    got = field.clearance(torch.tensor(x[:, None], dtype=torch.float32), torch.tensor([ahead])).numpy()[:, 0]
+    truth = exact_gap(x, centre, velocity, radius, ahead)
+    assert np.abs(got - truth).max() < 0.25, np.c_[got, truth]
+    # The same points held still (the static planner's belief) are wrong by its motion.
+    still = field.clearance(torch.tensor(x, dtype=torch.float32)).numpy()
+    assert np.abs(still - truth).max() > 0.45
+
+
+def test_two_spheres_moving_differently_are_tracked_apart():
+    spheres = [
+        (np.array([2.8, -1.1, 0.0]), np.array([0.0, -0.4, 0.4]), 0.5),
+        (np.array([2.8, 1.1, 0.2]), np.array([-0.6, 0.2, -0.3]), 0.5),
+    ]
+    tracker = Tracker()
+    now = watch(tracker, spheres, 30)
+    assert len(tracker.tracks) == 2
+    for centre, velocity, _ in spheres:
+        track = the_track(tracker, centre + velocity * now)
+        assert np.linalg.norm(track.velocity - velocity) < 0.15, (track.velocity, velocity)
+    assert the_track(tracker, spheres[0][0]) is not the_track(tracker, spheres[1][0] + spheres[1][1] * now)
+
+
+def test_a_still_sphere_gets_no_velocity_from_a_moving_camera():
+    tracker = Tracker()
+    watch(tracker, [(np.array([3.2, 0.3, -0.2]), np.zeros(3), 0.6)], 30, camera_velocity=(1.0, 0.1, 0.0))
+    assert len(tracker.tracks) == 1
+    assert np.linalg.norm(tracker.tracks[0].velocity) < 0.15  # against 1 m/s of the camera's own motion
+
+
+def test_a_track_seen_in_fewer_than_min_frames_stands_still_and_the_speed_is_capped():
+    sphere = [(np.array([2.6, -0.3, 0.0]), np.array([0.0, 0.8, 0.0]), 0.6)]
+    glimpse = Tracker(TrackerConfig(min_frames=8))
+    watch(glimpse, sphere, 7)
+    assert [t.velocity.tolist() for t in glimpse.tracks] == [[0.0, 0.0, 0.0]]
+    capped = Tracker(TrackerConfig(speed_cap=0.3))
+    watch(capped, sphere, 30)
+    assert np.linalg.norm(capped.tracks[0].velocity) == pytest.approx(0.3)
+
+
+def test_a_track_out_of_view_is_carried_along_then_forgotten():
+    tracker = Tracker(TrackerConfig(forget=5))
+    watch(tracker, [(np.array([2.6, -0.3, 0.0]), np.array([0.0, 0.6, 0.0]), 0.6)], 30)
+    (track,) = tracker.tracks
+    for f in range(4):
+        tracker.add(np.zeros((0, 3)), np.zeros(0), (30 + f) * DT)
+    assert tracker.tracks == [track] and track.unseen == 4
+    tracker.add(np.zeros((0, 3)), np.zeros(0), 34 * DT)
+    assert tracker.tracks == []
+
+
+# ---- the time-indexed cost -----------------------------------------------------------------------
+RADIUS, PATH_SPEED, NOW_FRAME = 0.4, 1.5, 30
+NOW = NOW_FRAME * DT
+
+
+def straight_path() -> torch.Tensor:
+    """(1, H, 16) states flying +x at PATH_SPEED from the origin, frames NOW+1 .. NOW+H."""
+    s = torch.tensor(state_at((0.0, 0.0, 0.0))).repeat(1, H, 1)
+    s[0, :, 0] = PATH_SPEED * DT * torch.arange(1, H + 1)
+    s[0, :, 3] = PATH_SPEED  # body velocity: along the camera axis
+    return s
+
+
+def plan_times() -> torch.Tensor:
+    return (NOW_FRAME + 1 + torch.arange(H, dtype=torch.float64)) * DT
+
+
+# A sphere that will cross the path (0.8 m/s along +y, on it 1.4 s from now), and one on the path
+# now that leaves it (1 m/s along +y); centres at t = 0 of the episode.
+CROSSING = (np.array([2.1, -0.8 * (NOW + 1.4), 0.0]), np.array([0.0, 0.8, 0.0]))
+LEAVING = (np.array([2.1, -1.0 * NOW, 0.0]), np.array([0.0, 1.0, 0.0]))
+
+
+def moving_scenario(centre, velocity) -> Scenario:
+    sphere = Obstacle("sphere", tuple(centre), (RADIUS, 0.0, 0.0))
+    return Scenario((sphere,), goal=(6.0, 0.0, 0.0), dynamics=Dynamics(debris=(DebrisMotion(tuple(velocity)),)))
+
+
+def field_for(motion: str, centre, velocity):
+    if motion == "tracker":
+        tracker = Tracker()
+        assert watch(tracker, [(centre, velocity, RADIUS)], NOW_FRAME + 1) == pytest.approx(NOW)
+        return tracker.field(NOW, reach=1.0)
+    return TrueObstacles(moving_scenario(centre, velocity), motion).now(NOW)
+
+
+@pytest.mark.parametrize("motion", ["true", "tracker", "frozen"])
+def test_the_cost_meets_each_step_where_the_obstacle_will_be(motion):
+    c = PlannerConfig().cost
+    costs = {}
+    for name, (centre, velocity) in {"crossing": CROSSING, "leaving": LEAVING}.items():
+        field = field_for(motion, centre, velocity)
+        _, terms = trajectory_cost(
+            straight_path(), torch.zeros(1, H, 8), torch.tensor([6.0, 0, 0]), 0.5, field, c, plan_times()
+        )
+        costs[name] = (float(terms["crash"]), float(terms["collision"]))
+    hit, clear = ("leaving", "crossing") if motion == "frozen" else ("crossing", "leaving")
+    assert costs[hit][0] == c.crash and costs[hit][1] > 0, costs
+    assert costs[clear] == (0.0, 0.0), costs
+
+
+def test_true_motion_is_the_exact_pose_at_each_step():
+    box = Obstacle("box", (2.0, 0.5, -0.3), (0.4, 0.2, 0.3), quat=(0.9, 0.1, 0.3, 0.2))
+    ball = Obstacle("sphere", (1.0, -1.0, 0.5), (0.3, 0.0, 0.0))
+    motions = (DebrisMotion((-0.4, 0.2, 0.1), (0.3, -0.2, 0.4)), DebrisMotion((0.1, 0.5, 0.0)))
+    scenario = Scenario((box, ball), (6.0, 0, 0), dynamics=Dynamics(motions, cw=True, mean_motion=0.00113))
+    x = torch.rand(4, 6, 3, generator=torch.Generator().manual_seed(0)) * 3 - 0.5  # (K, H, 3)
+    times = torch.tensor([0.0, 0.5, 1.0, 2.0, 4.0, 8.0], dtype=torch.float64)
+    got = TrueObstacles(scenario, "true").clearance(x, times)
+    for h, t in enumerate(times.tolist()):
+        want = torch.stack([signed_distance(ob, x[:, h]) for ob in scenario.obstacles_at(t)]).amin(0)
+        assert torch.allclose(got[:, h], want, atol=1e-5)
+    frozen = TrueObstacles(scenario, "frozen").now(1.0).clearance(x, times)
+    want = torch.stack([signed_distance(ob, x) for ob in scenario.obstacles_at(1.0)]).amin(0)
+    assert torch.allclose(frozen, want, atol=1e-5)
+
+
+def test_fields_of_still_obstacles_ignore_the_times():
+    x = torch.rand(3, 7, 3, generator=torch.Generator().manual_seed(1)) * 3
+    times = torch.arange(7, dtype=torch.float64) * 0.3
+    still = Scenario((Obstacle("sphere", (1.5, 0.2, 0.0), (0.5, 0, 0)),), (6.0, 0, 0))
+    points = np.random.default_rng(0).uniform(0, 3, (40, 3))
+    for field in (
+        TrueObstacles(still),
+        TrueObstacles(still, "frozen").now(2.0),
+        PointCloud(points, np.full(40, 0.1)),
+        MovingCloud([(points, np.full(40, 0.1), np.zeros(3))], 0.0),
+    ):
+        assert torch.equal(field.clearance(x, times), field.clearance(x))
+
+
+# ---- the planner setting -------------------------------------------------------------------------
+SIM = SimConfig(camera=CameraConfig(image_size=32), max_steps=10)
+SMALL = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=6))
+
+
+class OldCallField:
+    """A field with the one-argument ``clearance`` of the static planner: it refuses times."""
+
+    def __init__(self, field):
+        self.field, self.points = field, field.points
+
+    def __len__(self):
+        return len(self.field)
+
+    def clearance(self, positions):
+        return self.field.clearance(positions)
+
+
+class OldCallPilot(PlannerPilot):
+    def _obstacles(self, obs, depth):
+        return OldCallField(super()._obstacles(obs, depth))
+
+
+def sensor_pilot(cls=PlannerPilot, **changes) -> PlannerPilot:
+    config = dataclasses.replace(SMALL, **changes)
+    return cls(Variant.ORACLE_TRUE_DYN_SENSOR, RigidBodyDynamics(SIM), sensor_depth, Camera.from_sim(SIM), config, SIM)
+
+
+def fly(pilot, scenario=None) -> np.ndarray:
+    env = CubeSatEnv(SIM)
+    result = fly_episode(env, pilot, grid_seed(0, 3, 1.0, 2), 3, 1.0, scenario=scenario)
+    env.close()
+    return result.actions
+
+
+def test_the_static_planner_flies_the_old_call_path_to_the_bit():
+    assert np.array_equal(fly(sensor_pilot()), fly(sensor_pilot(OldCallPilot)))
+
+
+def test_the_tracking_planner_follows_a_rendered_moving_sphere():
+    centre, velocity = (2.6, -0.9, 0.0), (0.0, 0.6, 0.0)
+    pilot = sensor_pilot(obstacle_motion="tracker")
+    actions = fly(pilot, moving_scenario(centre, velocity))
+    assert len(actions) > 5 and np.isfinite(actions).all()
+    (track,) = pilot.tracker.tracks  # the rendered depth_low, through the pilot's own cell filter
+    assert np.linalg.norm(track.velocity - velocity) < 0.2, track.velocity  # the truth is 0.6 m/s
+
+
+def test_the_oracles_take_true_or_frozen_and_the_planner_static_or_tracker():
+    with pytest.raises(ValueError, match="obstacle_motion=tracker"):
+        OraclePilot(Variant.ORACLE_TRUE, RigidBodyDynamics(SIM), None, CAMERA, PlannerConfig(obstacle_motion="tracker"))
+    with pytest.raises(ValueError, match="obstacle_motion=true"):
+        sensor_pilot(obstacle_motion="true")
+    with pytest.raises(ValueError, match="obstacle_motion"):
+        PlannerConfig(obstacle_motion="psychic")
+    oracle = OraclePilot(Variant.ORACLE_TRUE, RigidBodyDynamics(SIM), None, CAMERA, SMALL)
+    task = Task(goal=(6.0, 0.0, 0.0), goal_radius=0.5, initial_velocity=(0.0, 0.0, 0.0), seed=0)
+    with pytest.raises(ValueError, match="obstacle_motion=true"):  # moving debris: say which oracle
+        oracle.reset(task, scenario=moving_scenario(*CROSSING))
+
+
+def test_the_settings_record_the_motion_and_the_tracker_only_when_not_static():
+    plain = recorded(planner_config("cpu"))
+    assert "obstacle_motion" not in plain and "tracker" not in plain
+    assert "tracker" not in recorded(planner_config("cpu", obstacle_motion="true"))
+    tracked = recorded(planner_config("cpu", obstacle_motion="tracker", window="30", speed_cap="1.2"))
+    assert tracked["obstacle_motion"] == "tracker"
+    assert tracked["tracker"] == dataclasses.asdict(TrackerConfig(window=30, speed_cap=1.2))
+    with pytest.raises(ValueError, match="min_frames"):
+        planner_config("cpu", obstacle_motion="tracker", min_frames="40")
+
+
+def test_the_oracles_fly_moving_debris_true_or_frozen():
+    # On the way to the goal now, gone from it in a second: only the frozen oracle steers around it.
+    scenario = dataclasses.replace(moving_scenario((1.2, 0.0, 0.0), (0.0, 1.0, 0.0)), goal=(4.0, 0.0, 0.0))
+    plans = {}
+    for motion in ("true", "frozen"):
+        config = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=25), obstacle_motion=motion)
+        oracle = OraclePilot(Variant.ORACLE_TRUE, RigidBodyDynamics(SIM), None, CAMERA, config, SIM)
+        plans[motion] = fly(oracle, scenario)
+        assert np.isfinite(plans[motion]).all()
+    assert not np.array_equal(plans["true"], plans["frozen"])  # they expect different futures
