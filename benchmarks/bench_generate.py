@@ -1,6 +1,7 @@
 """Generation throughput per core against the render-only bound, bytes per frame, and memory.
 
     python benchmarks/bench_generate.py [--episodes 24] [--image-size 224]
+    python benchmarks/bench_generate.py --tier dynamic [--episodes 40] [--workers 2] [--repeats 2]
 
 1. End to end: `generate` with one worker (one core) -> frames/s, wall time of the whole
    command (planning, flying, rendering, encoding, sharding, stats, card).
@@ -10,6 +11,13 @@
 3. Bytes per frame of the finished dataset (goal <= 12 KB at 224 px).
 4. Peak memory (max RSS) of a one-worker generation of N and 3N episodes in subprocesses:
    it should be flat in the number of episodes.
+
+``--tier dynamic`` measures instead that tier's generation against the static tier's, side by
+side in one run: the same episode count, root seed, image size (64 px unless given) and workers,
+the whole command each time, the two tiers alternating (static, dynamic, static, ...) for
+``--repeats`` rounds so that a change in the machine's load falls on both. It prints episodes
+(and frames) per second of each run and of each tier over its runs, and the ratio of the
+dynamic tier's episodes per second to the static tier's (goal >= 0.5).
 """
 
 from __future__ import annotations
@@ -45,8 +53,8 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
 """
 
 
-def config(episodes: int, image_size: int) -> GenerationConfig:
-    cfg = GenerationConfig()
+def config(episodes: int, image_size: int, tier: str = "static") -> GenerationConfig:
+    cfg = GenerationConfig.for_tier(tier)
     return cfg.replace(
         dataset={"episodes": episodes, "seed": 123},
         sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)},
@@ -93,11 +101,46 @@ def peak_rss_mb(episodes: int, image_size: int) -> float:
         return int(out[-1]) / 1024
 
 
+def compare_tiers(tier: str, episodes: int, image_size: int, workers: int, repeats: int) -> None:
+    """Episodes per second of ``generate`` for the static tier and ``tier``, alternating."""
+    runs: dict[str, list[tuple[float, int]]] = {"static": [], tier: []}  # (wall s, frames) per run
+    print(f"generate, {episodes} episodes per run, {image_size} px, {workers} workers, seed 123, {repeats} rounds")
+    for r in range(repeats):
+        for name in runs:
+            with tempfile.TemporaryDirectory() as tmp:
+                start = time.perf_counter()
+                info = generate(
+                    Path(tmp) / "ds", config(episodes, image_size, name), workers=workers, figure=overview_figure
+                )
+                wall = time.perf_counter() - start
+            frames = info.counts["frames"]
+            runs[name].append((wall, frames))
+            print(
+                f"  round {r + 1}, {name:>7}: {wall:6.1f} s, {episodes / wall:.3f} episodes/s, "
+                f"{frames / wall:,.0f} frames/s ({frames / episodes:.0f} frames per episode)"
+            )
+    rate = {}
+    for name, measured in runs.items():
+        wall, frames = sum(w for w, _ in measured), sum(f for _, f in measured)
+        rate[name] = len(measured) * episodes / wall
+        print(f"{name:>7} tier: {rate[name]:.3f} episodes/s, {frames / wall:,.0f} frames/s over {len(measured)} runs")
+    print(f"ratio {tier} / static: {rate[tier] / rate['static']:.2f} episodes per second (goal >= 0.5)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--episodes", type=int, default=24)
-    ap.add_argument("--image-size", type=int, default=224)
+    ap.add_argument("--episodes", type=int, default=None, help="episodes per run (24; 40 with --tier)")
+    ap.add_argument("--image-size", type=int, default=None, help="camera px (224; 64 with --tier)")
+    ap.add_argument("--tier", choices=["dynamic"], default=None, help="compare this tier's generation to the static")
+    ap.add_argument("--workers", type=int, default=2, help="workers of each run (--tier only)")
+    ap.add_argument("--repeats", type=int, default=2, help="rounds of static then the tier (--tier only)")
     args = ap.parse_args()
+    if args.tier is not None:
+        if args.workers < 1 or args.repeats < 1:
+            ap.error("--workers and --repeats must be >= 1")
+        compare_tiers(args.tier, args.episodes or 40, args.image_size or 64, args.workers, args.repeats)
+        return
+    args.episodes, args.image_size = args.episodes or 24, args.image_size or 224
     cfg = config(args.episodes, args.image_size)
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()

@@ -63,6 +63,10 @@ class DatasetConfig:
             raise ValueError("episodes_per_unit, row_group_rows and max_shard_bytes must be positive")
 
 
+class TierConflict(ValueError):
+    """A config file names one scenario tier and the caller asked for another."""
+
+
 @dataclass(frozen=True)
 class GenerationConfig:
     """Everything that defines a dataset (or a flight grid): one section per stage.
@@ -79,14 +83,10 @@ class GenerationConfig:
     sim: SimConfig = field(default_factory=SimConfig)
     pilots: PilotsConfig = field(default_factory=PilotsConfig)
 
-    def __post_init__(self) -> None:
-        if self.scenario.tier != STATIC:
-            # Never silently: a dataset or grid of the tier would lack its episode record and poses.
-            raise ValueError(
-                f"scenario.tier {self.scenario.tier!r} cannot be generated or flown on a grid yet: the dataset writer "
-                "and the grid do not record its columns; fly it in orbitdata.sim.CubeSatEnv or "
-                f"gym.make('CubeSat-v1', tier={self.scenario.tier!r})"
-            )
+    @property
+    def tier(self) -> str:
+        """The scenario tier (``static`` or ``dynamic``): it decides the dataset's columns."""
+        return self.scenario.tier
 
     @property
     def flight(self) -> FlightConfig:
@@ -107,7 +107,9 @@ class GenerationConfig:
         return build(cls, data, where)
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "GenerationConfig":
+    def from_toml(cls, path: str | Path, tier: str | None = None) -> "GenerationConfig":
+        """The config of a TOML file. ``tier``: build that scenario tier (its defaults, under the
+        file's own scenario settings); a file whose ``[scenario]`` names another tier is an error."""
         path = Path(path)
         try:
             data = tomllib.loads(path.read_text())
@@ -115,7 +117,19 @@ class GenerationConfig:
             raise ValueError(f"config file {path} does not exist") from None
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
+        if tier is not None:
+            scenario = data.get("scenario", {})
+            named = scenario.get("tier") if isinstance(scenario, dict) else None
+            if named is not None and named != tier:
+                raise TierConflict(f"{path} sets scenario.tier = {named!r}, not {tier!r}")
+            if isinstance(scenario, dict):
+                data = {**data, "scenario": {**scenario, "tier": tier}}
         return build(cls, data, str(path))
+
+    @classmethod
+    def for_tier(cls, tier: str) -> "GenerationConfig":
+        """The defaults with the scenario tier ``tier`` (``ScenarioConfig.for_tier``)."""
+        return cls(scenario=ScenarioConfig.for_tier(tier))
 
     def replace(self, **sections) -> "GenerationConfig":
         """Copy with fields of sections replaced, e.g. ``replace(dataset={'episodes': 10})``."""

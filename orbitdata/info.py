@@ -100,6 +100,11 @@ class Info:
         return ((self.config.get("sim") or {}).get("camera") or {}).get("image_size")
 
     @property
+    def tier(self) -> str:
+        """The scenario tier, from the recorded config (a static record leaves it out)."""
+        return (self.config.get("scenario") or {}).get("tier", S.STATIC_TIER)
+
+    @property
     def max_steps(self) -> int | None:
         """Frames per episode at most."""
         return (self.config.get("sim") or {}).get("max_steps")
@@ -116,15 +121,17 @@ class Info:
         return GenerationConfig.from_dict(self.config, where=f"{S.INFO_PATH} config")
 
 
-def counts(rows: Iterable[tuple[str, str, str, int]]) -> dict:
+def counts(rows: Iterable[tuple[str, str, str, int]], tier: str = S.STATIC_TIER) -> dict:
     """Episode and frame counts per split, level and outcome from ``(split, level, outcome, length)`` rows.
 
     The definition of info.json's ``counts``: the writer states it, the validator recomputes it.
+    The outcomes counted are the ``tier``'s (``orbitdata.schema.outcomes``).
     """
     rows = list(rows)
+    names = S.outcomes(tier)
 
     def tally(mine: list) -> dict:
-        return {o: sum(1 for r in mine if r[2] == o) for o in S.OUTCOMES}
+        return {o: sum(1 for r in mine if r[2] == o) for o in names}
 
     out: dict = {"episodes": len(rows), "frames": sum(r[3] for r in rows), "splits": {}}
     for split in S.SPLITS:

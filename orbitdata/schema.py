@@ -43,6 +43,17 @@ DEPTH_LOW_DIM = DEPTH_LOW_SIDE * DEPTH_LOW_SIDE
 SPLITS = ("train", "test")
 LEVELS = ("expert", "risky", "exploratory")
 OUTCOMES = ("success", "collision", "timeout", "out_of_fuel")
+# The dynamic tier's episodes may also end "tumbling": the body spun past the tier's rate limit
+# (``DynamicConfig.max_body_rate``). A static dataset, its grid JSON and its card never name it.
+TUMBLING = "tumbling"
+DYNAMIC_OUTCOMES = OUTCOMES + (TUMBLING,)
+
+
+def outcomes(tier: str = "static") -> tuple[str, ...]:
+    """How an episode of ``tier`` can end: :data:`OUTCOMES`, and on the dynamic tier also ``tumbling``."""
+    return DYNAMIC_OUTCOMES if tier == "dynamic" else OUTCOMES
+
+
 SHAPES = ("sphere", "ellipsoid", "box", "capsule", "cylinder")
 
 
@@ -80,9 +91,13 @@ DATA_FILE = "data_file"
 ROW_START = "row_start"
 ROW_END = "row_end"
 
-# ---- the dynamic tier's columns: proposed (docs/design.md), not written yet -----------------
-# A dynamic-tier dataset adds these to the tables above (a static one is unchanged).
-OBSTACLE_POSES = "privileged.obstacle_poses"  # steps: a learned pilot never reads privileged.*
+# ---- the dynamic tier's columns ---------------------------------------------------------
+# The scenario tiers whose tables differ: orbitdata.scenario.config.TIERS (the schema sits below
+# the scenario package, so it names them itself; a test checks that they agree).
+STATIC_TIER, DYNAMIC_TIER = "static", "dynamic"
+# A dynamic-tier dataset appends these to the tables above (a static one is unchanged).
+PRIVILEGED_PREFIX = "privileged."  # for oracles and validation: a learned pilot never reads them
+OBSTACLE_POSES = "privileged.obstacle_poses"  # steps
 DEBRIS_MOTION = "debris_motion"
 CW = "cw"
 MEAN_MOTION = "mean_motion"
@@ -90,6 +105,17 @@ BODY = "body"
 FAULT = "fault"
 SENSING = "sensing"
 UNSURVIVABLE_DRAWS = "unsurvivable_draws"
+# Field of orbitdata.scenario.dynamics.Dynamics -> its episode column (the values are the
+# record's, as dataclasses.asdict gives them).
+DYNAMICS_COLUMNS = {
+    "debris": DEBRIS_MOTION,
+    "cw": CW,
+    "mean_motion": MEAN_MOTION,
+    "body": BODY,
+    "fault": FAULT,
+    "sensing": SENSING,
+    "unsurvivable_draws": UNSURVIVABLE_DRAWS,
+}
 
 # ---- paths --------------------------------------------------------------------------------
 DATA_DIR = "data"
@@ -242,8 +268,8 @@ def _arrow() -> dict:
         Field(ROW_END, pa.int64(), "", "one past its last row"),
     )
 
-    # The dynamic tier's columns (proposed; FIELDS and the schemas above leave them out until the
-    # writer records them). The struct fields are those of orbitdata.scenario.dynamics' records.
+    # The dynamic tier's columns, appended to a dynamic dataset's tables (see ``step_fields``).
+    # The struct fields are those of orbitdata.scenario.dynamics' records.
     DEBRIS_MOTION_STRUCT = pa.struct(
         [
             ("velocity", VEC3),  # m/s, world frame, at t = 0
@@ -283,7 +309,7 @@ def _arrow() -> dict:
             pa.list_(pa.list_(pa.float32(), 7)),
             "m, 1",
             "privileged, for oracles and validation only: each obstacle's centre (world) and quat (w, x, y, z) "
-            "at this frame",
+            "at this frame, in the order of the episode's obstacles",
         ),
     )
     DYNAMIC_EPISODE_FIELDS = (
@@ -308,6 +334,52 @@ def __getattr__(name: str):
     if name in ARROW_NAMES:
         return _arrow()[name]
     raise AttributeError(f"module 'orbitdata.schema' has no attribute {name!r}")
+
+
+def is_privileged(name: str) -> bool:
+    """Whether a column is for oracles and validation only (``privileged.*``): no learned pilot reads it."""
+    return name.startswith(PRIVILEGED_PREFIX)
+
+
+def fields_of(kind: str, tier: str = STATIC_TIER) -> tuple[Field, ...]:
+    """The columns of a table (``'data'`` or ``'episodes'``) of a tier's dataset: the static
+    tier's, and for the dynamic tier those plus its own appended at the end."""
+    arrow = _arrow()
+    if kind not in arrow["FIELDS"]:
+        raise ValueError(f"unknown table kind {kind!r}: expected 'data' or 'episodes'")
+    if tier not in (STATIC_TIER, DYNAMIC_TIER):
+        raise ValueError(f"unknown scenario tier {tier!r}; choose one of {STATIC_TIER}, {DYNAMIC_TIER}")
+    fields = arrow["FIELDS"][kind]
+    if tier == STATIC_TIER:
+        return fields
+    return fields + (arrow["DYNAMIC_STEP_FIELDS"] if kind == "data" else arrow["DYNAMIC_EPISODE_FIELDS"])
+
+
+def step_fields(tier: str = STATIC_TIER) -> tuple[Field, ...]:
+    """The steps table's columns in a dataset of ``tier``."""
+    return fields_of("data", tier)
+
+
+def episode_fields(tier: str = STATIC_TIER) -> tuple[Field, ...]:
+    """The episodes table's columns in a dataset of ``tier``."""
+    return fields_of("episodes", tier)
+
+
+@functools.cache
+def _schema(kind: str, tier: str):
+    import pyarrow as pa
+
+    return pa.schema([(f.name, f.type) for f in fields_of(kind, tier)])
+
+
+def step_schema(tier: str = STATIC_TIER):
+    """The steps table's Arrow schema in a dataset of ``tier`` (``STEP_SCHEMA`` for static)."""
+    return _schema("data", tier)
+
+
+def episode_schema(tier: str = STATIC_TIER):
+    """The episodes table's Arrow schema in a dataset of ``tier`` (``EPISODE_SCHEMA`` for static)."""
+    return _schema("episodes", tier)
 
 
 def column_width(name: str) -> int:
@@ -336,15 +408,12 @@ def _hf_feature(t) -> dict:
     return {"dtype": {"float": "float32", "double": "float64"}.get(str(t), str(t)), "_type": "Value"}
 
 
-def hf_features(kind: str) -> dict:
+def hf_features(kind: str, tier: str = STATIC_TIER) -> dict:
     """The `datasets` feature spec of a table, derived from its Arrow schema (Parquet metadata, card)."""
-    fields = _arrow()["FIELDS"]
-    if kind not in fields:
-        raise ValueError(f"unknown table kind {kind!r}: expected 'data' or 'episodes'")
-    return {f.name: _hf_feature(f.type) for f in fields[kind]}
+    return {f.name: _hf_feature(f.type) for f in fields_of(kind, tier)}
 
 
-def with_hf_metadata(schema, kind: str):
+def with_hf_metadata(schema, kind: str, tier: str = STATIC_TIER):
     """Attach the `datasets` feature metadata so Image columns decode with no custom code."""
-    meta = {b"huggingface": json.dumps({"info": {"features": hf_features(kind)}}).encode()}
+    meta = {b"huggingface": json.dumps({"info": {"features": hf_features(kind, tier)}}).encode()}
     return schema.with_metadata(meta)

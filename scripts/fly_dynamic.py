@@ -27,7 +27,7 @@ from orbitdata.fly.pilots.config import DynamicExpertConfig
 from orbitdata.fly.pilots.dynamic_expert import DynamicExpertPilot
 from orbitdata.scenario.config import ScenarioConfig
 from orbitdata.scenario.geometry import signed_distance
-from orbitdata.schema import DT, OUTCOMES
+from orbitdata.schema import DT, outcomes
 from orbitdata.seeding import grid_seed
 from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
 from orbitmodel.evaluate.success import rate_text, wilson
@@ -83,7 +83,8 @@ def fly(pilot, env, seed: int, obstacles: list[int], speeds: list[float], episod
                     cause, line = _cause(result)
                     causes[cause] += 1
                     failures.append(f"{n} obstacles, {v:g} m/s, episode {k}: {line}")
-            cells.append({"obstacles": n, "speed": v, "episodes": episodes, **{o: counts[o] for o in OUTCOMES}})
+            names = outcomes(env.scenario_config.tier)
+            cells.append({"obstacles": n, "speed": v, "episodes": episodes, **{o: counts[o] for o in names}})
     total = len(obstacles) * len(speeds) * episodes
     return {
         "settings": cells,

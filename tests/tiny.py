@@ -18,3 +18,14 @@ def tiny_config(episodes: int = 6, seed: int = 0, **dataset):
         },
         sim={"camera": cfg.sim.camera.__class__(image_size=64)},
     )
+
+
+def dynamic_config(episodes: int = 6, seed: int = 0, **dataset):
+    """A tiny dataset of the dynamic tier: 32 px, otherwise as :func:`tiny_config`."""
+    import dataclasses
+
+    from orbitdata.scenario.config import ScenarioConfig
+
+    cfg = tiny_config(episodes, seed, **dataset)
+    cfg = dataclasses.replace(cfg, scenario=ScenarioConfig.for_tier("dynamic"))
+    return cfg.replace(sim={"camera": cfg.sim.camera.__class__(image_size=32)})

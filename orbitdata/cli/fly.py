@@ -10,6 +10,7 @@ from pathlib import Path
 import typer
 
 from orbitdata.cli.errors import friendly, usage_errors
+from orbitdata.cli.generate import TIER_HELP, Tier, load_config
 from orbitdata.cli.options import key_values
 from orbitdata.fly.registry import ENTRY_POINT_GROUP, list_pilots
 from orbitdata.sim.config import CameraConfig
@@ -88,6 +89,7 @@ def register(app: typer.Typer) -> None:
             "config's quality), as the dataset stores it [default: raw renders, unless the pilot asks "
             "for the codec, as a policy's flight preset does].",
         ),
+        tier: Tier = typer.Option(None, show_default="static, or the --config's", help=TIER_HELP),
         config: Path = typer.Option(None, help="TOML config (scenario/sim/pilots settings)."),
         pilot_option: list[str] = typer.Option([], help="KEY=VALUE passed to the pilot's factory (repeatable)."),
     ):
@@ -96,13 +98,14 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
         from rich.table import Table
 
-        from orbitdata.config import GenerationConfig
-        from orbitdata.fly.grid import check_grid, fly_grid, grid_report
+        from orbitdata.fly.grid import check_grid, fly_grid, grid_report, pooled
         from orbitdata.fly.registry import pilot_factory
+        from orbitdata.scenario.config import STATIC
+        from orbitdata.schema import outcomes
 
         with usage_errors():
             check_grid(obstacles, speeds, episodes)
-            cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
+            cfg = load_config(config, tier)
             if image_size is not None:
                 import dataclasses
 
@@ -148,20 +151,17 @@ def register(app: typer.Typer) -> None:
                 thrust_noise=thrust_noise,
                 noise_hold=noise_hold,
             )
-        table = Table(title=f"{pilot} pilot, {episodes} episodes per setting, seed {seed}")
-        for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success %"):
+        where = "" if cfg.tier == STATIC else f", {cfg.tier} tier"
+        table = Table(title=f"{pilot} pilot{where}, {episodes} episodes per setting, seed {seed}")
+        names = outcomes(cfg.tier)
+        for col in ("obstacles", "v0 m/s", *(o.replace("_", " ") for o in names), "success %"):
             table.add_column(col, justify="right")
         for c in cells:
-            table.add_row(
-                str(c.obstacles),
-                f"{c.speed:g}",
-                str(c.success),
-                str(c.collision),
-                str(c.timeout),
-                str(c.out_of_fuel),
-                f"{100 * c.success_rate:.0f}",
-            )
+            counts = (str(getattr(c, o)) for o in names)
+            table.add_row(str(c.obstacles), f"{c.speed:g}", *counts, f"{100 * c.success_rate:.0f}")
         Console().print(table)
+        successes, flown = pooled(cells)
+        typer.echo(f"pooled: {successes}/{flown} success")
         if json_out is not None:
             json_out.parent.mkdir(parents=True, exist_ok=True)
             name = f"{pilot}+noise{thrust_noise:g}x{noise_hold}" if thrust_noise else pilot  # ThrustNoise's name
@@ -171,4 +171,5 @@ def register(app: typer.Typer) -> None:
                 "thrust_noise": thrust_noise,
                 "noise_hold": noise_hold,
             }
-            json_out.write_text(json.dumps(grid_report(name, seed, cells, flight), indent=2) + "\n")
+            report = grid_report(name, seed, cells, flight, cfg.tier)
+            json_out.write_text(json.dumps(report, indent=2) + "\n")

@@ -21,6 +21,28 @@ class Executor(str, Enum):
     ray = "ray"
 
 
+class Tier(str, Enum):
+    static = "static"
+    dynamic = "dynamic"
+
+
+def load_config(path: Path | None, tier: "Tier | None"):
+    """The GenerationConfig of ``--config`` (or the defaults) in ``--tier``'s scenario tier; a file
+    that names another tier is a usage error naming both."""
+    from orbitdata.config import GenerationConfig, TierConflict
+
+    name = None if tier is None else tier.value
+    try:
+        if path is not None:
+            return GenerationConfig.from_toml(path, name)
+        return GenerationConfig() if name is None else GenerationConfig.for_tier(name)
+    except TierConflict as exc:
+        usage(f"--tier {name} contradicts --config: {exc}; drop one of them or make them agree")
+
+
+TIER_HELP = "Scenario tier: static (the paper's scenes) or dynamic (drifting debris, CW terms, faults, noisy sensing)."
+
+
 def _progress_bar(console):
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
@@ -64,6 +86,7 @@ def register(app: typer.Typer) -> None:
         max_shard_mb: int = typer.Option(
             None, min=1, show_default=str(DatasetConfig.max_shard_bytes // MB), help="Max data shard size in MB."
         ),
+        tier: Tier = typer.Option(None, show_default="static, or the --config's", help=TIER_HELP),
         config: Path = typer.Option(None, help="TOML file with any scenario/sim/pilots/dataset setting."),
         overwrite: bool = typer.Option(False, help="Replace a dataset generated with a different config."),
         repo_id: str = typer.Option(None, help="Repo id to show in the card's loading snippet."),
@@ -74,13 +97,12 @@ def register(app: typer.Typer) -> None:
         """
         from rich.console import Console
 
-        from orbitdata.config import GenerationConfig
         from orbitdata.viz import overview_figure
         from orbitdata.write.generate import UnusableOutput
         from orbitdata.write.generate import generate as run
 
         with usage_errors():
-            cfg = GenerationConfig.from_toml(config) if config else GenerationConfig()
+            cfg = load_config(config, tier)
             flags = {
                 "episodes": episodes,
                 "test_fraction": test_fraction,

@@ -13,7 +13,7 @@ from rich.table import Table
 from rich.text import Text
 
 from orbitdata.cli.errors import fail, friendly, usage, usage_errors
-from orbitdata.schema import FPS, LEVELS, OUTCOMES, SPLITS
+from orbitdata.schema import DYNAMIC_OUTCOMES, FPS, LEVELS, OUTCOMES, SPLITS
 
 SPARK = " ▁▂▃▄▅▆▇█"
 
@@ -35,19 +35,26 @@ def _value(v) -> str:
     return "-" if v is None else str(v)
 
 
+def _outcomes(s: dict) -> list[str]:
+    """The outcomes to tabulate: the static tier's, and any other that the counts name (its tier's)."""
+    named = {o for sc in s["counts"].get("splits", {}).values() for o in sc["outcomes"]}
+    return [o for o in DYNAMIC_OUTCOMES if o in OUTCOMES or o in named]
+
+
 def _counts_table(s: dict) -> Table:
     t = Table(title="Episodes per split, level and outcome", title_justify="left")
-    for col in ("split", "level", "episodes", "steps", *(o.replace("_", " ") for o in OUTCOMES), "success %"):
+    outcomes = _outcomes(s)
+    for col in ("split", "level", "episodes", "steps", *(o.replace("_", " ") for o in outcomes), "success %"):
         t.add_column(col, justify="left" if col in ("split", "level") else "right")
 
     def row(split, level, c, style=None):
         n = c["episodes"]
         rate = f"{100 * c['outcomes'].get('success', 0) / n:.1f}" if n else "-"
         t.add_row(
-            split, level, str(n), str(c["frames"]), *(str(c["outcomes"].get(o, 0)) for o in OUTCOMES), rate, style=style
+            split, level, str(n), str(c["frames"]), *(str(c["outcomes"].get(o, 0)) for o in outcomes), rate, style=style
         )
 
-    totals = {"episodes": 0, "frames": 0, "outcomes": {o: 0 for o in OUTCOMES}}
+    totals = {"episodes": 0, "frames": 0, "outcomes": {o: 0 for o in outcomes}}
     splits = s["counts"].get("splits", {})
     for split, sc in sorted(splits.items(), key=lambda kv: SPLITS.index(kv[0]) if kv[0] in SPLITS else len(SPLITS)):
         for level in LEVELS:
@@ -56,7 +63,7 @@ def _counts_table(s: dict) -> Table:
         row(split, "all", sc, style="bold")
         totals["episodes"] += sc["episodes"]
         totals["frames"] += sc["frames"]
-        for o in OUTCOMES:
+        for o in outcomes:
             totals["outcomes"][o] += sc["outcomes"].get(o, 0)
         t.add_section()
     row("all", "all", totals, style="bold")

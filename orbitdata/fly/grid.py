@@ -17,7 +17,8 @@ from orbitdata.fly.config import FlightConfig
 from orbitdata.fly.pilot import Pilot
 from orbitdata.fly.registry import PilotFactory, make_pilot
 from orbitdata.fly.rollout import EpisodeResult, FrameSink, fly_episode
-from orbitdata.schema import OUTCOMES
+from orbitdata.scenario.config import DYNAMIC, STATIC
+from orbitdata.schema import outcomes
 from orbitdata.seeding import grid_seed
 from orbitdata.sim.env import CubeSatEnv
 
@@ -31,9 +32,20 @@ class CellResult:
     collision: int = 0
     timeout: int = 0
     out_of_fuel: int = 0
+    tumbling: int = 0  # the dynamic tier's outcome only (schema.outcomes)
+    # The dynamic tier's sampling: debris pieces its episodes hold, and draws rejected as
+    # unsurvivable on the way to them (``Dynamics.unsurvivable_draws``); 0 on the static tier.
+    debris: int = 0
+    unsurvivable_draws: int = 0
 
     def add(self, outcome: str) -> None:
         setattr(self, outcome, getattr(self, outcome) + 1)
+
+    def add_scenario(self, scenario) -> None:
+        """Count a dynamic scenario's debris and its rejected draws."""
+        if scenario.dynamics is not None:
+            self.debris += len(scenario.obstacles)
+            self.unsurvivable_draws += scenario.dynamics.unsurvivable_draws
 
     @property
     def success_rate(self) -> float:
@@ -111,6 +123,7 @@ def fly_grid(
                         env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink, image_quality=image_quality
                     )
                     cell.add(result.outcome)
+                    cell.add_scenario(result.scenario)
                     if on_episode:
                         on_episode(cell, k, result)
                 cells.append(cell)
@@ -119,15 +132,39 @@ def fly_grid(
     return cells
 
 
-def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | None = None) -> dict:
+def pooled(cells: list[CellResult]) -> tuple[int, int]:
+    """(successes, episodes) over the whole grid."""
+    return sum(c.success for c in cells), sum(c.episodes for c in cells)
+
+
+def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | None = None, tier: str = STATIC) -> dict:
     """The ``--json`` table: the pilot, the grid seed, the outcome counts per setting and (``flight``)
-    how it flew (pilot options, codec, thrust noise)."""
+    how it flew (pilot options, codec, thrust noise). A grid of another tier than the static one
+    names it (``tier``) and, for the dynamic tier, counts the debris draws rejected as unsurvivable
+    against the pieces kept (``rejections``: the tier's rejection rate is rejected / (rejected + kept))."""
+    extra = {}
+    if tier != STATIC:
+        extra["tier"] = tier
+    if tier == DYNAMIC:
+        rejected = sum(c.unsurvivable_draws for c in cells)
+        kept = sum(c.debris for c in cells)
+        extra["rejections"] = {
+            "unsurvivable_draws": rejected,
+            "debris": kept,
+            "rate": rejected / (rejected + kept) if rejected + kept else 0.0,
+        }
     return {
         "pilot": pilot,
         "seed": seed,
+        **extra,
         **({"flight": flight} if flight is not None else {}),
         "settings": [
-            {"obstacles": c.obstacles, "speed": c.speed, "episodes": c.episodes, **{o: getattr(c, o) for o in OUTCOMES}}
+            {
+                "obstacles": c.obstacles,
+                "speed": c.speed,
+                "episodes": c.episodes,
+                **{o: getattr(c, o) for o in outcomes(tier)},
+            }
             for c in cells
         ],
     }

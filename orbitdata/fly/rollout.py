@@ -39,6 +39,9 @@ class EpisodeResult:
     min_clearance: np.ndarray  # (L,) float32 metres
     depth_low: np.ndarray | None = None  # (L, 16, 16) float32 metres when rendered
     pilot_info: dict = field(default_factory=dict)
+    # (L, N, 7) float32: each obstacle's centre (m, world) and quat (w, x, y, z) at every frame,
+    # recorded when the scenario moves (has dynamics); privileged, never handed to the pilot.
+    obstacle_poses: np.ndarray | None = None
 
     @property
     def length(self) -> int:
@@ -108,6 +111,8 @@ class Flight:
         self.success = np.zeros(max_frames, bool)
         self.clearance = np.zeros(max_frames, np.float32)
         self.depth_low = np.zeros((max_frames, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE), np.float32) if env.sim.render else None
+        moving = scn.dynamics is not None
+        self.poses = np.zeros((max_frames, len(scn.obstacles), 7), np.float32) if moving else None
         self.t = 0
         self._record()
 
@@ -136,6 +141,8 @@ class Flight:
         self.success[t] = info["success"]
         if self.depth_low is not None:
             self.depth_low[t] = obs["depth_low"]
+        if self.poses is not None:
+            self.poses[t] = info["obstacle_poses"]
         if self.frame_sink is not None and "image" in obs:
             self.frame_sink(t, obs["image"], obs["depth"], obs["depth_low"])
 
@@ -154,6 +161,7 @@ class Flight:
             min_clearance=self.clearance[:length],
             depth_low=None if self.depth_low is None else self.depth_low[:length],
             pilot_info=self.pilot.metadata(),
+            obstacle_poses=None if self.poses is None else self.poses[:length],
         )
 
 

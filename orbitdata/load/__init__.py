@@ -86,7 +86,8 @@ def load_windows(
         source: a local dataset folder or a Hub repo id; read with ``datasets.load_dataset``.
         split: "train" or "test".
         context, horizon, stride, pad, image_size, columns, context_only: see :class:`WindowConfig`
-            (``columns=None`` loads every step column; name fewer to skip e.g. full-res depth;
+            (``columns=None`` loads every step column but the privileged ``privileged.*``; name
+            fewer to skip e.g. full-res depth;
             ``context_only=["observation.image"]`` decodes images of the context frames only).
         episodes: which episodes to cut windows from, through the episodes table: ``None``
             (all), a dict of column values (``{"level": "expert", "outcome": ["success"]}``),
@@ -146,7 +147,7 @@ def load_windows(
         return dataset
     steps = load_steps(source, split, True, load_dataset_kwargs)
     wanted = config.wanted(steps.column_names)  # raises for a missing column before any read
-    if config.columns is not None:
+    if config.columns is not None or len(wanted) < len(steps.column_names):
         steps = load_steps(source, split, True, load_dataset_kwargs, columns=wanted)
     return StreamingWindowDataset(
         steps,

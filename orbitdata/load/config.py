@@ -26,9 +26,10 @@ class WindowConfig:
         image_size: resize images (and full-resolution depth) to this square size in pixels;
             ``None`` keeps the stored size. RGB uses area averaging, depth nearest neighbour
             (averaging would invent depths between an object and "no return").
-        columns: the dataset columns to load; ``None`` = every step column. ``episode_index``
-            and ``frame_index`` are always included. Leaving out ``observation.depth`` skips
-            the costliest decode.
+        columns: the dataset columns to load; ``None`` = every step column but the privileged
+            ones (``privileged.*``: the dynamic tier's obstacle poses, for oracles and validation,
+            never a learned pilot's input). ``episode_index`` and ``frame_index`` are always
+            included. Leaving out ``observation.depth`` skips the costliest decode.
         context_only: columns read for the ``context`` frames only (their tensors are
             ``(context, ...)``): e.g. the image, for a policy that observes the first frames and
             predicts only actions over the rest. The horizon's frames are never decoded.
@@ -91,6 +92,6 @@ class WindowConfig:
         if missing:
             raise ValueError(f"column(s) {missing} not in the dataset; available: {list(available)}")
         if self.columns is None:
-            return available
+            return tuple(c for c in available if not S.is_privileged(c))
         wanted = set(self.columns) | set(KEY_COLUMNS)
         return tuple(c for c in available if c in wanted)

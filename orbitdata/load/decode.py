@@ -83,6 +83,11 @@ def plan_columns(schema: pa.Schema, names: tuple[str, ...]) -> tuple[Column, ...
             plan.append(Column(name, "scalar", (), torch.int64))
         elif pa.types.is_floating(t):
             plan.append(Column(name, "scalar", (), torch.float32))
+        elif S.is_privileged(name):
+            raise ValueError(
+                f"column {name!r} is privileged (for oracles and validation) and holds one pose per obstacle, "
+                "which windows cannot stack; leave it out of columns= and read it from the data shards with pyarrow"
+            )
         else:
             raise ValueError(
                 f"column {name!r} has type {t}, which the window loader cannot stack; leave it out of columns="

@@ -24,6 +24,15 @@ from orbitdata.state import FUEL, POSITION, ROT6D, VELOCITY
 STEP_COLUMNS = (S.FRAME_INDEX, S.EPISODE_INDEX, S.STATE, S.ACTION, S.COLLISION, S.SUCCESS, S.MIN_CLEARANCE)
 
 
+def dynamics_record(row: dict) -> dict | None:
+    """The dynamic tier's record (``dataclasses.asdict`` of a ``Dynamics``, for
+    ``Scenario.from_dict``) from an episodes-table row; None for a static-tier row. Its numbers
+    are the stored float32 values."""
+    if S.DEBRIS_MOTION not in row:
+        return None
+    return {field: row[column] for field, column in S.DYNAMICS_COLUMNS.items()}
+
+
 class EpisodeNotFound(ValueError):
     """The dataset holds no episode with that index."""
 
@@ -76,7 +85,20 @@ class Episode:
 
     @cached_property
     def scenario(self) -> Scenario:
-        return Scenario.from_dict(self.meta)
+        """The episode's scenario, with its dynamic-tier record (``dynamics``) when it has one."""
+        return Scenario.from_dict({**self.meta, "dynamics": dynamics_record(self.meta)})
+
+    @cached_property
+    def obstacle_poses(self) -> np.ndarray | None:
+        """(L, N, 7) float32, privileged: each obstacle's centre (m, world) and quat (w, x, y, z) at
+        every frame; None for a static-tier episode (its obstacles stand still)."""
+        if S.DEBRIS_MOTION not in self.meta:
+            return None
+        m = self.meta
+        rows = read_rows(self.root / m[S.DATA_FILE], m[S.ROW_START], m[S.ROW_END], [S.OBSTACLE_POSES])
+        col = rows.column(S.OBSTACLE_POSES).combine_chunks()
+        flat = col.flatten().flatten().to_numpy(zero_copy_only=False)
+        return flat.astype(np.float32).reshape(len(col), m[S.N_OBSTACLES], 7)
 
     def _column(self, name: str) -> np.ndarray:
         col = self.steps.column(name).combine_chunks()

@@ -25,7 +25,7 @@ from orbitdata import schema as S
 EpisodeFilter = Union[None, Mapping[str, Any], Callable[[dict], bool], Iterable[int]]
 
 # Columns whose values have a closed vocabulary, so a typo is an error rather than an empty set.
-VOCABULARY = {S.LEVEL: S.LEVELS, S.OUTCOME: S.OUTCOMES, S.SPLIT: S.SPLITS}
+VOCABULARY = {S.LEVEL: S.LEVELS, S.OUTCOME: S.DYNAMIC_OUTCOMES, S.SPLIT: S.SPLITS}  # any tier's outcomes
 
 
 def _values(value) -> list:

@@ -66,14 +66,16 @@ def lengths_summary(episodes: pa.Table, max_steps: int) -> dict:
     return {
         "all": length_stats(length),
         "by_level": {lv: length_stats(length[level == lv]) for lv in S.LEVELS if (level == lv).any()},
-        "by_outcome": {o: length_stats(length[outcome == o]) for o in S.OUTCOMES if (outcome == o).any()},
+        "by_outcome": {o: length_stats(length[outcome == o]) for o in S.DYNAMIC_OUTCOMES if (outcome == o).any()},
         "histogram": {
             "edges": [round(float(e), 3) for e in edges],
             "by_level": {
                 lv: np.histogram(length[level == lv], edges)[0].tolist() for lv in S.LEVELS if (level == lv).any()
             },
             "by_outcome": {
-                o: np.histogram(length[outcome == o], edges)[0].tolist() for o in S.OUTCOMES if (outcome == o).any()
+                o: np.histogram(length[outcome == o], edges)[0].tolist()
+                for o in S.DYNAMIC_OUTCOMES
+                if (outcome == o).any()
             },
         },
     }
@@ -108,13 +110,14 @@ def _flatten(d: dict, prefix: str = "") -> dict:
 
 
 def outcome_rates(counts: dict) -> dict:
-    """Share of each outcome per level, over all splits."""
+    """Share of each outcome per level, over all splits (the outcomes the counts name: their tier's)."""
     rates = {}
     for level in S.LEVELS:
         per = [s["levels"][level] for s in counts.get("splits", {}).values() if level in s.get("levels", {})]
         n = sum(p["episodes"] for p in per)
+        names = [o for o in S.DYNAMIC_OUTCOMES if o in S.OUTCOMES or any(o in p["outcomes"] for p in per)]
         if n:
-            rates[level] = {o: round(sum(p["outcomes"].get(o, 0) for p in per) / n, 4) for o in S.OUTCOMES}
+            rates[level] = {o: round(sum(p["outcomes"].get(o, 0) for p in per) / n, 4) for o in names}
     return rates
 
 

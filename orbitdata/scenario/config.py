@@ -63,6 +63,12 @@ class DynamicConfig:
         eclipse_ambient: MuJoCo ambient light in eclipse.
         onboard_light: diffuse intensity of the spotlight beside the camera (every episode).
         max_tries: draws per piece of debris before the spec is declared impossible.
+        max_body_rate: rad/s; an episode ends ``tumbling`` when the body's rate exceeds it. A
+            fault-blind pilot (risky, exploratory) can spin the body up without bound, and
+            MuJoCo's Euler step gains angular momentum the faster the faster the body spins,
+            until MuJoCo declares the state unstable and resets it: the limit ends such a flight
+            while its physics still holds. About 2000 deg/s, the widest range of common MEMS
+            rate gyros, and far above what the expert flies.
     """
 
     debris_speed: tuple[float, float] = (0.1, 1.0)
@@ -91,6 +97,7 @@ class DynamicConfig:
     eclipse_ambient: float = 0.02
     onboard_light: float = 0.6
     max_tries: int = 200
+    max_body_rate: float = 35.0
 
     def __post_init__(self) -> None:
         where = "scenario.dynamic"
@@ -103,7 +110,7 @@ class DynamicConfig:
         for name in ("intercept_prob", "cw_prob", "fault_prob", "fault_at_start_prob", "eclipse_prob"):
             if not 0.0 <= getattr(self, name) <= 1.0:
                 raise ValueError(f"{where}.{name} must be a probability in [0, 1], got {getattr(self, name)}")
-        for name in ("nominal_speed", "escape_accel", "horizon"):
+        for name in ("nominal_speed", "escape_accel", "horizon", "max_body_rate"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{where}.{name} must be > 0, got {getattr(self, name)}")
         for name in ("intercept_miss", "intercept_jitter", "mean_motion", "rgb_noise", "eclipse_ambient"):

@@ -10,7 +10,12 @@ Spec (Gymnasium-style, version ``CubeSat-v1``):
   optical axis (0 = no return within [near, far]) and ``depth_low`` (16, 16) float32 metres.
 * **Episode end**: ``terminated`` at the first contact with an obstacle (``collision``),
   on entering the goal region (``success``) or with an empty tank (``out_of_fuel``);
-  ``truncated`` when the frame index reaches ``max_steps - 1`` (``timeout``).
+  ``truncated`` when the frame index reaches ``max_steps - 1`` (``timeout``). On the dynamic
+  tier also ``terminated`` when the body spins faster than ``DynamicConfig.max_body_rate``
+  (``tumbling``).
+* **Instability**: should MuJoCo still find the state numerically unstable (NaN, Inf or huge
+  values) and reset it, ``step`` raises :class:`SimulationUnstable` and the episode is over: no
+  frame is ever observed from a reset state.
 * **Reward**: +1 on success, -1 on collision, 0 otherwise (the dataset does not use it).
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``contact_substep``,
   ``min_clearance`` (m, hull to nearest obstacle surface, 0 in contact), ``fuel_kg``,
@@ -41,13 +46,26 @@ import numpy as np
 from orbitdata.scenario.config import ScenarioConfig
 from orbitdata.scenario.sampler import check_scenario, sample_scenario
 from orbitdata.scenario.spec import Scenario
-from orbitdata.schema import ACTION_DIM
+from orbitdata.schema import ACTION_DIM, TUMBLING
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.dynamic import DynamicWorld
 from orbitdata.sim.mjcf import BODY, CAMERA, HULL, OBSTACLE_PREFIX, build_mjcf
 from orbitdata.sim.render import CameraRenderer, pool_depth
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitdata.state import make_state
+
+# MuJoCo's warnings that it found the state unstable; on each it resets the state to the model's
+# initial one and carries on, which an episode must never do silently.
+INSTABILITY_WARNINGS = (
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQACC,
+)
+
+
+class SimulationUnstable(RuntimeError):
+    """MuJoCo found the state numerically unstable during a step and reset it: the episode ends
+    with this error, since nothing after the reset belongs to the flight."""
 
 
 def validate_action(action) -> np.ndarray:
@@ -109,6 +127,7 @@ class CubeSatEnv:
         self._static_poses = scn.obstacle_poses(0.0)[0] if self._world is None else None
         self._fuel = self.sim.cubesat.fuel_mass
         self._update_mass()
+        self._warnings = {w: d.warning[w].number for w in INSTABILITY_WARNINGS}
         d.qvel[0:3] = scn.initial_velocity  # free joint: linear velocity in the world frame
         if self._world is not None:
             self._world.place_debris(d, 0)  # exactly, not as the MJCF's 9 digits put it
@@ -151,6 +170,7 @@ class CubeSatEnv:
             a = a * (self._fuel / burn)  # the tank empties part-way: scale the whole step
             burn = self._fuel
         d.ctrl[:] = a
+        rate_before = self.body_rate
         contact_substep = None
         for k in range(self.sim.substeps):
             if world is None:
@@ -164,6 +184,7 @@ class CubeSatEnv:
             # mj_step collides the state it started from, so this sees substep k's start.
             if contact_substep is None and d.ncon and self._hull_in_contact():
                 contact_substep = k
+        self._check_stable(rate_before)
         if world is not None:
             world.place_debris(d, (self.t + 1) * self.sim.substeps)
         # Recompute kinematics and contacts of the final state (mj_step leaves them stale).
@@ -181,11 +202,13 @@ class CubeSatEnv:
             outcome = "collision"
         elif success:
             outcome = "success"
+        elif world is not None and self.body_rate > self.scenario_config.dynamic.max_body_rate:
+            outcome = TUMBLING
         elif self._fuel <= 0.0:
             outcome = "out_of_fuel"
         elif self.t >= self.sim.max_steps - 1:
             outcome = "timeout"
-        terminated = outcome in ("collision", "success", "out_of_fuel")
+        terminated = outcome in ("collision", "success", "out_of_fuel", TUMBLING)
         truncated = outcome == "timeout"
         self.done = terminated or truncated
         clearance = 0.0 if collision else self._min_clearance()
@@ -197,6 +220,20 @@ class CubeSatEnv:
             truncated,
             self._info(outcome, collision, success, contact_substep, clearance, a),
         )
+
+    def _check_stable(self, rate_before: float) -> None:
+        """Raise :class:`SimulationUnstable` if MuJoCo reset the state during this step."""
+        d = self.data
+        for warning in INSTABILITY_WARNINGS:
+            if d.warning[warning].number > self._warnings[warning]:
+                self.done = True
+                raise SimulationUnstable(
+                    f"MuJoCo found the state unstable ({warning.name}) in the step from frame {self.t} of the "
+                    f"episode with seed {self.scenario.seed} (body rate {rate_before:.4g} rad/s before it) and "
+                    "reset it; the episode cannot go on from a reset state. On the dynamic tier "
+                    "scenario.dynamic.max_body_rate ends a spinning flight before this; lower it, or "
+                    "keep the pilot from spinning the body up"
+                )
 
     def _hull_in_contact(self) -> bool:
         d = self.data
@@ -233,6 +270,11 @@ class CubeSatEnv:
     @property
     def mass(self) -> float:
         return float(self.model.body_mass[self._body])
+
+    @property
+    def body_rate(self) -> float:
+        """rad/s, the magnitude of the body's angular velocity."""
+        return float(np.linalg.norm(self.data.qvel[3:6]))
 
     def state(self) -> np.ndarray:
         d = self.data

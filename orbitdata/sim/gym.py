@@ -7,6 +7,7 @@
     obs, info = env.reset(seed=0)
     obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
     info["outcome"]                                   # None while flying; success, collision, timeout, out_of_fuel
+                                                      # (and tumbling on the dynamic tier)
 
 ``gym.make("orbitdata.sim.gym:CubeSat-v1", ...)`` imports and registers in one call.
 
@@ -25,8 +26,9 @@ Spec (the same world and episodes as :class:`orbitdata.sim.env.CubeSatEnv` and t
   render itself.
 * **Episode end**: ``terminated`` on a collision, on entering the 0.5 m goal sphere
   (``success``) or with an empty tank (``out_of_fuel``); ``truncated`` after ``max_steps`` steps
-  (``timeout``; by default 299 steps, 12 s: the dataset's episodes of at most 300 frames).
-  **Reward**: +1 on success, -1 on a collision, 0 otherwise.
+  (``timeout``; by default 299 steps, 12 s: the dataset's episodes of at most 300 frames). On
+  ``tier="dynamic"`` also ``terminated`` when the body spins faster than 35 rad/s
+  (``tumbling``, ``DynamicConfig.max_body_rate``). **Reward**: +1 on success, -1 on a collision, 0 otherwise.
 * **info**: ``outcome`` (None while flying), ``collision``, ``success``, ``min_clearance`` (m),
   ``fuel_kg``, ``mass``, ``thrust`` (after fuel limits), ``position_world``, ``step``, and
   ``episode_seed``: the seed that drew the episode's world (obstacles, goal, initial velocity,

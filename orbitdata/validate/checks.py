@@ -3,11 +3,17 @@
 A check's name is what a report (text or JSON) and the tests refer to. ``quick`` checks run in
 ``--quick`` mode (structure, integrity, schema, counts: footers and metadata, no data pages);
 the others read every row and image and run only in the full (default) mode.
+
+``CHECKS`` run on every dataset. A dataset of the dynamic tier (``config.scenario.tier`` in
+meta/info.json) also runs ``DYNAMIC_CHECKS``, the physics of its episode record; a static
+dataset's report lists only ``CHECKS``. :func:`checks_for` gives a tier's list.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+from orbitdata.scenario.config import STATIC
 
 
 @dataclass(frozen=True)
@@ -47,6 +53,10 @@ DEPTH_RANGE = "images.depth_range"
 DEPTH_LOW = "images.depth_low"
 COUNTS = "consistency.counts"
 STATS = "consistency.stats"
+DYN_RECORD = "dynamics.record"
+DYN_THRUST = "dynamics.thrust"
+DYN_DEBRIS = "dynamics.debris"
+DYN_CW = "dynamics.cw"
 
 CHECKS: tuple[Check, ...] = (
     Check(MISSING, "structure", "every file the layout and meta/info.json name is present", True),
@@ -78,4 +88,27 @@ CHECKS: tuple[Check, ...] = (
     Check(COUNTS, "consistency", "counts agree between the card YAML, meta/info.json and the data", True),
     Check(STATS, "consistency", "meta/stats.json matches the train split", False),
 )
-BY_NAME = {c.name: c for c in CHECKS}
+DYNAMIC_CHECKS: tuple[Check, ...] = (
+    Check(
+        DYN_RECORD,
+        "dynamics",
+        "each episode's dynamic record is well formed, and each frame has one pose per obstacle",
+        True,
+    ),
+    Check(
+        DYN_THRUST,
+        "dynamics",
+        "velocity, angular velocity and fuel steps follow the commanded thrust through the recorded fault and body",
+        False,
+    ),
+    Check(DYN_DEBRIS, "dynamics", "privileged.obstacle_poses follow each obstacle's recorded motion", False),
+    Check(
+        DYN_CW, "dynamics", "the Clohessy-Wiltshire terms act on the CubeSat and the debris as the cw flag says", False
+    ),
+)
+BY_NAME = {c.name: c for c in CHECKS + DYNAMIC_CHECKS}
+
+
+def checks_for(tier: str) -> tuple[Check, ...]:
+    """The checks a dataset of ``tier`` runs (the static list, plus the dynamic tier's own)."""
+    return CHECKS if tier == STATIC else CHECKS + DYNAMIC_CHECKS

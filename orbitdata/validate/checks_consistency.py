@@ -35,6 +35,7 @@ from orbitdata.codecs import (
     stats_width,
 )
 from orbitdata.info import counts
+from orbitdata.scenario.config import STATIC
 from orbitdata.state import STATE_NAMES
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
@@ -58,6 +59,7 @@ def check_counts(
     data_rows: dict[str, int],
     episodes_complete: bool,
     sink: Sink,
+    tier: str = STATIC,
 ) -> None:
     """Counts per split (and level, outcome) from the three places that state them."""
     frames_by_split = {s: 0 for s in S.SPLITS}
@@ -77,7 +79,9 @@ def check_counts(
     if info is not None and episodes_complete:
         diffs: list[str] = []
         usable = [r for r in episode_rows if r.split in S.SPLITS and r.length is not None]
-        _diff(info.get("counts"), counts((r.split, r.level, r.outcome, r.length) for r in usable), "counts", diffs)
+        _diff(
+            info.get("counts"), counts(((r.split, r.level, r.outcome, r.length) for r in usable), tier), "counts", diffs
+        )
         for d in diffs:
             sink.add(C.COUNTS, d, S.INFO_PATH)
     if card is None:

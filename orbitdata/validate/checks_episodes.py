@@ -13,6 +13,7 @@ import numpy as np
 import pyarrow as pa
 
 from orbitdata import schema as S
+from orbitdata.scenario.config import STATIC
 from orbitdata.validate import checks as C
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.report import Sink
@@ -74,8 +75,11 @@ def episode_rows(table: pa.Table, source: str) -> list[EpisodeRow]:
 
 
 # ---- the episodes table (quick) -------------------------------------------------------------
-def check_table(rows: list[EpisodeRow], split_of_file: dict[str, str], max_steps: int | None, sink: Sink) -> None:
-    """Field validity, duplicates and split hygiene of the episodes table."""
+def check_table(
+    rows: list[EpisodeRow], split_of_file: dict[str, str], max_steps: int | None, sink: Sink, tier: str = STATIC
+) -> None:
+    """Field validity, duplicates and split hygiene of the episodes table (outcomes: the ``tier``'s)."""
+    outcomes = S.outcomes(tier)
     for r in rows:
         where = dict(file=r.source, episode=r.index)
         if None in (r.index, r.split, r.level, r.length, r.outcome, r.data_file, r.row_start, r.row_end):
@@ -85,8 +89,8 @@ def check_table(rows: list[EpisodeRow], split_of_file: dict[str, str], max_steps
             sink.add(C.TABLE, f"split is {r.split!r} but the row is in the {split_of_file[r.source]} shard", **where)
         if r.level not in S.LEVELS:
             sink.add(C.TABLE, f"level {r.level!r} is not one of {S.LEVELS}", **where)
-        if r.outcome not in S.OUTCOMES:
-            sink.add(C.TABLE, f"outcome {r.outcome!r} is not one of {S.OUTCOMES}", **where)
+        if r.outcome not in outcomes:
+            sink.add(C.TABLE, f"outcome {r.outcome!r} is not one of {outcomes}", **where)
         if r.length < 1 or (max_steps is not None and r.length > max_steps):
             sink.add(C.TABLE, f"length {r.length} is outside [1, {max_steps}] (sim.max_steps)", **where)
         if r.n_obstacles != r.n_obstacle_rows:

@@ -13,6 +13,11 @@ Tolerances:
   [near, far] (the PNG stores ``rint(metres * 1000)``);
 * ``DEPTH_LOW_TOL_M = 1 mm``: depth_low is pooled from float32 metres before the PNG rounds
   them to millimetres, so the pooled PNG differs from it by at most 0.5 mm (measured: 0.50 mm).
+
+The dynamic tier's depth camera drops pixels (0, no return) after depth_low is pooled from the
+scene's depth, so a dropped pixel of a cell may have been anything in [near, far]: a cell with
+no empty pixel is checked exactly, one with k empty pixels against the range that k pixels
+between near and far allow.
 """
 
 from __future__ import annotations
@@ -89,8 +94,10 @@ def check_images(
     rel: str,
     sink: Sink,
     keep_rgb: np.ndarray,
+    dropout: bool = False,
 ) -> dict[int, np.ndarray]:
-    """Decode every frame of a row group. Returns the RGB pixels of the rows in ``keep_rgb``."""
+    """Decode every frame of a row group. Returns the RGB pixels of the rows in ``keep_rgb``.
+    ``dropout``: the depth images have dropped pixels that depth_low does not (the dynamic tier)."""
     rgb_blobs, rgb_ok = _blobs(table, S.IMAGE)
     depth_blobs, depth_ok = _blobs(table, S.DEPTH)
     keep = set(int(i) for i in keep_rgb)
@@ -140,15 +147,23 @@ def check_images(
             good_rows.append(i)
             good_depth.append(depth)
         if len(good_rows) == DEPTH_BATCH or (good_rows and i == table.num_rows - 1):
-            _check_depth(np.stack(good_depth), np.asarray(good_rows), fr, depth_low, camera, rel, sink)
+            _check_depth(np.stack(good_depth), np.asarray(good_rows), fr, depth_low, camera, rel, sink, dropout)
             good_rows, good_depth = [], []
     return kept
 
 
 def _check_depth(
-    depth_mm: np.ndarray, rows: np.ndarray, fr: Frames, depth_low: np.ndarray, camera: Camera, rel: str, sink: Sink
+    depth_mm: np.ndarray,
+    rows: np.ndarray,
+    fr: Frames,
+    depth_low: np.ndarray,
+    camera: Camera,
+    rel: str,
+    sink: Sink,
+    dropout: bool = False,
 ) -> None:
-    """depth_mm (K, H, W) uint16 of table rows ``rows``: range, then depth_low against the pooled image."""
+    """depth_mm (K, H, W) uint16 of table rows ``rows``: range, then depth_low against the pooled image
+    (``dropout``: each empty pixel anywhere in [near, far])."""
     ep, frame = fr.episode[rows], fr.frame[rows]
     lo, hi = camera.near * MM_PER_M - DEPTH_MM_SLACK, camera.far * MM_PER_M + DEPTH_MM_SLACK
     lowest = (depth_mm - np.uint16(1)).min(axis=(1, 2)).astype(np.int64) + 1  # 0 wraps to 65535: skips no-return
@@ -177,8 +192,11 @@ def _check_depth(
     far_mm = round(camera.far * MM_PER_M)  # no return counts as the far plane, as in the generator
     pooled = ((sums + empty * far_mm) / (bh * bw * MM_PER_M)).reshape(k, side * side)  # metres
     low = depth_low[rows]
+    lowest_pooled = pooled
+    if dropout:
+        lowest_pooled = ((sums + empty * (camera.near * MM_PER_M)) / (bh * bw * MM_PER_M)).reshape(k, side * side)
     with np.errstate(invalid="ignore"):
-        err = np.abs(pooled - low)
+        err = np.maximum(lowest_pooled - low, low - pooled) if dropout else np.abs(pooled - low)
         # out-of-range depth is already reported; non-finite depth_low is values.finite's
         bad = np.flatnonzero(~out & np.isfinite(low).all(axis=1) & (err.max(axis=1) > DEPTH_LOW_TOL_M))
     cell = err.argmax(axis=1) if len(bad) else None
@@ -186,8 +204,13 @@ def _check_depth(
         C.DEPTH_LOW,
         bad,
         lambda j: (
-            f"depth_low cell {cell[j]} is {low[j, cell[j]]:.4f} m, the pooled "
-            f"depth image says {pooled[j, cell[j]]:.4f} m (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)"
+            f"depth_low cell {cell[j]} is {low[j, cell[j]]:.4f} m, the pooled depth image says "
+            + (
+                f"{pooled[j, cell[j]]:.4f} m"
+                if lowest_pooled[j, cell[j]] == pooled[j, cell[j]]
+                else f"{lowest_pooled[j, cell[j]]:.4f}-{pooled[j, cell[j]]:.4f} m (its empty pixels may be dropped)"
+            )
+            + f" (tolerance {DEPTH_LOW_TOL_M * 1000:g} mm)"
         ),
         rel,
         ep,

@@ -17,6 +17,7 @@ import yaml
 
 from orbitdata import schema as S
 from orbitdata.info import FileEntry
+from orbitdata.scenario.config import STATIC, TIERS
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
 
@@ -126,6 +127,23 @@ def check_version(info: dict, sink: Sink) -> None:
         )
 
 
+def tier_of(info: dict | None, sink: Sink) -> str:
+    """The scenario tier that meta/info.json records (``config.scenario.tier``; a static record
+    leaves it out). An unknown tier is reported and checked as static."""
+    config = (info or {}).get("config")
+    scenario = config.get("scenario") if isinstance(config, dict) else None
+    tier = scenario.get("tier", STATIC) if isinstance(scenario, dict) else STATIC
+    if tier not in TIERS:
+        sink.add(
+            C.COLUMNS,
+            f"config.scenario.tier {tier!r} is not a tier this orbitdata knows ({', '.join(TIERS)}); "
+            "checked as static. Upgrade orbitdata, or regenerate the dataset",
+            S.INFO_PATH,
+        )
+        return STATIC
+    return tier
+
+
 def check_presence(layout: Layout, sink: Sink) -> None:
     """Missing files (named by the layout or info.json) and extra ones (named by neither)."""
     present = set(layout.present)
@@ -220,8 +238,8 @@ def check_hash(info: dict, rel: str, digest: str | None, size: int, error: str |
         )
 
 
-def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
-    """Read one shard's footer and compare its schema with v1."""
+def open_footer(root: Path, rel: str, sink: Sink, tier: str = STATIC) -> ParquetFooter | None:
+    """Read one shard's footer and compare its schema with v1's for the dataset's ``tier``."""
     m = S.SHARD_RE.match(rel)
     assert m, rel
     kind, split = m.group(1), m.group(2)
@@ -245,14 +263,14 @@ def open_footer(root: Path, rel: str, sink: Sink) -> ParquetFooter | None:
             rel,
         )
         return None
-    expected = S.STEP_SCHEMA if kind == S.DATA_DIR else S.EPISODE_SCHEMA
-    ok = check_schema(rel, pf.schema_arrow, expected, sink)
+    expected = S.step_schema(tier) if kind == S.DATA_DIR else S.episode_schema(tier)
+    ok = check_schema(rel, pf.schema_arrow, expected, sink, tier)
     md = pf.metadata
     rows = [md.row_group(i).num_rows for i in range(md.num_row_groups)]
     return ParquetFooter(rel, kind, split, md.num_rows, rows, ok)
 
 
-def check_schema(rel: str, actual: pa.Schema, expected: pa.Schema, sink: Sink) -> bool:
+def check_schema(rel: str, actual: pa.Schema, expected: pa.Schema, sink: Sink, tier: str = STATIC) -> bool:
     ok = True
     names = set(actual.names)
     for f in expected:
@@ -264,7 +282,8 @@ def check_schema(rel: str, actual: pa.Schema, expected: pa.Schema, sink: Sink) -
             ok = False
     for name in actual.names:
         if expected.get_field_index(name) < 0:
-            sink.add(C.COLUMNS, f"unexpected column {name!r}: not part of schema {S.SCHEMA_VERSION}", rel)
+            what = "" if tier == STATIC else f" for the {tier} tier"
+            sink.add(C.COLUMNS, f"unexpected column {name!r}: not part of schema {S.SCHEMA_VERSION}{what}", rel)
             ok = False
     if ok and actual.names != expected.names:
         sink.add(C.COLUMNS, f"columns are out of order: {actual.names}", rel)

@@ -14,6 +14,7 @@ Tolerances (the kinematic ones are justified in :mod:`orbitdata.validate.kinemat
 from __future__ import annotations
 
 import math
+from typing import Callable
 
 import numpy as np
 import pyarrow as pa
@@ -130,8 +131,14 @@ def check_values(fr: Frames, rel: str, sink: Sink) -> None:
         )
 
 
-def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: Sink) -> None:
-    """Row a[i] -> b[i] is one control step: fuel may not rise; pose must follow v and w."""
+def check_steps(
+    a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: Sink, pose_model: Callable | None = None
+) -> None:
+    """Row a[i] -> b[i] is one control step: fuel may not rise; pose must follow v and w.
+
+    ``pose_model(a, b) -> (position m, rotation rad)`` replaces the static body's kinematic
+    residuals (:func:`orbitdata.validate.kinematics.residuals`), e.g. with the dynamic tier's.
+    """
     step = (a.episode == b.episode) & (b.frame - a.frame == 1)
     ep, frame = b.episode, b.frame
     with np.errstate(invalid="ignore"):
@@ -149,7 +156,10 @@ def check_steps(a: Frames, b: Frames, rel: str, dt: float, substeps: int, sink: 
     if not len(idx):
         return
     with np.errstate(invalid="ignore", divide="ignore"):
-        pos, rot = residuals(a.state[idx], b.state[idx], dt, substeps)
+        if pose_model is None:
+            pos, rot = residuals(a.state[idx], b.state[idx], dt, substeps)
+        else:
+            pos, rot = pose_model(a.take(idx), b.take(idx))
     bad = np.flatnonzero(~(pos <= POSITION_TOL_M))
     sink.add_rows(
         C.KIN_POSITION,

@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Callable, Sequence
 
-from orbitdata.validate.checks import BY_NAME, CHECKS
+from orbitdata.validate.checks import BY_NAME, CHECKS, Check
 
 DEFAULT_CAP = 20  # findings shown per check; the rest are counted
 
@@ -96,6 +96,7 @@ class Report:
     episodes: int = 0
     seconds: float = 0.0
     workers: int = 1
+    checks: tuple[Check, ...] = CHECKS  # those this dataset's tier runs (checks.checks_for)
 
     @property
     def ok(self) -> bool:
@@ -107,7 +108,7 @@ class Report:
         return "skip" if check in self.skipped else "pass"
 
     def failed(self) -> list[str]:
-        return [c.name for c in CHECKS if self.sink.counts.get(c.name)]
+        return [c.name for c in self.checks if self.sink.counts.get(c.name)]
 
     def findings(self, check: str) -> list[Finding]:
         return list(self.sink.kept.get(check, []))
@@ -122,7 +123,7 @@ class Report:
 
     def to_dict(self) -> dict:
         checks = []
-        for c in CHECKS:
+        for c in self.checks:
             entry = {
                 "name": c.name,
                 "group": c.group,
@@ -165,10 +166,10 @@ class Report:
             f"{t['frames_per_s']:.0f} frames/s)",
             "",
         ]
-        width = max(len(c.name) for c in CHECKS)
-        for group in dict.fromkeys(c.group for c in CHECKS):
+        width = max(len(c.name) for c in self.checks)
+        for group in dict.fromkeys(c.group for c in self.checks):
             lines.append(f"{group}")
-            for c in (c for c in CHECKS if c.group == group):
+            for c in (c for c in self.checks if c.group == group):
                 status = self.status(c.name)
                 n = self.sink.counts.get(c.name, 0)
                 if status == "fail":

@@ -15,8 +15,10 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.codecs import stats_width
+from orbitdata.scenario.config import STATIC
 from orbitdata.validate import checks as C
 from orbitdata.validate.checks_consistency import Moments, StatsPlan
+from orbitdata.validate.checks_dynamic import Physics, debris_flags, pose_model, read_poses, thrust_flags
 from orbitdata.validate.checks_episodes import check_rows, check_transitions, runs
 from orbitdata.validate.checks_images import Camera, check_images
 from orbitdata.validate.checks_values import check_finite, check_steps, check_values
@@ -36,6 +38,8 @@ class FileContext:
     outcomes: dict  # episode_index -> outcome, for the episodes the table puts in this file
     stats: StatsPlan | None  # set for train shards: recompute their share of meta/stats.json
     cap: int
+    tier: str = STATIC  # the dynamic tier's depth camera drops pixels that depth_low keeps
+    physics: Physics | None = None  # the dynamic tier: check its physics against the episode record
 
 
 @dataclass(frozen=True)
@@ -44,6 +48,7 @@ class RowGroupTask:
     index: int  # row group number
     first_row: int  # its first row within the file
     train_row: int  # its first row within the whole train split (for the stats sampling)
+    records: dict = field(default_factory=dict)  # the dynamic tier: episode -> EpisodeRecord of its rows
 
 
 @dataclass
@@ -57,6 +62,8 @@ class RowGroupResult:
     tail: Frames | None = None
     runs: list = field(default_factory=list)
     moments: dict = field(default_factory=dict)  # feature -> Moments (train shards only)
+    thrust: dict = field(default_factory=dict)  # the dynamic tier: episode -> Flag of steps off the thrust
+    debris: dict = field(default_factory=dict)  # ... and of obstacle poses off their motion
 
 
 def init_worker() -> None:
@@ -91,14 +98,20 @@ def check_row_group(task: RowGroupTask) -> RowGroupResult:
     check_rows(fr, ctx.rel, ctx.dt, ctx.outcomes, sink)
     check_finite(fr, depth_low, ctx.rel, sink)
     check_values(fr, ctx.rel, sink)
+    dynamic = ctx.physics is not None
+    poses = pose_model(task.records, ctx.physics) if dynamic else None
     if len(fr) > 1:
         a, b = fr.take(slice(0, -1)), fr.take(slice(1, None))
         check_transitions(a, b, ctx.rel, sink)
-        check_steps(a, b, ctx.rel, ctx.dt, ctx.substeps, sink)
+        check_steps(a, b, ctx.rel, ctx.dt, ctx.substeps, sink, poses)
+        if dynamic:
+            result.thrust = thrust_flags(a, b, task.records, ctx.physics)
+    if dynamic and (obstacle_poses := read_poses(table)) is not None:
+        result.debris = debris_flags(fr, obstacle_poses, task.records, ctx.dt, ctx.rel, sink)
 
     global_rows = np.arange(task.train_row, task.train_row + len(fr))
     keep_rgb = np.flatnonzero(global_rows % ctx.stats.image_stride == 0) if ctx.stats else np.empty(0, int)
-    rgb = check_images(table, fr, depth_low, ctx.camera, ctx.rel, sink, keep_rgb)
+    rgb = check_images(table, fr, depth_low, ctx.camera, ctx.rel, sink, keep_rgb, dropout=ctx.tier != STATIC)
     if ctx.stats:
         result.moments = _moments(fr, depth_low, rgb, ctx.stats)
     result.rows = len(fr)

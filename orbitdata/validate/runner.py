@@ -11,6 +11,7 @@ the usual ``if __name__ == "__main__":`` guard.
 
 from __future__ import annotations
 
+import bisect
 import multiprocessing
 import os
 import time
@@ -24,8 +25,10 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.load.source import local_folder
+from orbitdata.scenario.config import DYNAMIC, STATIC
 from orbitdata.validate import checks as C
 from orbitdata.validate.checks_consistency import Moments, StatsPlan, check_counts, check_stats, merge_moments
+from orbitdata.validate.checks_dynamic import Flag, Physics, merge_flags, pose_model, thrust_flags
 from orbitdata.validate.checks_episodes import (
     EpisodeRow,
     check_file_edges,
@@ -46,8 +49,11 @@ from orbitdata.validate.checks_structure import (
     open_footer,
     scan,
     sha256_task,
+    tier_of,
 )
 from orbitdata.validate.checks_values import check_episode_floats, check_steps
+from orbitdata.validate.diagnose_dynamic import diagnose
+from orbitdata.validate.dynamic_record import EpisodeRecord, episode_records
 from orbitdata.validate.report import DEFAULT_CAP, Report, Sink
 from orbitdata.validate.rowgroup import FileContext, RowGroupResult, RowGroupTask, check_row_group, init_worker
 
@@ -138,6 +144,8 @@ def validate(
     layout.card = load_card(root, sink)
     if layout.info is not None:
         check_version(layout.info, sink)
+    tier = tier_of(layout.info, sink)
+    report.checks = C.checks_for(tier)
     check_presence(layout, sink)
     report.files = len(layout.present)
     report.bytes = sum((root / rel).stat().st_size for rel in layout.present)
@@ -145,15 +153,16 @@ def validate(
     pool = _Pool(workers)
     try:
         _check_hashes(layout, pool, sink, progress)
-        rows = _check_metadata(layout, sink)
+        rows = _check_metadata(layout, sink, tier)
+        dynamic = _dynamic(layout, sink, report) if tier != STATIC else None
         report.episodes = len(rows)
         report.frames = sum(f.num_rows for f in layout.shards(S.DATA_DIR))
         if options.quick:
-            for check in C.CHECKS:
+            for check in report.checks:
                 if not check.quick:
                     report.skipped[check.name] = "full mode only (run without --quick)"
         else:
-            _check_rows(layout, rows, pool, sink, report, progress)
+            _check_rows(layout, rows, pool, sink, report, progress, dynamic)
     finally:
         pool.close()
     report.seconds = time.monotonic() - start
@@ -171,11 +180,11 @@ def _check_hashes(layout: Layout, pool: _Pool, sink: Sink, progress: Progress | 
             progress("sha256", i + 1, len(listed))
 
 
-def _check_metadata(layout: Layout, sink: Sink) -> list[EpisodeRow]:
+def _check_metadata(layout: Layout, sink: Sink, tier: str) -> list[EpisodeRow]:
     """Footers, schemas, the episodes table and the counts: everything --quick reads."""
     for rel in layout.present:
         if S.SHARD_RE.match(rel):
-            footer = open_footer(layout.root, rel, sink)
+            footer = open_footer(layout.root, rel, sink, tier)
             if footer is not None:
                 layout.footers[rel] = footer
     rows: list[EpisodeRow] = []
@@ -201,17 +210,61 @@ def _check_metadata(layout: Layout, sink: Sink) -> list[EpisodeRow]:
         footer.table = table  # kept for the full pass (small: one row per episode)
     config = (layout.info or {}).get("config") or {}
     max_steps = (config.get("sim") or {}).get("max_steps")
-    check_table(rows, split_of_file, max_steps, sink)
+    check_table(rows, split_of_file, max_steps, sink, tier)
     data_rows = {f.rel: f.num_rows for f in layout.shards(S.DATA_DIR)}
     complete = complete and all(f.schema_ok for f in layout.shards(S.DATA_DIR))
     if complete:
         check_row_ranges(rows, data_rows, sink)
-    check_counts(layout.info, layout.card, rows, data_rows, complete, sink)
+    check_counts(layout.info, layout.card, rows, data_rows, complete, sink, tier)
     return rows
 
 
+@dataclass
+class _Dynamic:
+    """The dynamic tier's part of a full validation: the records, and the episodes flagged so far."""
+
+    physics: Physics | None  # None: the config does not say how to fly the body; only the records are checked
+    records: dict[int, EpisodeRecord]
+    thrust: dict[int, Flag]
+    debris: dict[int, Flag]
+
+
+def _dynamic(layout: Layout, sink: Sink, report: Report) -> _Dynamic:
+    """The dynamic tier's episode records (``dynamics.record``, quick) and the simulator settings."""
+    from orbitdata.config import GenerationConfig
+
+    records: dict[int, EpisodeRecord] = {}
+    for footer in layout.shards(S.EPISODES_DIR):
+        if footer.table is not None:
+            records |= episode_records(footer.table, footer.rel, sink)
+    try:
+        sim = GenerationConfig.from_dict((layout.info or {}).get("config") or {}).sim
+        physics = Physics(sim.cubesat, sim.dt, sim.substeps)
+    except (ValueError, TypeError) as exc:
+        physics = None
+        for check in (C.DYN_THRUST, C.DYN_DEBRIS, C.DYN_CW):
+            report.skipped[check] = f"meta/info.json's config does not parse ({str(exc)[:120]})"
+    return _Dynamic(physics, records, {}, {})
+
+
+def _task_records(records: list[EpisodeRecord], ends: list[int], first: int, stop: int) -> dict[int, EpisodeRecord]:
+    """The records (of one file, sorted by their row_end ``ends``) whose rows overlap rows [first, stop)."""
+    out = {}
+    for r in records[bisect.bisect_right(ends, first) :]:
+        if r.row_start >= stop:
+            break
+        out[r.index] = r
+    return out
+
+
 def _check_rows(
-    layout: Layout, rows: list[EpisodeRow], pool: _Pool, sink: Sink, report: Report, progress: Progress | None
+    layout: Layout,
+    rows: list[EpisodeRow],
+    pool: _Pool,
+    sink: Sink,
+    report: Report,
+    progress: Progress | None,
+    dynamic: _Dynamic | None = None,
 ) -> None:
     """The full pass: every row group of every data shard, then seams, runs and stats."""
     for footer in layout.shards(S.EPISODES_DIR):
@@ -234,8 +287,14 @@ def _check_rows(
         report.skipped[C.STATS] = "meta/stats.json is missing or unreadable"
 
     files = [f for f in layout.shards(S.DATA_DIR) if f.schema_ok]
+    physics = dynamic.physics if dynamic is not None else None
     tasks, train_row = [], 0
     for footer in files:
+        in_file = sorted(
+            (r for r in dynamic.records.values() if r.data_file == footer.rel) if physics else (),
+            key=lambda r: (r.row_end, r.row_start),
+        )
+        ends = [r.row_end for r in in_file]
         outcomes = {r.index: r.outcome for r in rows if r.data_file == footer.rel}
         ctx = FileContext(
             str(layout.root),
@@ -246,10 +305,13 @@ def _check_rows(
             outcomes,
             plan if footer.split == "train" else None,
             sink.cap,
+            STATIC if dynamic is None else DYNAMIC,
+            physics,
         )
         first = 0
         for i, n in enumerate(footer.row_groups):
-            tasks.append(RowGroupTask(ctx, i, first, train_row if footer.split == "train" else 0))
+            records = _task_records(in_file, ends, first, first + n) if physics else {}
+            tasks.append(RowGroupTask(ctx, i, first, train_row if footer.split == "train" else 0, records))
             first += n
             if footer.split == "train":
                 train_row += n
@@ -261,16 +323,21 @@ def _check_rows(
     current: list[RowGroupResult] = []
     for done, result in enumerate(pool.map(check_row_group, tasks)):
         sink.merge(result.sink)
+        if physics is not None:
+            merge_flags(dynamic.thrust, result.thrust)
+            merge_flags(dynamic.debris, result.debris)
         stats_whole &= result.ok
         merge_moments(moments, result.moments)
         if current and current[-1].rel != result.rel:
-            seen |= _finish_file(current, by_index, dt, substeps, sink, checked_files)
+            seen |= _finish_file(current, by_index, dt, substeps, sink, checked_files, dynamic)
             current = []
         current.append(result)
         if progress:
             progress("rows", done + 1, len(tasks))
     if current:
-        seen |= _finish_file(current, by_index, dt, substeps, sink, checked_files)
+        seen |= _finish_file(current, by_index, dt, substeps, sink, checked_files, dynamic)
+    if physics is not None:
+        diagnose(layout.root, dynamic.thrust, dynamic.debris, dynamic.records, physics, sink)
     for r in rows:
         if r.data_file in checked_files and r.index not in seen:
             sink.add(
@@ -294,14 +361,19 @@ def _finish_file(
     substeps: int,
     sink: Sink,
     checked_files: set[str],
+    dynamic: _Dynamic | None = None,
 ) -> set[int]:
     """Seams between consecutive row groups, the file's first and last rows, and its episode runs."""
     rel = results[0].rel
     readable = [r for r in results if r.ok and r.rows]
+    physics = dynamic.physics if dynamic is not None else None
     for prev, cur in zip(readable, readable[1:]):
         if prev.index + 1 == cur.index:
             check_transitions(prev.tail, cur.head, rel, sink)
-            check_steps(prev.tail, cur.head, rel, dt, substeps, sink)
+            poses = pose_model(dynamic.records, physics) if physics is not None else None
+            check_steps(prev.tail, cur.head, rel, dt, substeps, sink, poses)
+            if physics is not None:
+                merge_flags(dynamic.thrust, thrust_flags(prev.tail, cur.head, dynamic.records, physics))
     if not all(r.ok for r in results):
         return set()  # rows are missing: comparing runs with the table would only repeat the corruption
     if readable:

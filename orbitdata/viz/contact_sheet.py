@@ -1,7 +1,9 @@
 """A one-page picture of an episode: key frames (RGB over depth), both maps and the time plots.
 
 Key frames are evenly spaced from the first to the last frame and numbered; the same numbers
-mark where they were taken on the maps and when on the time plots.
+mark where they were taken on the maps and when on the time plots. On the dynamic tier the maps
+show each piece of debris' track (and its outline at the end), and the maps and the time plots
+mark the thruster fault's onset.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ class ContactSheet:
         self.ep = ep
         self.frames = key_frames(len(ep), count)
         rgb, depth = ep.rgb(self.frames), ep.depth(self.frames)
+        poses, onset = ep.obstacle_poses, P.fault_onset(ep)
         colours = P.DepthColours(P.DepthColours.range_for(depth))
         with P.theme():
             fig = P.figure(self.WIDTH, self.HEIGHT)
@@ -58,11 +61,19 @@ class ContactSheet:
             top = P.add_axes(fig, 70, 560, 590, 300)
             side = P.add_axes(fig, 770, 560, 590, 300)
             self.top, self.side = paired_views(
-                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, ep.positions
+                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, P.map_points(ep)
             )
             P.setup_map_axes(top, self.top, "top view (obstacles to scale)")
             P.setup_map_axes(side, self.side, "side view (obstacles to scale)")
-            P.map_legend(fig, (0.5, 1 - 908 / self.HEIGHT), collision=ep.collision_at is not None, marks=True, ncol=7)
+            P.map_legend(
+                fig,
+                (0.5, 1 - 908 / self.HEIGHT),
+                collision=ep.collision_at is not None,
+                marks=True,
+                ncol=7 if poses is None else 9,
+                debris=poses is not None,
+                fault=onset is not None,
+            )
             ep_axes = {
                 "speed": P.add_axes(fig, 60, 970, 270, 190),
                 "clearance": P.add_axes(fig, 400, 970, 270, 190),
@@ -82,9 +93,14 @@ class ContactSheet:
         key = ep.positions[self.frames]
         for name, view in self.views.items():
             panel = view.background()
+            if poses is not None:
+                view.draw_tracks(panel, poses)
+                view.draw_debris(panel, poses[-1])
             for t in self.frames:  # which way the camera looked in each key frame (under the path)
                 view.draw_heading(panel, ep.positions[t], ep.camera_axis[t], length_m=0.8)
             view.draw_path(panel, ep.positions, ep.collision_at)
+            if onset is not None:
+                view.draw_fault(panel, ep.positions[onset])
             draw_numbered(panel, view, key)
             self.boxes[name].paste(image, panel)
         self.image = image
@@ -104,7 +120,20 @@ class ContactSheet:
             f"fuel used {100 * (ep.fuel[0] - ep.fuel[-1]):.1f}%",
             f"seed {m[S.SEED]}",
         ]
+        fault = P.episode_fault(ep)
+        if fault is not None:
+            when = fault["onset_step"] * S.DT
+            began = fault["onset_step"] < len(ep)
+            parts.insert(
+                -1,
+                f"{P.fault_label(fault)} " + (f"from {when:.2f} s" if began else f"due at {when:.2f} s, after the end"),
+            )
         return "   ·   ".join(parts)
+
+    def track_pixels(self, view: str, piece: int) -> np.ndarray:
+        """(L, 2) image pixels (column, row) where debris ``piece``'s track is drawn in ``view``."""
+        box = self.boxes[view]
+        return self.views[view].polyline(self.ep.obstacle_poses[:, piece, :3]) + [box.x0, box.y0]
 
     def path_pixels(self, view: str) -> np.ndarray:
         """(L, 2) image pixels (column, row) where the whole path is drawn in ``view``."""

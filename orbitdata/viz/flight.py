@@ -1,4 +1,5 @@
-"""Videos of ``orbitdata fly``: each episode's onboard camera beside a top-down map of its path.
+"""Videos of ``orbitdata fly``: each episode's onboard camera beside a top-down map of its path
+(on the dynamic tier also each piece of debris' track, where it is now and where the fault began).
 
 :class:`FlightVideos` plugs into :func:`orbitdata.fly.grid.fly_grid`: ``frame`` is its frame
 sink (it keeps the current episode's camera frames) and ``episode`` its per-episode hook (it
@@ -13,7 +14,7 @@ import cv2
 import numpy as np
 
 from orbitdata.fly.rollout import EpisodeResult
-from orbitdata.schema import FPS
+from orbitdata.schema import DT, FPS
 from orbitdata.state import POSITION
 from orbitdata.viz.topdown import PlaneMap
 from orbitdata.viz.video import check_video_format, write_video
@@ -23,11 +24,20 @@ def flight_frames(camera: list[np.ndarray], result: EpisodeResult):
     """(H, 2H, 3) uint8 frames: camera frame t beside the top-down map of the path up to t."""
     side = camera[0].shape[0]
     positions = result.states[:, POSITION]
-    view = PlaneMap(result.scenario, side * 2, positions)
-    base = view.background()
+    dynamics = result.scenario.dynamics
+    poses = None if dynamics is None else result.scenario.obstacle_poses(np.arange(len(positions)) * DT)  # (L, N, 7)
+    points = positions if poses is None else np.concatenate([positions, poses[:, :, :3].reshape(-1, 3)])
+    view = PlaneMap(result.scenario, side * 2, points)
+    base = view.background() if poses is None else view.draw_tracks(view.background(), poses)
+    onset = None if dynamics is None or not dynamics.fault.active(len(positions) - 1) else dynamics.fault.onset_step
     hit = positions[-1] if result.outcome == "collision" else None
     for t, rgb in enumerate(camera):
-        top = view.draw_path(base.copy(), positions[: t + 1], hit if t == len(camera) - 1 else None)
+        top = base.copy()
+        if poses is not None:
+            view.draw_debris(top, poses[t])
+        top = view.draw_path(top, positions[: t + 1], hit if t == len(camera) - 1 else None)
+        if onset is not None and t >= onset:
+            view.draw_fault(top, positions[onset])
         top = cv2.resize(top, (side, side), interpolation=cv2.INTER_AREA)
         yield np.concatenate([rgb, top], axis=1)
 

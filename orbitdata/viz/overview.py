@@ -1,9 +1,11 @@
 """``meta/overview.png``: what a dataset looks like at a glance, embedded in its card.
 
 Sample frames for every (level, outcome) that occurs, the outcome rates per level and the
-episode-length distribution. The writer draws it through :func:`orbitdata.viz.overview_figure`,
-which imports this module only when matplotlib (the ``viz`` extra) is installed: importing it
-without matplotlib raises ImportError, on purpose.
+episode-length distribution. On the dynamic tier each sample also gets a top view of its flight:
+the path, each piece of debris' track from its start and where the thruster fault began. The
+writer draws it through :func:`orbitdata.viz.overview_figure`, which imports this module only
+when matplotlib (the ``viz`` extra) is installed: importing it without matplotlib raises
+ImportError, on purpose.
 
 It stays fast on big datasets: one typical episode per (level, outcome), chosen
 deterministically (the median length), and three of its frames, read row group by row group.
@@ -16,17 +18,27 @@ from pathlib import Path
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 from PIL import Image
 
 from orbitdata import schema as S
 from orbitdata.codecs import decode_rgb
 from orbitdata.load.rows import RowReader, read_rows
+from orbitdata.scenario.dynamics import NO_FAULT
+from orbitdata.state import POSITION
 from orbitdata.viz import plots as P
+from orbitdata.viz.topdown import PlaneMap
 from orbitdata.write.parts import atomic_write
 
 P.require_matplotlib()  # fail at import, so that `shard` skips the figure without the extra
 
-OUTCOME_COLOURS = {"success": "#5fd35f", "collision": "#ff5a5a", "timeout": "#ffc04d", "out_of_fuel": "#b38cff"}
+OUTCOME_COLOURS = {
+    "success": "#5fd35f",
+    "collision": "#ff5a5a",
+    "timeout": "#ffc04d",
+    "out_of_fuel": "#b38cff",
+    S.TUMBLING: "#4dd0e1",
+}
 THUMB_MIN, THUMB_MAX = 104, 200  # px
 GRID_X = 110  # px, left edge of the sample grid
 WIDTH = 1400
@@ -80,10 +92,69 @@ def sample_frames(out: Path, picks: dict, far: float) -> dict[tuple[str, str], l
     return frames
 
 
+def is_dynamic(episodes: pa.Table) -> bool:
+    """Whether the episodes are of the dynamic tier (they record a thruster fault)."""
+    return S.FAULT in episodes.column_names
+
+
+def sample_maps(out: Path, episodes: pa.Table, picks: dict) -> dict[tuple[str, str], dict]:
+    """Per picked dynamic-tier episode: its scenario, path (L, 3), debris poses (L, N, 7) and fault."""
+    from orbitdata.scenario.spec import Scenario
+
+    picked = pa.array(sorted({p[S.EPISODE_INDEX] for p in picks.values()}), episodes.schema.field(S.EPISODE_INDEX).type)
+    chosen = episodes.filter(pc.is_in(episodes.column(S.EPISODE_INDEX), value_set=picked))
+    rows = {r[S.EPISODE_INDEX]: r for r in chosen.to_pylist()}
+    maps = {}
+    for key, pick in picks.items():
+        row = rows[pick[S.EPISODE_INDEX]]
+        length = row[S.LENGTH]
+        steps = read_rows(
+            Path(out) / row[S.DATA_FILE], row[S.ROW_START], row[S.ROW_START] + length, [S.STATE, S.OBSTACLE_POSES]
+        )
+        state = steps.column(S.STATE).combine_chunks().values.to_numpy().reshape(length, -1)
+        poses = steps.column(S.OBSTACLE_POSES).combine_chunks().values.values.to_numpy()
+        maps[key] = {
+            "scenario": Scenario.from_dict(row),
+            "positions": state[:, POSITION].astype(np.float64),
+            "poses": poses.reshape(length, row[S.N_OBSTACLES], 7).astype(np.float64),
+            "fault": row[S.FAULT],
+            "collision": row[S.OUTCOME] == "collision",
+        }
+    return maps
+
+
+def draw_map(flight: dict, size: tuple[int, int]) -> np.ndarray:
+    """(H, W, 3) uint8 top view of one picked flight: obstacles at their start, debris tracks, the
+    path (a cross where it hit) and a diamond where the fault began."""
+    positions, poses = flight["positions"], flight["poses"]
+    view = PlaneMap(flight["scenario"], size, np.concatenate([positions, poses[:, :, :3].reshape(-1, 3)]))
+    img = view.draw_tracks(view.background(), poses)
+    view.draw_path(img, positions, positions[-1] if flight["collision"] else None)
+    fault = flight["fault"]
+    if fault["kind"] != NO_FAULT and fault["onset_step"] < len(positions):
+        view.draw_fault(img, positions[fault["onset_step"]])
+    return img
+
+
+def fault_caption(fault: dict, length: int) -> str:
+    """The fault of a picked episode, in the few words under its cell."""
+    if fault["kind"] == NO_FAULT:
+        return "no fault"
+    when = f"{fault['onset_step'] * S.DT:.2f} s"
+    return P.fault_label(fault) + (
+        f" from {when}" if fault["onset_step"] < length else f" due at {when}, after the end"
+    )
+
+
+def tier_outcomes(episodes: pa.Table) -> tuple[str, ...]:
+    """How the episodes' tier lets an episode end (``schema.outcomes``)."""
+    return S.outcomes("dynamic" if is_dynamic(episodes) else "static")
+
+
 def _levels_outcomes(episodes: pa.Table) -> tuple[list[str], list[str]]:
     levels = set(episodes.column(S.LEVEL).to_pylist())
     outcomes = set(episodes.column(S.OUTCOME).to_pylist())
-    return [lv for lv in S.LEVELS if lv in levels], [o for o in S.OUTCOMES if o in outcomes]
+    return [lv for lv in S.LEVELS if lv in levels], [o for o in tier_outcomes(episodes) if o in outcomes]
 
 
 def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
@@ -91,10 +162,12 @@ def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
     levels, outcomes = _levels_outcomes(episodes)
     picks = sample_episodes(episodes)
     frames = sample_frames(out, picks, far)
+    maps = sample_maps(out, episodes, picks) if is_dynamic(episodes) else None
+    panels = 3 if maps is None else 4  # three frames, and the top view on the dynamic tier
     n = len(outcomes)  # columns; thumbnails grow when there are few of them
-    width = max(WIDTH, GRID_X + n * (3 * THUMB_MIN + 36) + 20)
-    thumb = min(THUMB_MAX, (width - GRID_X - 20 - n * 36) // (3 * n))
-    cell_w, row_h, grid_y = 3 * thumb + 12, thumb + 44, 96
+    width = max(WIDTH, GRID_X + n * (panels * THUMB_MIN + 36) + 20)
+    thumb = min(THUMB_MAX, (width - GRID_X - 20 - n * 36) // (panels * n))
+    cell_w, row_h, grid_y = panels * thumb + 6 * (panels - 1), thumb + 44, 96
     pitch = cell_w + 24
     plots_y = grid_y + len(levels) * row_h + 40
     height = plots_y + 260
@@ -117,7 +190,8 @@ def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
             0.5,
             1 - 48 / height,
             "a typical (median-length) episode per pilot level and outcome: its start, the frame where "
-            "obstacles fill most of the view, and just before the end",
+            "obstacles fill most of the view, and just before the end"
+            + ("" if maps is None else "; its top view: path, debris tracks from their start (dot), fault onset"),
             ha="center",
             va="center",
             color="#b0b0bc",
@@ -157,32 +231,39 @@ def render_overview(out: Path, episodes: pa.Table, far: float) -> np.ndarray:
                     ax = P.add_axes(fig, x + k * (thumb + 6), y, thumb, thumb)
                     ax.set_axis_off()
                     boxes.append((ax, rgb))
+                caption = f"episode {pick[S.EPISODE_INDEX]} ({pick[S.LENGTH]} frames): frames " + ", ".join(
+                    str(t) for t, _ in frames[(level, outcome)]
+                )
+                if maps is not None:
+                    ax = P.add_axes(fig, x + 3 * (thumb + 6), y, thumb, thumb)
+                    ax.set_axis_off()
+                    boxes.append((ax, maps[(level, outcome)]))
+                    caption += "; " + fault_caption(maps[(level, outcome)]["fault"], pick[S.LENGTH])
                 fig.text(
                     (x + cell_w / 2) / width,
                     1 - (y + thumb + 14) / height,
-                    f"episode {pick[S.EPISODE_INDEX]} ({pick[S.LENGTH]} frames): frames "
-                    + ", ".join(str(t) for t, _ in frames[(level, outcome)]),
+                    caption,
                     ha="center",
                     va="center",
                     fontsize=8,
                     color="#b0b0bc",
                 )
         split = int(0.55 * width)
-        _rates(fig, P.add_axes(fig, 110, plots_y, split - 180, 180), rows, levels)
+        _rates(fig, P.add_axes(fig, 110, plots_y, split - 180, 180), rows, levels, tier_outcomes(episodes))
         _lengths(fig, P.add_axes(fig, split + 40, plots_y, width - split - 80, 180), rows, levels)
         image = P.render(fig)
-        for ax, rgb in boxes:
+        for ax, panel in boxes:
             box = P.box_of(fig, ax)
-            box.paste(image, P.fit(rgb, box.size))
+            box.paste(image, draw_map(panel, box.size) if isinstance(panel, dict) else P.fit(panel, box.size))
     return image
 
 
-def _rates(fig, ax, rows: list[dict], levels: list[str]) -> None:
+def _rates(fig, ax, rows: list[dict], levels: list[str], outcomes: tuple[str, ...]) -> None:
     """Stacked horizontal bars: the share of each outcome per level, with counts."""
     for i, level in enumerate(levels):
         mine = [r for r in rows if r[S.LEVEL] == level]
         left = 0.0
-        for outcome in S.OUTCOMES:
+        for outcome in outcomes:
             n = sum(1 for r in mine if r[S.OUTCOME] == outcome)
             share = n / len(mine)
             if n:
@@ -208,10 +289,10 @@ def _rates(fig, ax, rows: list[dict], levels: list[str]) -> None:
     from matplotlib.patches import Patch
 
     ax.legend(
-        handles=[Patch(color=OUTCOME_COLOURS[o], label=o.replace("_", " ")) for o in S.OUTCOMES],
+        handles=[Patch(color=OUTCOME_COLOURS[o], label=o.replace("_", " ")) for o in outcomes],
         loc="upper center",
         bbox_to_anchor=(0.5, -0.14),
-        ncol=4,
+        ncol=len(outcomes),
         fontsize=9,
     )
 

@@ -14,7 +14,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from orbitdata import schema as S
 from orbitdata.load.episodes import Episode
+from orbitdata.scenario.dynamics import NO_FAULT
 from orbitdata.schema import DT
 
 INSTALL_HINT = "pip install 'orbitdata[viz]'"
@@ -166,10 +168,44 @@ class DepthColours:
         bar.set_label(label)
 
 
+FAULT = "#ff50c8"  # the fault's onset, as on the maps (topdown.FAULT)
+FAULT_GID = "fault-onset"  # the matplotlib gid of the onset lines, for whoever inspects a figure
+
+
+def fault_label(fault: dict) -> str:
+    """How the pictures name a thruster fault, e.g. ``fault: off thruster 3``."""
+    return f"fault: {fault['kind']} thruster {fault['thruster']}"
+
+
+def episode_fault(ep: Episode) -> dict | None:
+    """A dynamic-tier episode's thruster fault (kind, thruster, level, onset_step), or None when it
+    has none or its dataset records none (the static tier)."""
+    fault = ep.meta.get(S.FAULT)
+    return fault if fault is not None and fault["kind"] != NO_FAULT else None
+
+
+def fault_onset(ep: Episode) -> int | None:
+    """The frame at which the episode's thruster fault began, or None (no fault, or it was due
+    only after the episode had ended)."""
+    fault = episode_fault(ep)
+    return fault["onset_step"] if fault is not None and fault["onset_step"] < len(ep) else None
+
+
+def map_points(ep: Episode) -> np.ndarray:
+    """(M, 3) metres, the points a map of the episode must show: its path and, on the dynamic
+    tier, every piece of debris' track."""
+    poses = ep.obstacle_poses
+    if poses is None:
+        return ep.positions
+    return np.concatenate([ep.positions, poses[:, :, :3].reshape(-1, 3)])
+
+
 def plot_signals(fig, axes: dict, ep: Episode, marks: list[int] = ()) -> None:
     """Speed, clearance, thrust and fuel against time on ``axes`` (keys of those names).
 
-    ``marks``: frames to flag with numbered dotted lines (the contact sheet's key frames).
+    ``marks``: frames to flag with numbered dotted lines (the contact sheet's key frames). A
+    thruster fault's onset is a dashed line on every plot, labelled on the speed plot, with the
+    faulty thruster's row marked on the thrust plot.
     """
     t = ep.times
     end = t[-1] if len(t) > 1 else DT
@@ -217,6 +253,24 @@ def plot_signals(fig, axes: dict, ep: Episode, marks: list[int] = ()) -> None:
     ax.set_title("fuel left (%)")
     pad = max(0.5, 0.1 * float(fuel.max() - fuel.min()))
     ax.set_ylim(max(0.0, float(fuel.min()) - pad), min(100.0, float(fuel.max()) + pad) + 0.05 * pad)
+
+    onset, fault = fault_onset(ep), episode_fault(ep)
+    if onset is not None:
+        for name in ("speed", "clearance", "thrust", "fuel"):
+            axes[name].axvline(t[onset], color=FAULT, lw=1.2, ls="--", gid=FAULT_GID)
+        right = t[onset] > 0.6 * t[-1]
+        axes["speed"].text(
+            t[onset],
+            0.03,
+            f"{fault_label(fault)} " if right else f" {fault_label(fault)}",
+            transform=axes["speed"].get_xaxis_transform(),
+            ha="right" if right else "left",
+            va="bottom",
+            fontsize=8,
+            color=FAULT,
+            gid=FAULT_GID,
+        )
+        axes["thrust"].plot([t[onset]], [fault["thruster"]], ">", color=FAULT, ms=6, gid=FAULT_GID)
 
     for name in ("speed", "clearance", "thrust", "fuel"):
         ax = axes[name]
@@ -277,9 +331,17 @@ def setup_map_axes(ax, view, title: str) -> None:
 
 
 def map_legend(
-    fig, anchor: tuple[float, float], collision: bool, heading: bool = False, marks: bool = False, ncol: int = 6
+    fig,
+    anchor: tuple[float, float],
+    collision: bool,
+    heading: bool = False,
+    marks: bool = False,
+    ncol: int = 6,
+    debris: bool = False,
+    fault: bool = False,
 ) -> None:
-    """What the map symbols mean, in the maps' colours, centred at figure fraction ``anchor``."""
+    """What the map symbols mean, in the maps' colours, centred at figure fraction ``anchor``;
+    ``debris`` and ``fault`` add the dynamic tier's tracks and fault onset."""
     from matplotlib.lines import Line2D
 
     from orbitdata.viz import topdown as T
@@ -301,6 +363,12 @@ def map_legend(
         )
     if collision:
         items.append(Line2D([], [], color=rgb(T.HIT), marker="x", ls="", ms=9, mew=3, label="collision"))
+    if debris:
+        items.append(Line2D([], [], color=rgb(T.TRACK), marker="o", lw=1, ms=4, label="debris track from start"))
+    if fault:
+        items.append(
+            Line2D([], [], color=rgb(T.FAULT), marker="D", ls="", ms=6, mfc="none", mew=2, label="fault onset")
+        )
     fig.legend(
         handles=items, loc="center", bbox_to_anchor=anchor, ncol=ncol, fontsize=8, handlelength=1.6, columnspacing=1.2
     )

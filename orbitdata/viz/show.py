@@ -2,7 +2,9 @@
 
 Each video frame shows the onboard RGB camera beside colour-mapped depth, a top-down and a side
 view of the path so far (obstacles to scale, goal, camera axis, the collision point at the end)
-and time plots of speed, clearance, thrust and fuel with a cursor at the current time.
+and time plots of speed, clearance, thrust and fuel with a cursor at the current time. On the
+dynamic tier the maps also show each piece of debris' track and where it is now, and the plots
+and the maps mark the thruster fault's onset.
 """
 
 from __future__ import annotations
@@ -50,6 +52,8 @@ class EpisodeVideo:
         self.rgb_bytes, self.depth_bytes = ep.encoded(S.IMAGE), ep.encoded(S.DEPTH)
         sample = [decode_depth(b) for b in self.depth_bytes[:: max(1, len(ep) // 25)]]
         self.colours = P.DepthColours(P.DepthColours.range_for(sample))
+        self.poses = ep.obstacle_poses  # (L, N, 7) on the dynamic tier, else None
+        self.onset = P.fault_onset(ep)
         with P.theme():
             fig = P.figure(self.WIDTH, self.HEIGHT, scale)
             fig.text(0.5, 1 - 22 / self.HEIGHT, ep.title(), ha="center", va="center", fontsize=13, weight="bold")
@@ -63,7 +67,7 @@ class EpisodeVideo:
                 ax.set_title(title)
             self.colours.colorbar(fig, cbar)
             self.top, self.side = paired_views(
-                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, ep.positions
+                ep.scenario, P.box_of(fig, top).size, P.box_of(fig, side).size, P.map_points(ep)
             )
             P.setup_map_axes(top, self.top, "top view")
             P.setup_map_axes(side, self.side, "side view")
@@ -72,7 +76,9 @@ class EpisodeVideo:
                 ((650 + 1265) / 2 / self.WIDTH, 1 - 370 / self.HEIGHT),
                 collision=ep.collision_at is not None,
                 heading=True,
-                ncol=3,
+                ncol=3 if self.poses is None else 4,
+                debris=self.poses is not None,
+                fault=self.onset is not None,
             )
             sig = {
                 "speed": P.add_axes(fig, 60, 440, 250, 220),
@@ -88,6 +94,9 @@ class EpisodeVideo:
             }
             self.cursor = P.TimeCursor.of(fig, [sig[n] for n in ("speed", "clearance", "thrust", "fuel")])
         self.map_background = {"top": self.top.background(), "side": self.side.background()}
+        if self.poses is not None:
+            for name, view in self.views.items():
+                view.draw_tracks(self.map_background[name], self.poses)
         assert self.background.shape[:2] == (round(self.HEIGHT * scale), round(self.WIDTH * scale))
 
     def __len__(self) -> int:
@@ -102,6 +111,11 @@ class EpisodeVideo:
         box = self.boxes[view]
         return self.views[view].polyline(self.ep.positions[: t + 1]) + [box.x0, box.y0]
 
+    def track_pixels(self, view: str, piece: int) -> np.ndarray:
+        """(L, 2) frame pixels (column, row) where debris ``piece``'s track is drawn in ``view``."""
+        box = self.boxes[view]
+        return self.views[view].polyline(self.poses[:, piece, :3]) + [box.x0, box.y0]
+
     def frame(self, t: int) -> np.ndarray:
         ep = self.ep
         img = self.background.copy()
@@ -113,13 +127,19 @@ class EpisodeVideo:
         last = t == len(ep) - 1
         for name, view in self.views.items():
             panel = self.map_background[name].copy()
+            if self.poses is not None:
+                view.draw_debris(panel, self.poses[t])
             view.draw_path(panel, ep.positions[: t + 1], ep.collision_at if last else None)
+            if self.onset is not None and t >= self.onset:
+                view.draw_fault(panel, ep.positions[self.onset])
             view.draw_heading(panel, ep.positions[t], ep.camera_axis[t])
             self.boxes[name].paste(img, panel)
         self.cursor.draw(img, t * ep.times[1] if len(ep) > 1 else 0.0)
         status = f"t = {ep.times[t]:5.2f} s   frame {t + 1:3d} / {len(ep)}"
         if last:
             status += f"   {ep.meta[OUTCOME].upper()}"
+        if self.onset is not None and t >= self.onset:
+            status += f"   {P.fault_label(P.episode_fault(ep))}"
         cam = self.boxes["camera"]
         cv2.putText(
             img,

@@ -1,5 +1,9 @@
 """Orthographic maps of an episode drawn with OpenCV: obstacles to scale, goal, start, path.
 
+On the dynamic tier the obstacles move: the background shows them at their start pose, and
+``draw_tracks`` adds each piece's track (its centre over the episode, a dot at the start),
+``draw_debris`` the outlines where the pieces are at a frame, ``draw_fault`` where the fault began.
+
 ``PlaneMap`` projects the world on two of its axes: ``(0, 1)`` is the top-down view (x right,
 y up), ``(0, 2)`` the side view (x right, z up). Images are RGB. The mapping from metres to
 pixels is public (``px``, ``polyline``, ``world``) so callers and tests can find what was drawn.
@@ -11,6 +15,7 @@ import cv2
 import numpy as np
 
 from orbitdata.scenario.spec import Obstacle, Scenario
+from orbitdata.state import quat_to_matrix
 
 # RGB colours
 BG = (18, 18, 24)
@@ -20,6 +25,8 @@ GOAL = (90, 220, 90)
 HIT = (255, 60, 60)
 START = (255, 255, 255)
 HEADING = (255, 210, 60)
+TRACK = (190, 140, 255)  # a piece of debris' track and its pose now (dynamic tier)
+FAULT = (255, 80, 200)  # where the thruster fault began (dynamic tier)
 
 AXIS_NAMES = "xyz"
 
@@ -132,10 +139,32 @@ class PlaneMap:
         cv2.drawMarker(img, self.px((0.0, 0.0, 0.0)), START, cv2.MARKER_CROSS, 10, 2)
         return img
 
-    def _footprint(self, ob: Obstacle) -> np.ndarray:
-        """Outline of the obstacle's projection: the hull of its surface points."""
-        world = _surface_points(ob) @ ob.rotation.T + np.asarray(ob.center)
+    def _footprint(self, ob: Obstacle, pose: np.ndarray | None = None) -> np.ndarray:
+        """Outline of the obstacle's projection: the hull of its surface points, at its own pose
+        or at ``pose`` (7,): centre (m, world) and quat (w, x, y, z)."""
+        center, rotation = (ob.center, ob.rotation) if pose is None else (pose[:3], quat_to_matrix(pose[3:]))
+        world = _surface_points(ob) @ rotation.T + np.asarray(center)
         return cv2.convexHull(self.polyline(world))
+
+    def draw_tracks(self, img: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """Each piece's track in place: its centre from the first to the last of ``poses`` (L, N, 7),
+        a dot where it started."""
+        for i in range(poses.shape[1]):
+            track = self.polyline(poses[:, i, :3])
+            cv2.polylines(img, [track], False, TRACK, 1, cv2.LINE_AA)
+            cv2.circle(img, tuple(int(x) for x in track[0]), 3, TRACK, -1, cv2.LINE_AA)
+        return img
+
+    def draw_debris(self, img: np.ndarray, poses: np.ndarray) -> np.ndarray:
+        """The outline of every obstacle at ``poses`` (N, 7), e.g. where each piece is at a frame."""
+        for ob, pose in zip(self.scenario.obstacles, poses):
+            cv2.polylines(img, [self._footprint(ob, pose)], True, TRACK, 1, cv2.LINE_AA)
+        return img
+
+    def draw_fault(self, img: np.ndarray, position) -> np.ndarray:
+        """A diamond where the CubeSat was when its thruster fault began."""
+        cv2.drawMarker(img, self.px(position), FAULT, cv2.MARKER_DIAMOND, 12, 2, cv2.LINE_AA)
+        return img
 
     def draw_path(self, img: np.ndarray, positions: np.ndarray, collision_at: np.ndarray | None = None) -> np.ndarray:
         """Draw the path (N, 3) in place, a dot at its end and a red cross where it collided."""

@@ -13,6 +13,7 @@ from rich.filesize import decimal
 from orbitdata import schema as S
 from orbitdata.config import GenerationConfig
 from orbitdata.info import Info
+from orbitdata.scenario.config import STATIC
 
 LICENSE = "cc-by-4.0"
 TAGS = ["space-robotics", "world-models", "cubesat", "obstacle-avoidance", "mujoco", "orbit-planner"]
@@ -30,11 +31,11 @@ def _size_category(n: int) -> str:
     return next((label for limit, label in bounds if n < limit), "n>100M")
 
 
-def _features_yaml(kind: str) -> list:
+def _features_yaml(kind: str, tier: str = STATIC) -> list:
     from datasets import Features
     from datasets.info import DatasetInfo
 
-    info = DatasetInfo(features=Features.from_dict(S.hf_features(kind)))
+    info = DatasetInfo(features=Features.from_dict(S.hf_features(kind, tier)))
     return info._to_yaml_dict()["features"]
 
 
@@ -58,7 +59,7 @@ def yaml_header(info: Info, sizes: dict) -> dict:
         dataset_info.append(
             {
                 "config_name": name,
-                "features": _features_yaml("data" if folder == S.DATA_DIR else "episodes"),
+                "features": _features_yaml("data" if folder == S.DATA_DIR else "episodes", info.tier),
                 "splits": split_info,
                 "download_size": total,
                 "dataset_size": total,
@@ -87,29 +88,77 @@ def _type_name(t: pa.DataType) -> str:
     return {"float": "float32", "double": "float64"}.get(str(t), str(t))
 
 
-def column_table(kind: str) -> str:
-    """The card's table of one table's columns, from the schema: name, type, unit, meaning."""
+def column_table(kind: str, tier: str = STATIC) -> str:
+    """The card's table of one table's columns in a ``tier`` dataset, from the schema: name, type, unit, meaning."""
     rows = ["| column | type | unit | meaning |", "|---|---|---|---|"]
-    for f in S.FIELDS[kind]:
+    for f in S.fields_of(kind, tier):
         rows.append(f"| `{f.name}` | {_type_name(f.type)} | {f.unit or '-'} | {f.description} |")
     return "\n".join(rows)
 
 
+def _header(columns: list[str], outcomes: tuple[str, ...]) -> str:
+    """A composition table's header: the columns, then one per outcome."""
+    names = columns + [o.replace("_", " ") for o in outcomes]
+    return "| " + " | ".join(names) + " |\n" + "|---" * len(names) + "|"
+
+
+def rejections(episodes: pa.Table) -> tuple[int, int]:
+    """(debris draws rejected as unsurvivable, debris pieces kept) over a dynamic dataset's episodes:
+    the tier's rejection rate is the first over their sum."""
+    rejected = sum(episodes.column(S.UNSURVIVABLE_DRAWS).to_pylist())
+    return rejected, sum(episodes.column(S.N_OBSTACLES).to_pylist())
+
+
+def _share(count: int, total: int) -> str:
+    return f"{count} of {total} ({100 * count / max(total, 1):.0f} %)"
+
+
+def tier_note(config: GenerationConfig, episodes: pa.Table | None) -> str:
+    """The card's paragraph on the dynamic tier, measured from the episodes table ('' for static)."""
+    if config.tier == STATIC:
+        return ""
+    d, n = config.scenario.dynamic, episodes.num_rows
+    cw = sum(episodes.column(S.CW).to_pylist())
+    faults = sum(f["kind"] != "none" for f in episodes.column(S.FAULT).to_pylist())
+    eclipse = sum(e["eclipse"] for e in episodes.column(S.SENSING).to_pylist())
+    rejected, kept = rejections(episodes)
+    return (
+        "\n\n**The dynamic tier.** Unlike the paper's static scenes (the numbers above on rocks, and the"
+        " limitations below on sensing and orbital mechanics, are the static tier's), the debris drifts at"
+        f" {d.debris_speed[0]:g}-{d.debris_speed[1]:g} m/s and tumbles at {d.tumble_deg_s[0]:g}-{d.tumble_deg_s[1]:g}"
+        f" deg/s, a share of {d.intercept_prob:g} of it aimed to cross the nominal flight; the Clohessy-Wiltshire"
+        f" terms (n = {d.mean_motion:g} rad/s) act in {_share(cw, n)} episodes, one thruster is faulty in"
+        f" {_share(faults, n)} and {_share(eclipse, n)} are in eclipse; the camera has RGB noise of {d.rgb_noise:g}"
+        f" and depth dropout of {d.depth_dropout[0]:g}-{d.depth_dropout[1]:g}; mass and inertia vary by"
+        f" x{d.mass_scale[0]:g}-{d.mass_scale[1]:g}. {rejected} debris draws were rejected as unsurvivable against"
+        f" {kept} kept (`{S.UNSURVIVABLE_DRAWS}`). Each frame's obstacle poses (`{S.OBSTACLE_POSES}`) and the"
+        " episode's motion, body, fault and sensing records are privileged: for oracles and validation, never an"
+        " input of a learned pilot."
+    )
+
+
 def render_card(
-    info: Info, config: GenerationConfig, sizes: dict, repo: str = "path/to/orbit_planner", overview: str | None = None
+    info: Info,
+    config: GenerationConfig,
+    sizes: dict,
+    repo: str = "path/to/orbit_planner",
+    overview: str | None = None,
+    episodes: pa.Table | None = None,
 ) -> str:
+    """The card. ``episodes``: the episodes table, which a dynamic-tier card summarises."""
     c = info.counts
+    outcomes = S.outcomes(config.tier)
     split_rows, level_rows = [], []
     for s, sc in c["splits"].items():
         o = sc["outcomes"]
         split_rows.append(
-            f"| {s} | {sc['episodes']} | {sc['frames']} | " + " | ".join(str(o[k]) for k in S.OUTCOMES) + " |"
+            f"| {s} | {sc['episodes']} | {sc['frames']} | " + " | ".join(str(o[k]) for k in outcomes) + " |"
         )
         for level, lc in sc["levels"].items():
             lo = lc["outcomes"]
             level_rows.append(
                 f"| {s} | {level} | {lc['episodes']} | {lc['frames']} | "
-                + " | ".join(str(lo[k]) for k in S.OUTCOMES)
+                + " | ".join(str(lo[k]) for k in outcomes)
                 + " |"
             )
     total_bytes = sum(v for folder in sizes.values() for v in folder.values())
@@ -126,7 +175,10 @@ def render_card(
         codebase_version=info.codebase_version,
         schema_version=info.schema_version,
         seed=ds.seed,
+        tier_note=tier_note(config, episodes),
         repo=repo,
+        split_header=_header(["split", "episodes", "frames"], outcomes),
+        level_header=_header(["split", "level", "episodes", "frames"], outcomes),
         split_table="\n".join(split_rows),
         level_table="\n".join(level_rows),
         total_bytes=decimal(total_bytes),
@@ -144,8 +196,8 @@ def render_card(
         max_thrust=sim.cubesat.max_thrust,
         cant_deg=sim.cubesat.cant_deg,
         wrench_rank=info.hardware["wrench_rank"],
-        step_columns=column_table("data"),
-        episode_columns=column_table("episodes"),
+        step_columns=column_table("data", config.tier),
+        episode_columns=column_table("episodes", config.tier),
         fov=sim.camera.fovy_deg,
         n_obstacles_range=f"{scn.n_obstacles[0]} to {scn.n_obstacles[1]}",
         shapes=", ".join(scn.shapes),

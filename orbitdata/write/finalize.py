@@ -62,7 +62,7 @@ def finalize(
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
     if max_shard_bytes is not None:
         config = config.replace(dataset={"max_shard_bytes": int(max_shard_bytes)})
-    result = write_shards(out, config.dataset)
+    result = write_shards(out, config.dataset, config.tier)
     write_json(out, S.STATS_PATH, result.stats)
     sizes = {S.DATA_DIR: {}, S.EPISODES_DIR: {}}
     for rel in result.files:
@@ -74,7 +74,7 @@ def finalize(
     if overview:
         files.append(overview)
     info = build_info(config, result.episodes, out, files)
-    card = render_card(info, config, sizes, repo=repo_id or out.name, overview=overview)
+    card = render_card(info, config, sizes, repo=repo_id or out.name, overview=overview, episodes=result.episodes)
     atomic_write(out / S.CARD_PATH, card.encode())
     info = build_info(config, result.episodes, out, files + [S.CARD_PATH])
     write_json(out, S.INFO_PATH, info.to_dict())  # last: its presence means the layout is complete

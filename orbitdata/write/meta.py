@@ -12,6 +12,7 @@ from orbitdata import schema as S
 from orbitdata.codecs import PNG_FILTER
 from orbitdata.config import GenerationConfig
 from orbitdata.info import FileEntry, Info, counts
+from orbitdata.scenario.config import STATIC
 from orbitdata.sim.thrusters import thruster_layout, wrench_matrix
 from orbitdata.state import STATE_NAMES
 from orbitdata.version import __version__
@@ -35,8 +36,23 @@ def hardware(config: GenerationConfig) -> dict:
     }
 
 
-def _unit(name: str) -> str:
-    return next(f.unit for f in S.STEP_FIELDS if f.name == name)
+def _unit(name: str, tier: str = STATIC) -> str:
+    return next(f.unit for f in S.step_fields(tier) if f.name == name)
+
+
+def _tier_features(tier: str) -> dict:
+    """The features a tier adds to the static ones (none for the static tier)."""
+    if tier == STATIC:
+        return {}
+    return {
+        S.OBSTACLE_POSES: {
+            "dtype": "float32",
+            "shape": [S.N_OBSTACLES, 7],  # per frame: one row per obstacle of the episode
+            "names": ["x", "y", "z", "qw", "qx", "qy", "qz"],
+            "unit": _unit(S.OBSTACLE_POSES, tier),
+            "privileged": True,
+        }
+    }
 
 
 def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: list[str]) -> Info:
@@ -49,7 +65,7 @@ def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: l
         fps=S.FPS,
         dt=S.DT,
         root_seed=ds.seed,
-        counts=counts(rows),
+        counts=counts(rows, config.tier),
         features={
             S.IMAGE: {"dtype": "image", "shape": [size, size, 3], "codec": "jpeg", "quality": ds.jpeg_quality},
             S.DEPTH: {
@@ -70,6 +86,7 @@ def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: l
             S.STATE: {"dtype": "float32", "shape": [S.STATE_DIM], "names": list(STATE_NAMES)},
             S.ACTION: {"dtype": "float32", "shape": [S.ACTION_DIM], "names": list(S.ACTION_NAMES)},
             S.MIN_CLEARANCE: {"dtype": "float32", "shape": [1], "unit": _unit(S.MIN_CLEARANCE)},
+            **_tier_features(config.tier),
         },
         storage={
             "compression": ds.compression,

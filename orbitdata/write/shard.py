@@ -21,6 +21,7 @@ import pyarrow.parquet as pq
 from orbitdata import schema as S
 from orbitdata.config import DatasetConfig
 from orbitdata.load.rows import RowReader
+from orbitdata.scenario.config import STATIC
 from orbitdata.write.parts import atomic_write, episodes_part, parts_dir, remove_temporaries, steps_part
 from orbitdata.write.stats import StatsAccumulator
 
@@ -38,9 +39,9 @@ def _image_bytes(table: pa.Table) -> int:
 class _ShardWriter:
     """Writes one split's frames to numbered shards under temporary names."""
 
-    def __init__(self, out: Path, split: str, storage: DatasetConfig):
+    def __init__(self, out: Path, split: str, storage: DatasetConfig, tier: str = STATIC):
         self.out, self.split, self.storage = out, split, storage
-        self.schema = S.with_hf_metadata(S.STEP_SCHEMA, "data")
+        self.schema = S.with_hf_metadata(S.step_schema(tier), "data", tier)
         self.files: list[Path] = []
         self.writer: pq.ParquetWriter | None = None
         self.buffer: list[pa.Table] = []
@@ -153,10 +154,11 @@ class ShardResult:
     stats: dict  # train-split stats
 
 
-def write_shards(out: Path, storage: DatasetConfig) -> ShardResult:
+def write_shards(out: Path, storage: DatasetConfig, tier: str = STATIC) -> ShardResult:
     """Write final data/episodes shards from parts/ (if present) or from existing shards.
 
-    ``storage``: the compression, rows per row group and shard size limit of the config.
+    ``storage``: the compression, rows per row group and shard size limit of the config;
+    ``tier``: the scenario tier, whose columns the tables have.
     """
     from_parts = parts_dir(out).is_dir() and any(parts_dir(out).glob("unit-*.episodes.parquet"))
     for folder in (out / S.DATA_DIR, out / S.EPISODES_DIR):
@@ -167,7 +169,7 @@ def write_shards(out: Path, storage: DatasetConfig) -> ShardResult:
     for split in S.SPLITS:
         if totals[split] == 0:
             continue
-        writer = _ShardWriter(out, split, storage)
+        writer = _ShardWriter(out, split, storage, tier)
         rows = []
         source = _source_from_parts(out, split) if from_parts else _source_from_shards(out, split)
         for row, frames in source:
@@ -178,7 +180,7 @@ def write_shards(out: Path, storage: DatasetConfig) -> ShardResult:
         data_files = writer.finish()
         for r in rows:
             r[S.DATA_FILE] = data_files[r[S.DATA_FILE]]
-        table = pa.Table.from_pylist(rows, schema=S.with_hf_metadata(S.EPISODE_SCHEMA, "episodes"))
+        table = pa.Table.from_pylist(rows, schema=S.with_hf_metadata(S.episode_schema(tier), "episodes", tier))
         rel = S.shard_path(S.EPISODES_DIR, split, 0, 1)
         sink = pa.BufferOutputStream()
         pq.write_table(table, sink, compression=storage.compression)
@@ -191,5 +193,5 @@ def write_shards(out: Path, storage: DatasetConfig) -> ShardResult:
         for path in (out / folder).glob("*.parquet"):
             if f"{folder}/{path.name}" not in keep:
                 path.unlink()
-    episodes = pa.Table.from_pylist(all_rows, schema=S.EPISODE_SCHEMA)
+    episodes = pa.Table.from_pylist(all_rows, schema=S.episode_schema(tier))
     return ShardResult(files=files, episodes=episodes, stats=stats.result())

@@ -51,7 +51,7 @@ def _env(config: GenerationConfig) -> CubeSatEnv:
 
 def parquet_bytes(table: pa.Table, kind: str, config: GenerationConfig) -> bytes:
     sink = io.BytesIO()
-    schema = S.with_hf_metadata(table.schema, kind)
+    schema = S.with_hf_metadata(table.schema, kind, config.tier)
     pq.write_table(
         table.cast(schema),
         sink,
@@ -74,14 +74,14 @@ def run_unit(config: GenerationConfig, unit: Unit) -> UnitResult:
 
         pilot = make_pilot(task.level, config.flight)
         result = fly_episode(env, pilot, task.seed, frame_sink=sink)
-        tables.append(steps_table(result, task.index, rgb, depth))
-        rows.append(episode_row(result, task.index, task.split))
+        tables.append(steps_table(result, task.index, rgb, depth, config.tier))
+        rows.append(episode_row(result, task.index, task.split, config.tier))
         outcomes[result.outcome] = outcomes.get(result.outcome, 0) + 1
     steps = pa.concat_tables(tables)
     return UnitResult(
         unit=unit.index,
         steps=parquet_bytes(steps, "data", config),
-        episodes=parquet_bytes(episodes_table(rows), "episodes", config),
+        episodes=parquet_bytes(episodes_table(rows, config.tier), "episodes", config),
         frames=steps.num_rows,
         outcomes=outcomes,
     )

@@ -14,7 +14,7 @@ from orbitmodel.config import PRESETS
 
 Preset = Enum("Preset", {name: name for name in PRESETS}, type=str)
 Level = Enum("Level", {name: name for name in S.LEVELS}, type=str)
-Outcome = Enum("Outcome", {name: name for name in S.OUTCOMES}, type=str)
+Outcome = Enum("Outcome", {name: name for name in S.DYNAMIC_OUTCOMES}, type=str)  # any tier's
 Device = Enum("Device", {name: name for name in ("auto", "cpu", "cuda")}, type=str)
 
 

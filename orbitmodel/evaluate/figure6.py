@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from orbitdata.schema import OUTCOMES
+from orbitdata.schema import DYNAMIC_OUTCOMES, OUTCOMES
 from orbitmodel.extras import pyplot
 
 
@@ -51,7 +51,10 @@ def report_from_episodes(path: str | Path) -> dict:
                 key, {"obstacles": key[0], "speed": key[1], "episodes": 0, **{o: 0 for o in OUTCOMES}}
             )
             cell["episodes"] += 1
-            cell[e["outcome"]] += 1
+            outcome = e["outcome"]
+            if outcome not in DYNAMIC_OUTCOMES:
+                raise ValueError(f"unknown outcome {outcome!r}")
+            cell[outcome] = cell.get(outcome, 0) + 1  # tumbling: the dynamic tier's only
             pilot = e.get("variant", pilot)
     except (json.JSONDecodeError, KeyError, TypeError, ValueError) as err:
         raise ValueError(

@@ -35,13 +35,21 @@ def report_totals(report: dict) -> tuple[int, int]:
 
 
 FAILURES = ("collision", "timeout", "out_of_fuel")
+TUMBLING = "tumbling"  # the dynamic tier's grids also count it (orbitdata.schema.outcomes)
+
+
+def failure_kinds(reports: list[dict]) -> tuple[str, ...]:
+    """The failures the reports count: :data:`FAILURES`, and ``tumbling`` where a setting counts it
+    (a dynamic-tier grid), so that a static grid's tables keep their keys."""
+    tumbling = any(TUMBLING in s for r in reports for s in r["settings"])
+    return FAILURES + ((TUMBLING,) if tumbling else ())
 
 
 def failures_text(report: dict) -> str:
     """'3 collisions, 1 timeout' over every setting ('none' without failures)."""
-    counts = {kind: sum(int(s.get(kind, 0)) for s in report["settings"]) for kind in FAILURES}
-    words = {"collision": "collision", "timeout": "timeout", "out_of_fuel": "out of fuel"}
-    parts = [f"{n} {words[k]}{'s' if n != 1 and k != 'out_of_fuel' else ''}" for k, n in counts.items() if n]
+    counts = {kind: sum(int(s.get(kind, 0)) for s in report["settings"]) for kind in failure_kinds([report])}
+    words = {"collision": "collisions", "timeout": "timeouts", "out_of_fuel": "out of fuel", TUMBLING: "tumbling"}
+    parts = [f"{n} {words[k] if n != 1 else words[k].removesuffix('s')}" for k, n in counts.items() if n]
     return ", ".join(parts) or "none"
 
 
@@ -107,8 +115,9 @@ def pool_seeds(reports: list[dict]) -> dict:
     seeds = [int(r["seed"]) for r in reports]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"seeds {seeds} repeat: pool each root seed once")
+    failures = failure_kinds(reports)
     pooled = {
-        k: {"obstacles": k[0], "speed": k[1], "episodes": 0, "success": 0, **{f: 0 for f in FAILURES}} for k in keys
+        k: {"obstacles": k[0], "speed": k[1], "episodes": 0, "success": 0, **{f: 0 for f in failures}} for k in keys
     }
     per_seed, worst = {}, None
     for r in reports:
@@ -131,7 +140,7 @@ def pool_seeds(reports: list[dict]) -> dict:
             raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")
         per_seed[str(r["seed"])] = r["settings"]
         for k, x in mine.items():
-            for f in ("episodes", "success", *FAILURES):
+            for f in ("episodes", "success", *failures):
                 pooled[k][f] += int(x.get(f, 0))
             rate = int(x["success"]) / int(x["episodes"])
             if worst is None or rate < worst["rate"]:

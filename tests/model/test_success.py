@@ -146,3 +146,22 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
     assert res.exit_code == 0, res.output
     assert "96.7 % [91.7, 98.7] (116/120)" in res.output and "seed 4, 1 obstacles at 1 m/s, 17/20" in res.output
     assert json.loads((tmp_path / "test.json").read_text())["seeds"] == [3, 4, 5]
+
+
+def test_a_dynamic_grids_tumbling_is_a_failure_and_a_static_grids_keys_stay(tmp_path):
+    from orbitmodel.evaluate.figure6 import report_from_episodes
+    from orbitmodel.evaluate.success import pool_seeds
+
+    static = [{**grid("risky", [18, 20], collisions=[2, 0]), "seed": s} for s in (0, 1)]
+    assert set(pool_seeds(static)["settings"][0]) == set(static[0]["settings"][0])  # no tumbling key added
+    dynamic = [
+        {**r, "settings": [{**x, "tumbling": 1, "success": x["success"] - 1} for x in r["settings"]]} for r in static
+    ]
+    assert failures_text(dynamic[0]) == "2 collisions, 2 tumbling"
+    assert [s["tumbling"] for s in pool_seeds(dynamic)["settings"]] == [2, 2]
+    stream = tmp_path / "grid.episodes.jsonl"
+    stream.write_text(
+        "".join(json.dumps({"obstacles": 3, "speed": 1.0, "outcome": o}) + "\n" for o in ("success", "tumbling"))
+    )
+    cell = report_from_episodes(stream)["settings"][0]
+    assert (cell["episodes"], cell["success"], cell["tumbling"]) == (2, 1, 1)

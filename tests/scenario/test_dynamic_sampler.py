@@ -48,9 +48,10 @@ def test_the_tier_is_chosen_by_name_in_a_config_table():
     stored = GenerationConfig().to_dict()
     assert "tier" not in stored["scenario"] and "dynamic" not in stored["scenario"]
     assert GenerationConfig.from_dict(stored) == GenerationConfig()
-    # Never silently: the writer and the grid cannot record the tier's columns yet.
-    with pytest.raises(ValueError, match="scenario.tier 'dynamic' cannot be generated or flown on a grid yet"):
-        GenerationConfig.from_dict({"scenario": {"tier": "dynamic"}})
+    # A dynamic record names its tier and loads back as it.
+    dynamic = GenerationConfig.from_dict({"scenario": {"tier": "dynamic"}})
+    assert dynamic.scenario == DYNAMIC and dynamic.to_dict()["scenario"]["tier"] == "dynamic"
+    assert GenerationConfig.from_dict(dynamic.to_dict()) == dynamic
 
 
 def test_a_pure_function_of_seed_and_settings(scenarios):

@@ -11,7 +11,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 import yaml
-from tiny import tiny_config
+from tiny import dynamic_config, tiny_config
 
 from orbitdata import schema as S
 from orbitdata.viz import overview_figure
@@ -138,9 +138,10 @@ def test_ray_executor_gives_identical_bytes(tiny_dataset_master, tmp_path):
 
 # Dies by SIGKILL in the middle of writing the third unit: its frames are on disk, its episode
 # rows (the mark of a finished unit) are not. Deterministic: no polling, no timing.
+# argv: OUT and the name of the config's maker in tests/tiny.py (one per tier).
 KILL_SCRIPT = """
 import os, signal, sys
-from tiny import tiny_config
+import tiny
 from orbitdata.write import parts
 from orbitdata.write.generate import generate
 
@@ -156,21 +157,22 @@ def write_unit_or_die(out, name, steps, episodes):
 
 
 parts.write_unit = write_unit_or_die
-generate(sys.argv[1], tiny_config(episodes_per_unit=1), workers=1)
+generate(sys.argv[1], getattr(tiny, sys.argv[2])(episodes_per_unit=1), workers=1)
 """
 
 
-def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
+@pytest.mark.parametrize("make", [tiny_config, dynamic_config], ids=["static", "dynamic"])
+def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path, make):
     clean = tmp_path / "clean" / "orbit"
-    generate(clean, tiny_config(episodes_per_unit=1), workers=1, figure=overview_figure)
+    generate(clean, make(episodes_per_unit=1), workers=1, figure=overview_figure)
     out = tmp_path / "killed" / "orbit"
     env = dict(os.environ, PYTHONPATH=str(Path(__file__).parents[1]))  # tests/, for tiny.py
-    proc = subprocess.run([sys.executable, "-c", KILL_SCRIPT, str(out)], env=env, timeout=300)
+    proc = subprocess.run([sys.executable, "-c", KILL_SCRIPT, str(out), make.__name__], env=env, timeout=300)
     assert proc.returncode == -signal.SIGKILL
     assert len(list((out / "parts").glob("*.episodes.parquet"))) == 2  # two whole units
     assert len(list((out / "parts").glob("*.steps.parquet"))) == 3  # and the frames of a third
     assert not (out / S.INFO_PATH).exists()
-    generate(out, tiny_config(episodes_per_unit=1), workers=1, figure=overview_figure)  # resume
+    generate(out, make(episodes_per_unit=1), workers=1, figure=overview_figure)  # resume
     assert tree_digest(out) == tree_digest(clean)
 
 

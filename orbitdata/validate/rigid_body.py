@@ -1,0 +1,273 @@
+"""The dynamic tier's CubeSat over one control step, as the simulator integrates it, for many steps at once.
+
+The simulator (:mod:`orbitdata.sim.env`, :mod:`orbitdata.sim.dynamic`) holds the thrust of a step
+for its ``n`` substeps of ``h = dt / n``; MuJoCo's semi-implicit Euler updates the velocities with
+the accelerations of the substep's start, then the pose with the new velocities. The model here
+is that integrator on the rigid body as the episode record draws it:
+
+* thrusts: the command through the recorded fault from its onset frame, scaled down on the step
+  that empties the tank; the mass and principal inertia are those of the fuel at the step's
+  start (as :func:`orbitdata.sim.dynamic.body_mass_properties` gives them);
+* force and torque: the thrusters' body-frame wrench about the centre of mass, offset by
+  ``com_offset`` from the cube's centre; Euler's equations for the rotation (the inertia is not
+  isotropic, so the gyroscopic term acts);
+* the Clohessy-Wiltshire acceleration of the centre of mass when the episode is flagged ``cw``;
+* the state's p and v are the cube centre's (MuJoCo's free joint), which moves with the
+  centre of mass plus ``w x r``.
+
+:func:`thrust_residuals` compares the velocities, angular velocities and fuel that the recorded
+thrust gives with those recorded at the step's end. :func:`pose_residuals` is the kinematic
+check of this tier: it finds the constant body wrench that carries the recorded velocities of
+a step's start to those of its end, and compares the pose it flies with the recorded one, so
+that it reads no thrust record.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from orbitdata.scenario.dynamics import NO_FAULT
+from orbitdata.sim.config import CubeSatConfig
+from orbitdata.sim.thrusters import wrench_matrix
+from orbitdata.state import ANGULAR_VELOCITY, FUEL, POSITION, ROT6D, VELOCITY, rot6d_to_matrix
+
+FAULT_KINDS = (NO_FAULT, "off", "scaled", "stuck")  # codes 0..3 in :class:`StepBody`
+WRENCH_ITERATIONS = 4  # fixed-point steps of the wrench that :func:`pose_residuals` infers
+
+
+@dataclass
+class StepBody:
+    """The episode record of each step's episode, one row per step (N steps)."""
+
+    mass_scale: np.ndarray  # (N,)
+    inertia_scale: np.ndarray  # (N, 3)
+    com: np.ndarray  # (N, 3) m, body frame, from the cube's centre
+    n: np.ndarray  # (N,) rad/s: the mean motion when the episode is flagged cw, else 0
+    fault_kind: np.ndarray  # (N,) int code into FAULT_KINDS
+    fault_thruster: np.ndarray  # (N,) int, -1 for none
+    fault_level: np.ndarray  # (N,)
+    onset: np.ndarray  # (N,) int, the frame from which the fault acts
+
+    def take(self, index) -> "StepBody":
+        return StepBody(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
+
+    def replace(self, **changes) -> "StepBody":
+        return StepBody(**{f.name: changes.get(f.name, getattr(self, f.name)) for f in fields(self)})
+
+
+def _rows(M: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) @ (N, 3) row by row."""
+    return np.einsum("nij,nj->ni", M, x)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return np.stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ],
+        axis=1,
+    )
+
+
+def _cw(position: np.ndarray, velocity: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Rows of :func:`orbitdata.scenario.motion.cw_acceleration`, each with its own n."""
+    return np.stack(
+        [
+            3.0 * n * n * position[:, 0] + 2.0 * n * velocity[:, 1],
+            -2.0 * n * velocity[:, 0],
+            -n * n * position[:, 2],
+        ],
+        axis=1,
+    )
+
+
+def given_thrust(action: np.ndarray, frame: np.ndarray, body: StepBody) -> np.ndarray:
+    """(N, 8) what the thrusters gave for the commanded ``action`` at ``frame`` (before the fuel limit)."""
+    thrust = np.array(action, dtype=np.float64)
+    active = (body.fault_kind != 0) & (frame >= body.onset)
+    rows = np.flatnonzero(active)
+    k = body.fault_thruster[rows]
+    commanded = thrust[rows, k]
+    kind = body.fault_kind[rows]
+    thrust[rows, k] = np.where(
+        kind == 1, 0.0, np.where(kind == 2, commanded * body.fault_level[rows], body.fault_level[rows])
+    )
+    return thrust
+
+
+@dataclass
+class Motion:
+    """Where N steps end: cube centre p (m, world), R (body -> world), v of the cube's centre
+    (m/s, world) and w (rad/s, body); ``turn`` is h * sum of the substeps' R, the map from a held
+    body-frame acceleration to the velocity it adds over the step."""
+
+    p: np.ndarray
+    R: np.ndarray
+    v: np.ndarray
+    w: np.ndarray
+    turn: np.ndarray | None = None
+
+
+def start_of(state: np.ndarray) -> Motion:
+    """The motion of states (N, 16) float64."""
+    R = rot6d_to_matrix(state[:, ROT6D])
+    return Motion(state[:, POSITION].copy(), R, _rows(R, state[:, VELOCITY]), state[:, ANGULAR_VELOCITY].copy())
+
+
+def _matrix(q: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (w, x, y, z) -> (N, 3, 3) rotations."""
+    w, x, y, z = q.T
+    return np.stack(
+        [
+            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
+            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
+            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+        ],
+        axis=1,
+    ).reshape(-1, 3, 3)  # fmt: skip
+
+
+def _quaternion(R: np.ndarray) -> np.ndarray:
+    """(N, 3, 3) rotations -> (N, 4) unit quaternions (Shepperd: from the largest of w, x, y, z)."""
+    r = R.reshape(-1, 9)
+    r00, r01, r02, r10, r11, r12, r20, r21, r22 = r.T
+    big = np.argmax(np.stack([r00 + r11 + r22, r00, r11, r22]), axis=0)
+    s = 2.0 * np.sqrt(
+        np.maximum(1.0 + np.stack([r00 + r11 + r22, r00 - r11 - r22, r11 - r00 - r22, r22 - r00 - r11]), 1e-300)
+    )
+    cases = np.stack(
+        [
+            [s[0] / 4, (r21 - r12) / s[0], (r02 - r20) / s[0], (r10 - r01) / s[0]],
+            [(r21 - r12) / s[1], s[1] / 4, (r01 + r10) / s[1], (r02 + r20) / s[1]],
+            [(r02 - r20) / s[2], (r01 + r10) / s[2], s[2] / 4, (r12 + r21) / s[2]],
+            [(r10 - r01) / s[3], (r02 + r20) / s[3], (r12 + r21) / s[3], s[3] / 4],
+        ]
+    )  # (case, component, N)
+    q = cases[big, :, np.arange(len(r))]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def _turn(q: np.ndarray, w: np.ndarray, h: float) -> np.ndarray:
+    """q turned by the body-frame angular velocity w for h seconds (MuJoCo's quaternion integration)."""
+    angle = h * np.linalg.norm(w, axis=1)
+    axis = w * (np.sin(0.5 * angle) / np.where(angle > 0, angle / h, 1.0))[:, None]
+    c = np.cos(0.5 * angle)
+    qw, qx, qy, qz = q.T
+    ax, ay, az = axis.T
+    out = np.stack(
+        [
+            qw * c - qx * ax - qy * ay - qz * az,
+            qw * ax + qx * c + qy * az - qz * ay,
+            qw * ay - qx * az + qy * c + qz * ax,
+            qw * az + qx * ay - qy * ax + qz * c,
+        ],
+        axis=1,
+    )
+    return out / np.linalg.norm(out, axis=1, keepdims=True)
+
+
+def fly(
+    start: Motion,
+    force: np.ndarray,
+    torque: np.ndarray,
+    inertia: np.ndarray,
+    body: StepBody,
+    dt: float,
+    substeps: int,
+) -> Motion:
+    """One control step of N bodies: ``force`` (N, 3) per unit mass and ``torque`` (N, 3) about
+    the centre of mass, both body frame and held, ``inertia`` (N, 3) principal (kg m^2)."""
+    h = dt / substeps
+    p, v, w = start.p, start.v, start.w
+    q = _quaternion(start.R)
+    c, n = body.com, body.n
+    cw = bool(np.any(n))
+    turn = np.zeros_like(start.R)
+    for _ in range(substeps):
+        R = _matrix(q)
+        turn += R
+        r = _rows(R, c)  # cube centre -> centre of mass, world
+        omega = _rows(R, w)
+        spin = _cross(omega, r)
+        a_com = _rows(R, force)
+        if cw:
+            a_com = a_com + _cw(p + r, v + spin, n)
+        alpha = (torque - _cross(w, inertia * w)) / inertia  # Euler's equations, body frame
+        a_centre = a_com - _cross(_rows(R, alpha), r) - _cross(omega, spin)
+        v = v + h * a_centre
+        w = w + h * alpha
+        p = p + h * v
+        q = _turn(q, w, h)
+    return Motion(p, _matrix(q), v, w, h * turn)
+
+
+def _mass(cubesat: CubeSatConfig, body: StepBody, fuel_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mass (N,) and principal inertia (N, 3) with ``fuel_kg`` in the tank: the simulator's
+    :func:`orbitdata.sim.dynamic.body_mass_properties` (the dry mass and each dry inertia scaled,
+    the tank as configured), written here so that validation never imports MuJoCo."""
+    dry_mass, dry_inertia = cubesat.mass_properties(0.0)
+    _, wet_inertia = cubesat.mass_properties(fuel_kg)
+    return dry_mass * body.mass_scale + fuel_kg, dry_inertia * body.inertia_scale + (wet_inertia - dry_inertia)[:, None]
+
+
+@dataclass
+class ThrustResiduals:
+    velocity: np.ndarray  # (N,) m/s, world frame
+    angular_velocity: np.ndarray  # (N,) rad/s, body frame
+    fuel: np.ndarray  # (N,) fuel ratio
+
+
+def thrust_residuals(
+    s0: np.ndarray,
+    s1: np.ndarray,
+    action: np.ndarray,
+    frame: np.ndarray,
+    body: StepBody,
+    cubesat: CubeSatConfig,
+    dt: float,
+    substeps: int,
+) -> ThrustResiduals:
+    """How far the recorded end of each step s0 -> s1 (states (N, 16) float64) lies from where the
+    commanded ``action`` (N, 8), through the record in ``body``, takes s0."""
+    thrust = given_thrust(action, frame, body)
+    fuel = s0[:, FUEL.start] * cubesat.fuel_mass  # kg at the step's start
+    burn = thrust.sum(axis=1) * cubesat.mass_flow_per_thrust * dt
+    empties = burn > fuel
+    scale = np.where(empties, fuel / np.where(empties, burn, 1.0), 1.0)  # the tank empties part-way
+    thrust *= scale[:, None]
+    mass, inertia = _mass(cubesat, body, fuel)
+    W = wrench_matrix(cubesat)  # about the cube's centre
+    force = thrust @ W[:3].T  # N, body frame
+    torque = thrust @ W[3:].T - _cross(body.com, force)  # about the centre of mass
+    end = fly(start_of(s0), force / mass[:, None], torque, inertia, body, dt, substeps)
+    R1 = rot6d_to_matrix(s1[:, ROT6D])
+    fuel_end = np.maximum(0.0, fuel - burn * scale) / cubesat.fuel_mass
+    return ThrustResiduals(
+        np.linalg.norm(end.v - _rows(R1, s1[:, VELOCITY]), axis=1),
+        np.linalg.norm(end.w - s1[:, ANGULAR_VELOCITY], axis=1),
+        np.abs(fuel_end - s1[:, FUEL.start]),
+    )
+
+
+def pose_residuals(
+    s0: np.ndarray, s1: np.ndarray, body: StepBody, cubesat: CubeSatConfig, dt: float, substeps: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Position (m) and attitude (rad) residuals of steps s0 -> s1 under the body in ``body``, with
+    the constant body-frame force and torque that carry s0's velocities to s1's (no thrust read)."""
+    start = start_of(s0)
+    R1 = rot6d_to_matrix(s1[:, ROT6D])
+    v1, w1 = _rows(R1, s1[:, VELOCITY]), s1[:, ANGULAR_VELOCITY]
+    _, inertia = _mass(cubesat, body, s0[:, FUEL.start] * cubesat.fuel_mass)
+    force = np.einsum("nji,nj->ni", start.R, v1 - start.v) / dt  # per unit mass, body frame
+    torque = inertia * (w1 - start.w) / dt + _cross(start.w, inertia * start.w)
+    for _ in range(WRENCH_ITERATIONS):
+        end = fly(start, force, torque, inertia, body, dt, substeps)
+        force = force + np.linalg.solve(end.turn, (v1 - end.v)[:, :, None])[:, :, 0]
+        torque = torque + inertia * (w1 - end.w) / dt
+    end = fly(start, force, torque, inertia, body, dt, substeps)
+    cos = (np.einsum("nij,nij->n", end.R, R1) - 1.0) / 2.0
+    return np.linalg.norm(end.p - s1[:, POSITION], axis=1), np.arccos(np.clip(cos, -1.0, 1.0))
