@@ -95,11 +95,13 @@ class GenerationConfig:
 
     def to_dict(self) -> dict:
         """Every setting, as meta/info.json records it. The static tier's record leaves the tier
-        settings out, so its datasets keep the bytes (and resume) they had before tiers existed."""
+        settings (and the dynamic tier's expert) out, so its datasets keep the bytes (and resume)
+        they had before tiers existed."""
         data = dataclasses.asdict(self)
         if self.scenario.tier == STATIC:
             data["scenario"].pop("tier", None)
             data["scenario"].pop("dynamic", None)
+            data["pilots"].pop("dynamic_expert", None)
         return data
 
     @classmethod

@@ -44,11 +44,11 @@ def _expert(config: FlightConfig, plan_draw=0, noise_draw=0) -> Pilot:
 
     draws = _draws(plan_draw, noise_draw)
     if config.scenario.tier == DYNAMIC:
-        from orbitdata.fly.pilots.config import DynamicExpertConfig
         from orbitdata.fly.pilots.dynamic_expert import DynamicExpertPilot
 
+        pilots = config.pilots
         return DynamicExpertPilot(
-            DynamicExpertConfig(), config.sim.cubesat, config.pilots.gains, config.sim.max_steps, **draws
+            pilots.dynamic_expert, config.sim.cubesat, pilots.gains, config.sim.max_steps, **draws
         )
     from orbitdata.fly.pilots.control import Controller
     from orbitdata.fly.pilots.expert import ExpertPilot

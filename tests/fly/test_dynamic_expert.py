@@ -195,3 +195,17 @@ def test_the_expert_settings_are_checked_and_name_the_setting():
         DynamicExpertConfig(samples=1)
     with pytest.raises(ValueError, match="dynamic_expert.temperature must be > 0"):
         DynamicExpertConfig(temperature=0.0)
+
+
+def test_the_tier_expert_flies_its_configured_settings_and_only_a_dynamic_record_names_them(tmp_path):
+    from orbitdata.config import GenerationConfig
+
+    toml = tmp_path / "expert.toml"
+    toml.write_text('[scenario]\ntier = "dynamic"\n[pilots.dynamic_expert]\nsamples = 16\nreplan_every = 4\n')
+    cfg = GenerationConfig.from_toml(toml)
+    pilot = make_pilot("expert", cfg.flight)
+    assert isinstance(pilot, DynamicExpertPilot)
+    assert (pilot.config.samples, pilot.config.replan_every) == (16, 4)
+    assert cfg.to_dict()["pilots"]["dynamic_expert"]["samples"] == 16  # meta/info.json records what flew
+    assert GenerationConfig.from_dict(cfg.to_dict()) == cfg
+    assert "dynamic_expert" not in GenerationConfig().to_dict()["pilots"]  # the static record is as before

@@ -95,23 +95,13 @@ class ExploratoryConfig:
 
 
 @dataclass(frozen=True)
-class PilotsConfig:
-    """The settings of every built-in pilot: shared PD gains, then one section per level."""
-
-    gains: ControlGains = field(default_factory=ControlGains)
-    expert: ExpertConfig = field(default_factory=ExpertConfig)
-    risky: RiskyConfig = field(default_factory=RiskyConfig)
-    exploratory: ExploratoryConfig = field(default_factory=ExploratoryConfig)
-
-
-@dataclass(frozen=True)
 class DynamicExpertConfig:
     """The dynamic tier's expert: MPPI over world-frame acceleration sequences, each flown in its
     rollout by the attitude PD and the episode's own thrust allocation, with the true body, fault
     and orbit (see :mod:`orbitdata.fly.pilots.dynamic_expert`). Lengths in metres, times in
     control steps of 0.04 s unless named otherwise; costs are unitless weights, per control step.
-    ``make_pilot("expert", config)`` flies these defaults on the dynamic tier (they are not a
-    section of :class:`PilotsConfig`, whose record the static tier's datasets keep byte for byte).
+    ``make_pilot("expert", config)`` flies ``config.pilots.dynamic_expert`` on the dynamic tier
+    (a TOML's ``[pilots.dynamic_expert]``; a static-tier dataset's record leaves it out, byte for byte).
     """
 
     samples: int = 48  # K candidate sequences per replan (the warm start and the fan included)
@@ -152,3 +142,15 @@ class DynamicExpertConfig:
                 raise ValueError(f"dynamic_expert.{name} must be >= 0, got {getattr(self, name)}")
         if self.speed < 0 or self.noise_std < 0 or self.look_bias < 0:
             raise ValueError("dynamic_expert.speed, noise_std and look_bias must be >= 0")
+
+
+@dataclass(frozen=True)
+class PilotsConfig:
+    """The settings of every built-in pilot: shared PD gains, then one section per level, and the
+    dynamic tier's expert (recorded only in a dynamic-tier dataset's ``meta/info.json``)."""
+
+    gains: ControlGains = field(default_factory=ControlGains)
+    expert: ExpertConfig = field(default_factory=ExpertConfig)
+    risky: RiskyConfig = field(default_factory=RiskyConfig)
+    exploratory: ExploratoryConfig = field(default_factory=ExploratoryConfig)
+    dynamic_expert: DynamicExpertConfig = field(default_factory=DynamicExpertConfig)
