@@ -232,3 +232,11 @@ def test_fly_records_the_tier_and_its_rejections(tmp_path):
     static = json.loads(out.read_text())
     assert "tier" not in static and "rejections" not in static
     assert re.search(r"pooled: \d/2 success", res.output)
+
+
+def test_resuming_a_dynamic_dataset_without_its_tier_names_the_tier_not_overwrite(dynamic_master):
+    result = CliRunner().invoke(app, ["generate", str(dynamic_master), "--episodes", "6"])
+    assert result.exit_code == 2
+    line = result.output.strip().splitlines()[-1]
+    assert "holds a dynamic-tier dataset; pass --tier dynamic to resume it" in line
+    assert "--overwrite" not in line

@@ -65,7 +65,7 @@ class DynamicConfig:
         max_tries: draws per piece of debris before the spec is declared impossible.
         max_body_rate: rad/s; an episode ends ``tumbling`` when the body's rate exceeds it. A
             fault-blind pilot (risky, exploratory) can spin the body up without bound, and
-            MuJoCo's Euler step gains angular momentum the faster the faster the body spins,
+            MuJoCo's Euler step gains angular momentum the faster the body spins,
             until MuJoCo declares the state unstable and resets it: the limit ends such a flight
             while its physics still holds. About 2000 deg/s, the widest range of common MEMS
             rate gyros, and far above what the expert flies.

@@ -51,6 +51,11 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
     existing = existing_config(out) if out.exists() else None
     mine = json.loads(json.dumps(config.to_dict()))  # tuples -> lists, as stored
     if existing is not None and existing != mine:
+        theirs = existing.get("scenario", {}).get("tier", "static")
+        if not overwrite and theirs != config.tier:
+            raise UnusableOutput(
+                f"{out} holds a {theirs}-tier dataset; pass --tier {theirs} to resume it, or choose another OUT"
+            )
         if not overwrite:
             raise UnusableOutput(
                 f"{out} holds a dataset generated with a different config; "

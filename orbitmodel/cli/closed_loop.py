@@ -165,20 +165,19 @@ def print_table(report: dict, episodes: int) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from orbitdata.schema import outcomes
     from orbitmodel.evaluate.success import rate_text, report_totals, wilson
 
     table = Table(title=f"{report['pilot']} pilot, {episodes} episodes per setting, seed {report['seed']}")
-    for col in ("obstacles", "v0 m/s", "success", "collision", "timeout", "out of fuel", "success % [95 % CI]"):
+    kinds = outcomes(report.get("tier", "static"))  # the dynamic tier's also count tumbling
+    for col in ("obstacles", "v0 m/s", *(k.replace("_", " ") for k in kinds), "success % [95 % CI]"):
         table.add_column(col, justify="right")
     for c in report["settings"]:
         low, high = wilson(c["success"], c["episodes"])
         table.add_row(
             str(c["obstacles"]),
             f"{c['speed']:g}",
-            str(c["success"]),
-            str(c["collision"]),
-            str(c["timeout"]),
-            str(c["out_of_fuel"]),
+            *(str(c[k]) for k in kinds),
             f"{100 * c['success'] / c['episodes']:.0f} [{100 * low:.0f}, {100 * high:.0f}]",
         )
     console = Console()

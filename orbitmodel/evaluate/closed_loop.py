@@ -143,7 +143,26 @@ def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
         "min_clearance_m": float(result.min_clearance.min()),
         "goal_distance_m": float(np.linalg.norm(result.states[-1, P] - goal)),
         "fuel_used": float(result.states[0, FUEL.start] - result.states[-1, FUEL.start]),
+        **dynamic_factors(result.scenario),
         **result.pilot_info,
+    }
+
+
+def dynamic_factors(scenario) -> dict:
+    """What a dynamic-tier episode was dealt, for success by factor and the grid's rejection rate
+    (nothing for a static episode): the debris pieces and draws rejected on the way to them, how
+    many pieces move, the fault and its onset frame, the CW flag and eclipse."""
+    dyn = scenario.dynamics
+    if dyn is None:
+        return {}
+    return {
+        "debris": len(scenario.obstacles),
+        "unsurvivable_draws": int(dyn.unsurvivable_draws),
+        "debris_moving": sum(1 for m in dyn.debris if any(m.velocity) or any(m.angular_velocity)),
+        "fault": dyn.fault.kind,
+        "fault_onset_step": int(dyn.fault.onset_step),
+        "cw": bool(dyn.cw),
+        "eclipse": bool(dyn.sensing.eclipse),
     }
 
 
@@ -206,6 +225,13 @@ class ClosedLoop:
             raise ValueError(f"executor {req.executor!r}: use {' or '.join(EXECUTORS)}")
         if req.executor == "ray" and req.video_dir is not None:
             raise ValueError("videos are written where the episodes fly: fly --video with the local executor")
+        settings, tier = req.settings, req.config.tier
+        if req.variant.privileged and isinstance(settings, PlannerConfig) and tier != "static":
+            if settings.obstacle_motion == "static":
+                raise ValueError(
+                    f"the debris of the {tier} tier moves: fly the {req.variant.value} oracle with --set "
+                    "obstacle_motion=true (their exact motion) or --set obstacle_motion=frozen (held at each replan)"
+                )
         self.req = req
         self.seeds = grid_seeds(req.obstacles, req.speeds, req.episodes, req.seed)
         # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
@@ -250,6 +276,8 @@ class ClosedLoop:
         def land(entry: FlownEpisode) -> None:
             cell = cells[(entry.record["obstacles"], entry.record["speed"])]
             cell.add(entry.record["outcome"])
+            cell.debris += entry.record.get("debris", 0)
+            cell.unsurvivable_draws += entry.record.get("unsurvivable_draws", 0)
             flown.append(entry)
             if on_episode:
                 on_episode(cell, entry.record)
@@ -334,7 +362,7 @@ def closed_loop_report(
     ``pilot``: the name of a pilot that is not a planning variant (a policy run's), which has no
     planner settings; ``image_codec``: the pilot saw its camera through the dataset's codec."""
     planning = pilot is None
-    report = grid_report(req.variant.value if planning else pilot, req.seed, result.cells)
+    report = grid_report(req.variant.value if planning else pilot, req.seed, result.cells, tier=req.config.tier)
     total = sum(result.timings.values()) or 1.0
     report.update(
         {

@@ -8,6 +8,8 @@ import math
 import statistics
 from pathlib import Path
 
+from orbitdata.schema import TUMBLING
+
 Z95 = 1.959963984540054  # the standard normal's 97.5 % quantile
 
 
@@ -34,8 +36,10 @@ def report_totals(report: dict) -> tuple[int, int]:
     return (sum(int(s["success"]) for s in report["settings"]), sum(int(s["episodes"]) for s in report["settings"]))
 
 
-FAILURES = ("collision", "timeout", "out_of_fuel")
-TUMBLING = "tumbling"  # the dynamic tier's grids also count it (orbitdata.schema.outcomes)
+FAILURES = ("collision", "timeout", "out_of_fuel")  # the dynamic tier's grids also count TUMBLING
+# Planner settings recorded only when not their default (plan.config.recorded), with that default:
+# seeds flown with different ones are different ways of flying.
+PLANNER_WAYS = {"probe": "the run's own", "obstacle_motion": "static", "tracker": "none"}
 
 
 def failure_kinds(reports: list[dict]) -> tuple[str, ...]:
@@ -102,7 +106,8 @@ def pool_seeds(reports: list[dict]) -> dict:
     """One pilot's grid flown on several root seeds, as one table: per setting, the episodes and
     outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
     and ``worst_setting`` names the lowest-rate (seed, setting). Refuses reports of different
-    pilots, grids, pilot settings (a policy's sampling, the camera codec, the planner's probe) or a repeated seed:
+    pilots, grids, pilot settings (a policy's sampling, the camera codec, the planner's probe or
+    obstacle motion) or a repeated seed:
     pooling is for fresh episodes of one way of flying only."""
     if not reports:
         raise ValueError("give the grid results of at least one seed")
@@ -129,12 +134,13 @@ def pool_seeds(reports: list[dict]) -> dict:
                     f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
                     f"{first.get(key)!r}: pool one way of flying"
                 )
-        probe, first_probe = ((x.get("planner") or {}).get("probe") or "the run's own" for x in (r, first))
-        if probe != first_probe:  # the planner reading another of the run's probes is another way of flying
-            raise ValueError(
-                f"seed {r['seed']} was flown with probe {probe}, seed {first['seed']} with {first_probe}: "
-                "pool one way of flying"
-            )
+        for key, default in PLANNER_WAYS.items():  # another probe or obstacle motion is another way of flying
+            mine_, theirs = ((x.get("planner") or {}).get(key) or default for x in (r, first))
+            if mine_ != theirs:
+                raise ValueError(
+                    f"seed {r['seed']} was flown with {key} {mine_}, seed {first['seed']} with {theirs}: "
+                    "pool one way of flying"
+                )
         mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
         if sorted(mine) != keys:
             raise ValueError(f"seed {r['seed']} was flown on another grid ({sorted(mine)}) than seed {first['seed']}")

@@ -108,6 +108,8 @@ class PlannerConfig:
                 f"probe={self.probe!r}: give {LATENT} (the one chosen on validation) or a probe variant of the "
                 f"run ({', '.join(VARIANTS)}); leave it out for the run's own ({FLOWN})"
             )
+        if self.probe == FLOWN:  # the run's own probe, by its Table I name: one spelling in every record
+            object.__setattr__(self, "probe", "")
         if self.obstacle_motion not in OBSTACLE_MOTIONS:
             raise ValueError(
                 f"obstacle_motion={self.obstacle_motion!r}: use static or tracker (pilots that see the obstacles), "

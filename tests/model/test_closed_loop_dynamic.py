@@ -1,0 +1,62 @@
+"""``orbitmodel eval closed-loop`` on the dynamic tier: the grid counts the tier's outcomes and its
+rejected debris draws, each episode records what it was dealt, and an oracle must say how the debris moves."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from orbitdata.config import GenerationConfig
+from orbitdata.schema import outcomes
+from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
+from orbitmodel.evaluate.success import pool_seeds
+from orbitmodel.plan.config import planner_config
+from orbitmodel.plan.pilot import Variant
+
+
+@pytest.fixture(scope="module")
+def request_dynamic() -> ClosedLoopRequest:
+    return ClosedLoopRequest(
+        variant=Variant("oracle-true"),
+        obstacles=(3,),
+        speeds=(1.0,),
+        episodes=2,
+        seed=0,
+        settings=planner_config("cpu", obstacle_motion="true"),
+        preset="cpu",
+        config=GenerationConfig.for_tier("dynamic"),
+        max_steps=12,
+    )
+
+
+def test_a_dynamic_grid_counts_the_tiers_outcomes_rejections_and_factors(request_dynamic):
+    flight = ClosedLoop(request_dynamic)
+    result = flight.fly()
+    report = flight.report(result)
+    assert report["tier"] == "dynamic"
+    (setting,) = report["settings"]
+    assert set(outcomes("dynamic")) <= set(setting)
+    assert sum(setting[k] for k in outcomes("dynamic")) == setting["episodes"] == 2
+    assert report["rejections"]["debris"] == 2 * 3  # every episode's pieces are counted
+    for episode in result.episodes:
+        assert episode["debris"] == 3
+        assert episode["fault"] in ("none", "off", "scaled", "stuck")
+        assert isinstance(episode["cw"], bool) and isinstance(episode["eclipse"], bool)
+
+
+def test_an_oracle_on_moving_debris_must_say_how_it_moves_before_anything_flies(request_dynamic):
+    static = dataclasses.replace(request_dynamic, settings=planner_config("cpu"))
+    with pytest.raises(ValueError, match="obstacle_motion=true"):
+        ClosedLoop(static)
+
+
+def test_seeds_flown_with_another_obstacle_motion_do_not_pool():
+    def report(seed, planner):
+        settings = [{"obstacles": 3, "speed": 1.0, "episodes": 1, "success": 1, "collision": 0, "timeout": 0}]
+        return {"pilot": "planner", "seed": seed, "planner": planner, "settings": settings}
+
+    with pytest.raises(ValueError, match="obstacle_motion"):
+        pool_seeds([report(3, {}), report(4, {"obstacle_motion": "tracker"})])
+    assert planner_config("cpu", probe="thrust_probe").probe == ""  # the run's own probe has one spelling
+    pool_seeds([report(3, {}), report(4, {})])
