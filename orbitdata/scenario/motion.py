@@ -19,11 +19,12 @@ from __future__ import annotations
 import numpy as np
 
 
-def cw_acceleration(position, velocity, n: float) -> np.ndarray:
-    """The Clohessy-Wiltshire terms (m/s^2, world frame) at ``position`` (m) and ``velocity`` (m/s)."""
-    x, _, z = position
-    vx, vy, _ = velocity
-    return np.array([3.0 * n * n * x + 2.0 * n * vy, -2.0 * n * vx, -n * n * z])
+def cw_acceleration(position, velocity, n) -> np.ndarray:
+    """The Clohessy-Wiltshire terms (m/s^2, world frame) at ``position`` (m) and ``velocity`` (m/s):
+    (3,) for one point, or (N, 3) for rows of points, each with its own ``n`` ((N,) or one)."""
+    p, v = np.asarray(position, dtype=np.float64), np.asarray(velocity, dtype=np.float64)
+    x, z, vx, vy = p[..., 0], p[..., 2], v[..., 0], v[..., 1]
+    return np.stack([3.0 * n * n * x + 2.0 * n * vy, -2.0 * n * vx, -n * n * z], axis=-1)
 
 
 def free_motion(p0, v0, times, n: float) -> tuple[np.ndarray, np.ndarray]:

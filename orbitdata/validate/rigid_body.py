@@ -29,6 +29,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 
 from orbitdata.scenario.dynamics import NO_FAULT
+from orbitdata.scenario.motion import cw_acceleration
 from orbitdata.sim.config import CubeSatConfig
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitdata.state import ANGULAR_VELOCITY, FUEL, POSITION, ROT6D, VELOCITY, rot6d_to_matrix
@@ -68,18 +69,6 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
             a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
             a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
             a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
-
-
-def _cw(position: np.ndarray, velocity: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Rows of :func:`orbitdata.scenario.motion.cw_acceleration`, each with its own n."""
-    return np.stack(
-        [
-            3.0 * n * n * position[:, 0] + 2.0 * n * velocity[:, 1],
-            -2.0 * n * velocity[:, 0],
-            -n * n * position[:, 2],
         ],
         axis=1,
     )
@@ -195,7 +184,7 @@ def fly(
         spin = _cross(omega, r)
         a_com = _rows(R, force)
         if cw:
-            a_com = a_com + _cw(p + r, v + spin, n)
+            a_com = a_com + cw_acceleration(p + r, v + spin, n)
         alpha = (torque - _cross(w, inertia * w)) / inertia  # Euler's equations, body frame
         a_centre = a_com - _cross(_rows(R, alpha), r) - _cross(omega, spin)
         v = v + h * a_centre

@@ -30,6 +30,7 @@ import numpy as np
 
 from orbitdata.fly.pilots.config import ControlGains
 from orbitdata.scenario.dynamics import NO_FAULT, BodyParameters, Dynamics, ThrusterFault
+from orbitdata.scenario.motion import cw_acceleration
 from orbitdata.schema import ACTION_DIM, DT
 from orbitdata.sim.config import CubeSatConfig
 from orbitdata.sim.dynamic import body_mass_properties
@@ -248,7 +249,7 @@ class BodyModel:
             wrench = self.given(u, step)  # (K, 6) body frame, about the centre of mass
             a = np.einsum("kij,kj->ki", R, wrench[:, :3]) / mass  # (K, 3) m/s^2, world
             if n:
-                a += np.stack([3 * n * n * x[:, 0] + 2 * n * xv[:, 1], -2 * n * xv[:, 0], -n * n * x[:, 2]], axis=1)
+                a += cw_acceleration(x, xv, n)
             # Euler's equations about the centre of mass, then the attitude over the step.
             w = w + (wrench[:, 3:] - w[:, _CYCLE1] * w[:, _CYCLE2] * gyro) / inertia * dt
             R = R @ _exp(w * dt)
