@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 from publish.hub_server import TOKEN, HubServer
-from tiny import tiny_config
+from tiny import dynamic_config, tiny_config
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -24,6 +24,17 @@ def tiny_dataset_master(tmp_path_factory) -> Path:
 
     out = tmp_path_factory.mktemp("tiny") / "orbit"
     generate(out, tiny_config(), workers=1, figure=overview_figure)
+    return out
+
+
+@pytest.fixture(scope="session")
+def dynamic_master(tmp_path_factory) -> Path:
+    """A 6-episode, 32 px dataset of the dynamic tier generated once per session (do not modify it)."""
+    from orbitdata.viz import overview_figure
+    from orbitdata.write.generate import generate
+
+    out = tmp_path_factory.mktemp("dynamic") / "orbit"
+    generate(out, dynamic_config(), workers=1, figure=overview_figure)
     return out
 
 

@@ -37,14 +37,6 @@ def tree_digest(root: Path) -> dict:
     }
 
 
-@pytest.fixture(scope="module")
-def dynamic_master(tmp_path_factory) -> Path:
-    """6 episodes of the dynamic tier at 32 px (do not modify it)."""
-    out = tmp_path_factory.mktemp("dynamic") / "orbit"
-    generate(out, dynamic_config(), workers=1, figure=overview_figure)
-    return out
-
-
 def _float32(value):
     """A record's numbers as the float32 columns store them (nested dicts and lists alike)."""
     if isinstance(value, dict):

@@ -13,7 +13,6 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from tiny import dynamic_config
 from typer.testing import CliRunner
 
 from orbitdata import schema as S
@@ -22,18 +21,8 @@ from orbitdata.info import sha256_file
 from orbitdata.scenario.config import DYNAMIC
 from orbitdata.validate import ValidateOptions, validate
 from orbitdata.validate import checks as C
-from orbitdata.viz import overview_figure
-from orbitdata.write.generate import generate
 
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def dynamic_master(tmp_path_factory) -> Path:
-    """6 episodes of the dynamic tier at 32 px, row groups of 64 rows (do not modify it)."""
-    out = tmp_path_factory.mktemp("dynamic-validate") / "orbit"
-    generate(out, dynamic_config(), workers=1, figure=overview_figure)
-    return out
 
 
 @pytest.fixture

@@ -8,28 +8,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 from PIL import Image
-from tiny import dynamic_config
 
 from orbitdata import schema as S
 from orbitdata.load.episodes import Episode, load_episode, read_episodes
-from orbitdata.viz import overview_figure
 from orbitdata.viz import plots as P
 from orbitdata.viz.contact_sheet import ContactSheet
 from orbitdata.viz.overview import sample_episodes
 from orbitdata.viz.show import EpisodeVideo
 from orbitdata.viz.topdown import FAULT, TRACK
-from orbitdata.write.generate import generate
 
 PLOTS = ("speed", "clearance", "thrust", "fuel")
 PLOTS_HEIGHT = 260  # px at the bottom of the overview: outcome rates and lengths
 
 
 @pytest.fixture(scope="module")
-def dynamic_dataset(tmp_path_factory) -> Path:
-    """6 episodes of the dynamic tier at 32 px (do not modify it)."""
-    out = tmp_path_factory.mktemp("dynamic-viz") / "orbit"
-    generate(out, dynamic_config(), workers=1, figure=overview_figure)
-    return out
+def dynamic_dataset(dynamic_master) -> Path:
+    """The session's dynamic-tier dataset (do not modify it)."""
+    return dynamic_master
 
 
 def _episodes(root: Path) -> list[dict]:
