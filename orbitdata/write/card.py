@@ -14,6 +14,7 @@ from orbitdata import schema as S
 from orbitdata.config import GenerationConfig
 from orbitdata.info import Info
 from orbitdata.scenario.config import STATIC
+from orbitdata.scenario.dynamics import NO_FAULT
 
 LICENSE = "cc-by-4.0"
 TAGS = ["space-robotics", "world-models", "cubesat", "obstacle-avoidance", "mujoco", "orbit-planner"]
@@ -119,7 +120,7 @@ def tier_note(config: GenerationConfig, episodes: pa.Table | None) -> str:
         return ""
     d, n = config.scenario.dynamic, episodes.num_rows
     cw = sum(episodes.column(S.CW).to_pylist())
-    faults = sum(f["kind"] != "none" for f in episodes.column(S.FAULT).to_pylist())
+    faults = sum(f["kind"] != NO_FAULT for f in episodes.column(S.FAULT).to_pylist())
     eclipse = sum(e["eclipse"] for e in episodes.column(S.SENSING).to_pylist())
     rejected, kept = rejections(episodes)
     return (
