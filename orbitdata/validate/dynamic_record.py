@@ -20,7 +20,7 @@ from orbitdata.scenario.dynamics import BodyParameters, DebrisMotion, Dynamics, 
 from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
-from orbitdata.validate.rigid_body import FAULT_KINDS, StepBody
+from orbitdata.validate.rigid_body import StepBody
 
 DYNAMIC_COLUMNS = (S.DEBRIS_MOTION, S.CW, S.MEAN_MOTION, S.BODY, S.FAULT, S.SENSING)
 
@@ -113,25 +113,7 @@ def step_body(records: dict[int, EpisodeRecord], episodes: np.ndarray) -> tuple[
     """The record of each step's episode as arrays, and which steps have one (a well-formed record)."""
     known = np.array([int(e) in records for e in episodes], dtype=bool)
     n = len(episodes)
-    body = StepBody(
-        mass_scale=np.ones(n),
-        inertia_scale=np.ones((n, 3)),
-        com=np.zeros((n, 3)),
-        n=np.zeros(n),
-        fault_kind=np.zeros(n, int),
-        fault_thruster=np.full(n, -1),
-        fault_level=np.ones(n),
-        onset=np.zeros(n, int),
-    )
+    body = StepBody.nominal(n)
     for e in np.unique(episodes[known]):
-        rows = episodes == e
-        dyn = records[int(e)].dynamics
-        body.mass_scale[rows] = dyn.body.mass_scale
-        body.inertia_scale[rows] = dyn.body.inertia_scale
-        body.com[rows] = dyn.body.com_offset
-        body.n[rows] = dyn.n
-        body.fault_kind[rows] = FAULT_KINDS.index(dyn.fault.kind)
-        body.fault_thruster[rows] = dyn.fault.thruster
-        body.fault_level[rows] = dyn.fault.level
-        body.onset[rows] = dyn.fault.onset_step
+        body.fill(episodes == e, records[int(e)].dynamics)
     return body, known

@@ -25,6 +25,7 @@ that it reads no thrust record.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from functools import lru_cache
 
 import numpy as np
 
@@ -32,7 +33,16 @@ from orbitdata.scenario.dynamics import NO_FAULT
 from orbitdata.scenario.motion import cw_acceleration
 from orbitdata.sim.config import CubeSatConfig
 from orbitdata.sim.thrusters import wrench_matrix
-from orbitdata.state import ANGULAR_VELOCITY, FUEL, POSITION, ROT6D, VELOCITY, rot6d_to_matrix
+from orbitdata.state import (
+    ANGULAR_VELOCITY,
+    FUEL,
+    POSITION,
+    ROT6D,
+    STATE_DIM,
+    VELOCITY,
+    matrix_to_rot6d,
+    rot6d_to_matrix,
+)
 
 FAULT_KINDS = (NO_FAULT, "off", "scaled", "stuck")  # codes 0..3 in :class:`StepBody`
 WRENCH_ITERATIONS = 4  # fixed-point steps of the wrench that :func:`pose_residuals` infers
@@ -51,6 +61,32 @@ class StepBody:
     fault_level: np.ndarray  # (N,)
     onset: np.ndarray  # (N,) int, the frame from which the fault acts
 
+    @classmethod
+    def nominal(cls, rows: int) -> "StepBody":
+        """``rows`` steps of the nominal body: no fault, no CW terms."""
+        return cls(
+            mass_scale=np.ones(rows),
+            inertia_scale=np.ones((rows, 3)),
+            com=np.zeros((rows, 3)),
+            n=np.zeros(rows),
+            fault_kind=np.zeros(rows, int),
+            fault_thruster=np.full(rows, -1),
+            fault_level=np.ones(rows),
+            onset=np.zeros(rows, int),
+        )
+
+    def fill(self, rows, dynamics) -> None:
+        """Set ``rows`` (an index or mask) to the episode record ``dynamics``
+        (a :class:`orbitdata.scenario.dynamics.Dynamics`)."""
+        self.mass_scale[rows] = dynamics.body.mass_scale
+        self.inertia_scale[rows] = dynamics.body.inertia_scale
+        self.com[rows] = dynamics.body.com_offset
+        self.n[rows] = dynamics.n
+        self.fault_kind[rows] = FAULT_KINDS.index(dynamics.fault.kind)
+        self.fault_thruster[rows] = dynamics.fault.thruster
+        self.fault_level[rows] = dynamics.fault.level
+        self.onset[rows] = dynamics.fault.onset_step
+
     def take(self, index) -> "StepBody":
         return StepBody(**{f.name: getattr(self, f.name)[index] for f in fields(self)})
 
@@ -64,14 +100,11 @@ def _rows(M: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return np.stack(
-        [
-            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
-            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
-            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
-        ],
-        axis=1,
-    )
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
 
 
 def given_thrust(action: np.ndarray, frame: np.ndarray, body: StepBody) -> np.ndarray:
@@ -99,12 +132,24 @@ class Motion:
     v: np.ndarray
     w: np.ndarray
     turn: np.ndarray | None = None
+    q: np.ndarray | None = None  # (N, 4) the attitude as the integrator carries it, when known
 
 
 def start_of(state: np.ndarray) -> Motion:
     """The motion of states (N, 16) float64."""
     R = rot6d_to_matrix(state[:, ROT6D])
     return Motion(state[:, POSITION].copy(), R, _rows(R, state[:, VELOCITY]), state[:, ANGULAR_VELOCITY].copy())
+
+
+def state_of(motion: Motion, fuel_ratio: np.ndarray) -> np.ndarray:
+    """States (N, 16) float64 of N motions and their fuel ratios: the inverse of :func:`start_of`."""
+    out = np.empty((len(motion.p), STATE_DIM))
+    out[:, POSITION] = motion.p
+    out[:, VELOCITY] = np.einsum("nji,nj->ni", motion.R, motion.v)
+    out[:, ROT6D] = matrix_to_rot6d(motion.R)
+    out[:, ANGULAR_VELOCITY] = motion.w
+    out[:, FUEL.start] = fuel_ratio
+    return out
 
 
 def _matrix(q: np.ndarray) -> np.ndarray:
@@ -172,7 +217,7 @@ def fly(
     the centre of mass, both body frame and held, ``inertia`` (N, 3) principal (kg m^2)."""
     h = dt / substeps
     p, v, w = start.p, start.v, start.w
-    q = _quaternion(start.R)
+    q = _quaternion(start.R) if start.q is None else start.q
     c, n = body.com, body.n
     cw = bool(np.any(n))
     turn = np.zeros_like(start.R)
@@ -191,7 +236,7 @@ def fly(
         w = w + h * alpha
         p = p + h * v
         q = _turn(q, w, h)
-    return Motion(p, _matrix(q), v, w, h * turn)
+    return Motion(p, _matrix(q), v, w, h * turn, q)
 
 
 def _mass(cubesat: CubeSatConfig, body: StepBody, fuel_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -210,6 +255,41 @@ class ThrustResiduals:
     fuel: np.ndarray  # (N,) fuel ratio
 
 
+def step_rows(
+    start: Motion,
+    fuel_kg: np.ndarray,
+    action: np.ndarray,
+    frame: np.ndarray,
+    body: StepBody,
+    cubesat: CubeSatConfig,
+    dt: float,
+    substeps: int,
+) -> tuple[Motion, np.ndarray]:
+    """One control step of N bodies: ``start`` with ``fuel_kg`` (N,) in the tank, commanded
+    ``action`` (N, 8) at ``frame`` (N,), through the record in ``body`` -> where they end and the
+    fuel left (kg). The thrusts pass the fault and the fuel limit; the wrench acts about the
+    centre of mass."""
+    thrust = given_thrust(action, frame, body)
+    burn = thrust.sum(axis=1) * cubesat.mass_flow_per_thrust * dt
+    empties = burn > fuel_kg
+    scale = np.where(empties, fuel_kg / np.where(empties, burn, 1.0), 1.0)  # the tank empties part-way
+    thrust *= scale[:, None]
+    mass, inertia = _mass(cubesat, body, fuel_kg)
+    W = _wrench(cubesat)  # about the cube's centre
+    force = thrust @ W[:3].T  # N, body frame
+    torque = thrust @ W[3:].T - _cross(body.com, force)  # about the centre of mass
+    end = fly(start, force / mass[:, None], torque, inertia, body, dt, substeps)
+    return end, np.maximum(0.0, fuel_kg - burn * scale)
+
+
+@lru_cache(maxsize=4)
+def _wrench(cubesat: CubeSatConfig) -> np.ndarray:
+    """The thrusters' wrench about the cube's centre (read-only: shared between calls)."""
+    W = wrench_matrix(cubesat)
+    W.flags.writeable = False
+    return W
+
+
 def thrust_residuals(
     s0: np.ndarray,
     s1: np.ndarray,
@@ -222,23 +302,13 @@ def thrust_residuals(
 ) -> ThrustResiduals:
     """How far the recorded end of each step s0 -> s1 (states (N, 16) float64) lies from where the
     commanded ``action`` (N, 8), through the record in ``body``, takes s0."""
-    thrust = given_thrust(action, frame, body)
     fuel = s0[:, FUEL.start] * cubesat.fuel_mass  # kg at the step's start
-    burn = thrust.sum(axis=1) * cubesat.mass_flow_per_thrust * dt
-    empties = burn > fuel
-    scale = np.where(empties, fuel / np.where(empties, burn, 1.0), 1.0)  # the tank empties part-way
-    thrust *= scale[:, None]
-    mass, inertia = _mass(cubesat, body, fuel)
-    W = wrench_matrix(cubesat)  # about the cube's centre
-    force = thrust @ W[:3].T  # N, body frame
-    torque = thrust @ W[3:].T - _cross(body.com, force)  # about the centre of mass
-    end = fly(start_of(s0), force / mass[:, None], torque, inertia, body, dt, substeps)
+    end, fuel_left = step_rows(start_of(s0), fuel, action, frame, body, cubesat, dt, substeps)
     R1 = rot6d_to_matrix(s1[:, ROT6D])
-    fuel_end = np.maximum(0.0, fuel - burn * scale) / cubesat.fuel_mass
     return ThrustResiduals(
         np.linalg.norm(end.v - _rows(R1, s1[:, VELOCITY]), axis=1),
         np.linalg.norm(end.w - s1[:, ANGULAR_VELOCITY], axis=1),
-        np.abs(fuel_end - s1[:, FUEL.start]),
+        np.abs(fuel_left / cubesat.fuel_mass - s1[:, FUEL.start]),
     )
 
 

@@ -26,6 +26,7 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # How the planner expects the obstacles to move over a plan's horizon: "static" and "tracker" for
 # the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "true", "frozen")
+BODIES = ("true", "nominal")  # the body a rigid-body oracle plans a dynamic-tier episode with
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,10 @@ class PlannerConfig:
             step's time (``plan.tracker``). Oracles only: "true", each obstacle where its exact
             motion puts it at the step's time; "frozen", where it is at the replan.
         tracker: the tracker's knobs (``obstacle_motion="tracker"`` only); see :class:`TrackerConfig`.
+        body: the body the rigid-body oracles handed a dynamic-tier episode plan with: "true", the
+            episode's (its mass, inertia, centre of mass and thruster fault, and the CW terms:
+            ``plan.true_body``), or "nominal", the fault-free design body with the CW terms
+            (``oracle-nominal``: what ignoring the fault costs). The static tier has one body.
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -91,6 +96,7 @@ class PlannerConfig:
     probe: str = ""
     obstacle_motion: str = "static"
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
+    body: str = "true"
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -115,6 +121,8 @@ class PlannerConfig:
                 f"obstacle_motion={self.obstacle_motion!r}: use static or tracker (pilots that see the obstacles), "
                 "true or frozen (oracles handed the scenario)"
             )
+        if self.body not in BODIES:
+            raise ValueError(f"body={self.body!r}: use true (the episode's body and fault) or nominal (the design's)")
         if self.reach < self.cost.margin + self.cost.hull_radius:
             raise ValueError(
                 f"reach={self.reach} m is shorter than the collision ramp "
@@ -124,8 +132,9 @@ class PlannerConfig:
 
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
-    own (the default), ``obstacle_motion`` when "static" (the default) and ``tracker`` when no tracker
-    flies, so that the flights of the defaults all record the same settings."""
+    own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
+    flies and ``body`` when "true" (the default), so that the flights of the defaults all record
+    the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
         del out["probe"]
@@ -133,6 +142,8 @@ def recorded(config: PlannerConfig) -> dict:
         del out["obstacle_motion"]
     if config.obstacle_motion != "tracker":
         del out["tracker"]
+    if config.body == "true":
+        del out["body"]
     return out
 
 

@@ -16,7 +16,8 @@ oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 ==========================  ==================  ======================  ===========
 
 Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
-planner never sees the obstacle list. ``PlannerConfig.obstacle_motion`` says where each rollout
+planner never sees the obstacle list. On the dynamic tier an oracle's rigid body is the episode's
+own (``plan.true_body``: body, fault, CW terms; ``PlannerConfig.body``). ``PlannerConfig.obstacle_motion`` says where each rollout
 step meets the obstacles (the step's time is counted in control steps since the reset): still
 ("static"), carried by the tracker ("tracker", ``plan.tracker``), or for the oracles of a
 scenario whose debris moves, along their exact motion ("true") or held where they are at the
@@ -46,6 +47,7 @@ from orbitmodel.plan.mppi import MPPI
 from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, border_points, depth_to_points
 from orbitmodel.plan.timing import Timings
 from orbitmodel.plan.tracker import Tracker
+from orbitmodel.plan.true_body import EpisodeBodyDynamics
 from orbitmodel.plan.variant import Variant
 
 
@@ -107,7 +109,12 @@ class PlannerPilot(Pilot):
             raise ValueError(
                 f"obstacle_motion={config.obstacle_motion}: pilot {variant.value} takes {', '.join(motions)}"
             )
-        self.variant, self.config = variant, config
+        if config.body != "true" and not (variant.privileged and not variant.learned_dynamics):
+            raise ValueError(
+                f"body={config.body}: only the rigid-body oracles handed the scenario plan with a chosen body "
+                "(oracle-true); drop the body setting"
+            )
+        self.variant, self.config, self.sim = variant, config, sim
         self.name = variant.value
         self.needs_images = bool(dynamics.needs_images or depth is not None)
         self.image_codec = config.image_codec and self.needs_images
@@ -246,9 +253,15 @@ class PlannerPilot(Pilot):
 
 
 class OraclePilot(PlannerPilot):
-    """A planning pilot handed the true obstacles (privileged): the oracles of the grid."""
+    """A planning pilot handed the true obstacles (privileged): the oracles of the grid. One that
+    plans with the rigid body plans a dynamic-tier episode with that episode's body, fault and CW
+    terms (``plan.true_body``; ``body="nominal"``: the design's body, no fault)."""
 
     privileged = True
+
+    def __init__(self, variant: Variant, dynamics, *args, **kwargs):
+        super().__init__(variant, dynamics, *args, **kwargs)
+        self._rigid = dynamics  # the static tier's, and what each episode's body is built beside
 
     def reset(self, task, scenario=None) -> None:
         """``scenario``: the ground truth (orbitdata.fly passes it to privileged pilots only)."""
@@ -261,4 +274,11 @@ class OraclePilot(PlannerPilot):
                 "(their exact motion) or obstacle_motion=frozen (held where they are at each replan)"
             )
         self._true = TrueObstacles(scenario, "true" if motion == "static" else motion)
+        if not self.variant.learned_dynamics:  # the rigid body: the episode's own on the dynamic tier
+            if scenario.dynamics is None:
+                self.dynamics = self._rigid
+            else:
+                self.dynamics = EpisodeBodyDynamics(
+                    scenario.dynamics, self.sim, self.config.rigid_substeps, self.config.body == "nominal", self.timings
+                )
         super().reset(task)
