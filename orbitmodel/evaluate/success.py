@@ -39,7 +39,7 @@ def report_totals(report: dict) -> tuple[int, int]:
 FAILURES = ("collision", "timeout", "out_of_fuel")  # the dynamic tier's grids also count TUMBLING
 # Planner settings recorded only when not their default (plan.config.recorded), with that default:
 # seeds flown with different ones are different ways of flying.
-PLANNER_WAYS = {"probe": "the run's own", "obstacle_motion": "static", "tracker": "none"}
+PLANNER_WAYS = {"probe": "the run's own", "obstacle_motion": "static", "tracker": "none", "body": "true"}
 
 
 def failure_kinds(reports: list[dict]) -> tuple[str, ...]:
@@ -134,7 +134,7 @@ def pool_seeds(reports: list[dict]) -> dict:
                     f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
                     f"{first.get(key)!r}: pool one way of flying"
                 )
-        for key, default in PLANNER_WAYS.items():  # another probe or obstacle motion is another way of flying
+        for key, default in PLANNER_WAYS.items():  # another probe, obstacle motion or body is another way of flying
             mine_, theirs = ((x.get("planner") or {}).get(key) or default for x in (r, first))
             if mine_ != theirs:
                 raise ValueError(
