@@ -17,13 +17,14 @@ oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 
 Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
 planner never sees the obstacle list. On the dynamic tier an oracle's rigid body is the episode's
-own (``plan.true_body``: body, fault, CW terms; ``PlannerConfig.body``). ``PlannerConfig.obstacle_motion`` says where each rollout
-step meets the obstacles (the step's time is counted in control steps since the reset): still
-("static"), carried by the tracker ("tracker", ``plan.tracker``), or for the oracles of a
-scenario whose debris moves, along their exact motion ("true") or held where they are at the
-replan ("frozen"). The classes are ``orbitdata.fly.Pilot`` subclasses, so
-``orbitdata fly --pilot planner --pilot-option run=RUN`` flies them too. Several episodes fly in
-lockstep with a :meth:`PlannerPilot.fork` each and :meth:`PlannerPilot.act_batch` (``plan.batch``).
+own (``plan.true_body``: body, fault, CW terms; ``PlannerConfig.body``).
+``PlannerConfig.obstacle_motion`` says where each rollout step meets the obstacles (the step's
+time is counted in control steps since the reset): still ("static"), carried by the tracker
+("tracker", ``plan.tracker``), or for the oracles of a scenario whose debris moves, along their
+exact motion ("true") or held where they are at the replan ("frozen"). The classes are
+``orbitdata.fly.Pilot`` subclasses, so ``orbitdata fly --pilot planner --pilot-option run=RUN``
+flies them too. Several episodes fly in lockstep with a :meth:`PlannerPilot.fork` each and
+:meth:`PlannerPilot.act_batch` (``plan.batch``).
 """
 
 from __future__ import annotations

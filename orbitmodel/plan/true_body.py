@@ -47,7 +47,7 @@ class EpisodeBodyDynamics:
     ):
         if not 1 <= substeps <= sim.substeps or sim.substeps % substeps:
             raise ValueError(f"substeps={substeps}: give a divisor of the simulator's {sim.substeps} substeps")
-        self.record, self.nominal = record, bool(nominal)
+        self.nominal = bool(nominal)
         self.cubesat, self.dt, self.substeps = sim.cubesat, float(sim.dt), int(substeps)
         self.timings = timings or Timings()
         self._body = StepBody.nominal(1)
