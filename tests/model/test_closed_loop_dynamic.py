@@ -58,7 +58,8 @@ def test_seeds_flown_with_another_obstacle_motion_do_not_pool():
 
     with pytest.raises(ValueError, match="obstacle_motion"):
         pool_seeds([report(3, {}), report(4, {"obstacle_motion": "tracker"})])
-    with pytest.raises(ValueError, match="with body true, seed 3 with nominal"):  # the oracle of the design's body is another pilot
+    # the oracle of the design's body is another pilot
+    with pytest.raises(ValueError, match="with body true, seed 3 with nominal"):
         pool_seeds([report(3, {"body": "nominal"}), report(4, {})])
     assert planner_config("cpu", probe="thrust_probe").probe == ""  # the run's own probe has one spelling
     pool_seeds([report(3, {}), report(4, {})])
