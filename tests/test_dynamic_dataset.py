@@ -168,6 +168,7 @@ def test_orbitmodel_reads_no_privileged_column(dynamic_master):
     from orbitmodel.baselines.diffusion import train as diffusion_train
     from orbitmodel.data import load_model_windows
     from orbitmodel.evaluate import rollout
+    from orbitmodel.plan import imagined_fit
     from orbitmodel.probe import train as probe_train
     from orbitmodel.train import stage1
 
@@ -176,6 +177,7 @@ def test_orbitmodel_reads_no_privileged_column(dynamic_master):
         *rollout.COLUMNS,
         *diffusion_train.COLUMNS,
         *expert_floor.COLUMNS,
+        *imagined_fit.COLUMNS,
         *(c for cols in probe_train.COLUMNS.values() for c in cols),
     ]
     assert named and not [c for c in named if S.is_privileged(c)]

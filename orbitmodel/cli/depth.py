@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
 from orbitmodel.cli.errors import friendly
-from orbitmodel.plan.depth_recipe import DepthRefitConfig
+from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig
 
 _D = DepthRefitConfig()
+_I = ImaginedDepthConfig()
 
 
 def register(app: typer.Typer) -> None:
@@ -21,10 +22,22 @@ def register(app: typer.Typer) -> None:
 def depth(
     run: Annotated[Path, typer.Argument(help="a trained Stage I run folder (`orbitmodel train --out RUN`)")],
     dataset: Annotated[str, typer.Argument(help="the run's orbitdata dataset (train split fitted, test split scored)")],
-    frames: Annotated[int, typer.Option(min=1, help="random training frames encoded once")] = _D.frames,
+    frames: Annotated[
+        Optional[int],
+        typer.Option(
+            min=1,
+            help=f"random training frames encoded once [default: {_D.frames}]; with --imagined, windows "
+            f"imagined once [default: {_I.windows}]",
+        ),
+    ] = None,
     test_frames: Annotated[
-        int, typer.Option(min=1, help="random test frames for the before/after table")
-    ] = _D.test_frames,
+        Optional[int],
+        typer.Option(
+            min=1,
+            help=f"random test frames for the before/after table [default: {_D.test_frames}]; with "
+            f"--imagined, windows [default: {_I.test_windows}]",
+        ),
+    ] = None,
     epochs: Annotated[int, typer.Option(min=1)] = _D.epochs,
     lr: Annotated[float, typer.Option(min=0.0)] = _D.lr,
     near_weight: Annotated[
@@ -39,7 +52,14 @@ def depth(
             "the run's validation episodes (to choose a recipe)"
         ),
     ] = _D.eval_split,
-    overwrite: Annotated[bool, typer.Option(help="replace a refitted head already in RUN/depth")] = False,
+    imagined: Annotated[
+        bool,
+        typer.Option(
+            help="fit the head that reads depth from the world model's imagined latents instead "
+            "(RUN/depth-imagined; the planner's --set obstacle_motion=imagined)"
+        ),
+    ] = False,
+    overwrite: Annotated[bool, typer.Option(help="replace the head already there")] = False,
 ) -> None:
     """Refit the depth head on the frozen encoder with near cells weighted (written to RUN/depth).
 
@@ -47,12 +67,15 @@ def depth(
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
     closed-loop` uses RUN/depth when it is there (`--set depth_head=stage1` for the Stage I head).
     """
+    if imagined:
+        _imagined(run, dataset, frames, test_frames, epochs, lr, near_weight, near_m, seed, eval_split, overwrite)
+        return
     from orbitmodel.plan.depth_bands import comparison_lines
     from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head
 
     cfg = DepthRefitConfig(
-        frames=frames,
-        test_frames=test_frames,
+        frames=frames or _D.frames,
+        test_frames=test_frames or _D.test_frames,
         epochs=epochs,
         lr=lr,
         near_weight=near_weight,
@@ -65,3 +88,24 @@ def depth(
         typer.echo(line)
     s = result["seconds"]
     typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run)}")
+
+
+def _imagined(run, dataset, windows, test_windows, epochs, lr, near_weight, near_m, seed, eval_split, overwrite):
+    """``orbitmodel depth --imagined``: the head on imagined latents (``plan.imagined_fit``)."""
+    from orbitmodel.plan.imagined_fit import fit_imagined_depth, imagined_folder, step_lines
+
+    cfg = ImaginedDepthConfig(
+        windows=windows or _I.windows,
+        test_windows=test_windows or _I.test_windows,
+        epochs=epochs,
+        lr=lr,
+        near_weight=near_weight,
+        near_m=near_m,
+        seed=seed,
+        eval_split=eval_split,
+    )
+    result = fit_imagined_depth(run, dataset, cfg, overwrite=overwrite)
+    for line in step_lines(result):
+        typer.echo(line)
+    s = result["seconds"]
+    typer.echo(f"imagined in {s['imagine']:.0f} s, fitted in {s['fit']:.0f} s; wrote {imagined_folder(run)}")

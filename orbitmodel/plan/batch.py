@@ -91,7 +91,7 @@ def replan_batch(pilots: list, observations: list[dict], patches: torch.Tensor |
         imagined = type(lead.dynamics).rollout_many(dynamics, state0, candidates)  # N x (K, H, 16)
         with lead.timings("cost"):
             costs = [
-                trajectory_cost(s, a, p.goal, p.goal_radius, f, p.config.cost, p.plan_times())[0]
+                trajectory_cost(s, a, p.goal, p.goal_radius, p.round_field(f, s), p.config.cost, p.plan_times())[0]
                 for p, s, a, f in zip(pilots, imagined, candidates, fields)
             ]  # N x (K,)
         results = [p.mppi.update(a, c) for p, a, c in zip(pilots, candidates, costs)]

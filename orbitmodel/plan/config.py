@@ -23,9 +23,9 @@ from orbitmodel.plan.tracker import TrackerConfig
 from orbitmodel.probe.variants import FLOWN, LATENT, VARIANTS
 
 PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run's own (RUN/probe)
-# How the planner expects the obstacles to move over a plan's horizon: "static" and "tracker" for
-# the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
-OBSTACLE_MOTIONS = ("static", "tracker", "true", "frozen")
+# How the planner expects the obstacles to move over a plan's horizon: "static", "tracker" and
+# "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
+OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
 BODIES = ("true", "nominal")  # the body a rigid-body oracle plans a dynamic-tier episode with
 
 
@@ -68,7 +68,9 @@ class PlannerConfig:
         obstacle_motion: where each rollout step's clearance is taken. "static": the obstacles
             stand still (the point memory; an oracle's true obstacles, which must not move). "tracker":
             the depth points clustered into tracks, each carried along its fitted velocity to the
-            step's time (``plan.tracker``). Oracles only: "true", each obstacle where its exact
+            step's time (``plan.tracker``). "imagined" (the learned planner only): each candidate
+            meets the debris where the depth it imagines at that step puts them (``plan.imagined``;
+            ``orbitmodel depth RUN DATA --imagined`` fits the head). Oracles only: "true", each obstacle where its exact
             motion puts it at the step's time; "frozen", where it is at the replan.
         tracker: the tracker's knobs (``obstacle_motion="tracker"`` only); see :class:`TrackerConfig`.
         body: the body the rigid-body oracles handed a dynamic-tier episode plan with: "true", the
@@ -118,7 +120,7 @@ class PlannerConfig:
             object.__setattr__(self, "probe", "")
         if self.obstacle_motion not in OBSTACLE_MOTIONS:
             raise ValueError(
-                f"obstacle_motion={self.obstacle_motion!r}: use static or tracker (pilots that see the obstacles), "
+                f"obstacle_motion={self.obstacle_motion!r}: use static, tracker or imagined (pilots that see the obstacles), "
                 "true or frozen (oracles handed the scenario)"
             )
         if self.body not in BODIES:

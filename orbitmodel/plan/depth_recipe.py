@@ -1,5 +1,6 @@
-"""The depth-head refit's recipe (``orbitmodel depth``), and the planner's range, free of torch:
-the CLI shows the defaults without loading the model code (``plan.depth_refit`` fits it)."""
+"""The depth heads' recipes (``orbitmodel depth``, ``--imagined``), and the planner's range, free of
+torch: the CLI shows the defaults without loading the model code (``plan.depth_refit`` and
+``plan.imagined_fit`` fit them)."""
 
 from __future__ import annotations
 
@@ -43,3 +44,39 @@ class DepthRefitConfig:
             raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
         if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
             raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
+
+
+@dataclass(frozen=True)
+class ImaginedDepthConfig:
+    """The fit's recipe.
+
+    Args:
+        windows: random training windows imagined once (each gives 1 + horizon / step latents).
+        test_windows: random windows of ``eval_split`` scored before and after.
+        context: encoded frames' latents the rollout starts from (the ``cpu`` planner's history).
+        horizon: frames imagined (the planner's horizon; a multiple of the run's frame step).
+        hidden: the head's width.
+        epochs, batch_size, lr: AdamW on the head alone, cosine decay to zero.
+        near_weight, near_m: the refit's weighting of the cells nearer than ``near_m`` metres.
+        seed: window choice, initialisation and data order.
+        eval_split: "test" (to report) or "val", the run's validation episodes (to choose).
+    """
+
+    windows: int = 6000
+    test_windows: int = 400
+    context: int = 2
+    horizon: int = 50
+    hidden: int = 512
+    epochs: int = 30
+    batch_size: int = 256
+    lr: float = 1e-3
+    near_weight: float = 25.0
+    near_m: float = MAX_RANGE
+    seed: int = 0
+    eval_split: str = "test"
+
+    def __post_init__(self):
+        if min(self.windows, self.test_windows, self.context, self.horizon, self.hidden, self.epochs) < 1:
+            raise ValueError("windows, test_windows, context, horizon, hidden and epochs must be >= 1")
+        if self.eval_split not in EVAL_SPLITS:
+            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")

@@ -275,8 +275,9 @@ class LearnedDynamics:
             with lead.timings("probe"):
                 start = joined([state0s[i].float().expand(K, -1) for i, K in zip(rows, sizes)])  # (G K, 16)
                 states = lead.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -steps:])  # (G K, H, 16)
-            for i, part in zip(rows, states.split(sizes)):
+            for i, part, z_part in zip(rows, states.split(sizes), z_future.split(sizes)):
                 out[i] = part
+                members[i].imagined_latents = z_part  # (K, H / s, D): what ``plan.imagined`` reads
         return out
 
     def _thrusts_alone(self, state0s: list[torch.Tensor], actions: list[torch.Tensor]) -> list[torch.Tensor]:

@@ -17,6 +17,7 @@ from orbitmodel.plan.config import PlannerConfig, planner_config
 from orbitmodel.plan.depth_refit import refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.frames import FrameEncoder, PredictedDepth
+from orbitmodel.plan.imagined_fit import load_imagined_depth
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
@@ -113,6 +114,14 @@ def build_pilot(
         "true": lambda: None,
     }[variant.obstacles]()
     camera = Camera.from_sim(sim)
+    if config.obstacle_motion == "imagined":
+        if not (variant.learned_dynamics and not variant.privileged and dynamics.reads_latent):
+            raise ValueError(
+                f"obstacle_motion=imagined: pilot {variant.value} with probe {config.probe or FLOWN} imagines no "
+                "latents to read depth from; fly the planner with a probe that reads them"
+            )
+        imagined = load_imagined_depth(run, model, timings)
+        return PlannerPilot(variant, dynamics, depth, camera, config, sim, timings, imagined), sim
     cls = OraclePilot if variant.privileged else PlannerPilot
     return cls(variant, dynamics, depth, camera, config, sim, timings), sim
 

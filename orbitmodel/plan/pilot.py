@@ -44,8 +44,16 @@ from orbitdata.sim.thrusters import wrench_matrix
 from orbitmodel.kinematics import P
 from orbitmodel.plan.batch import plan_batch
 from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.plan.imagined import ImaginedDepth, ImaginedField, outside_view
 from orbitmodel.plan.mppi import MPPI
-from orbitmodel.plan.obstacles import Camera, PointMemory, TrueObstacles, border_points, depth_to_points
+from orbitmodel.plan.obstacles import (
+    Camera,
+    PointCloud,
+    PointMemory,
+    TrueObstacles,
+    border_points,
+    depth_to_points,
+)
 from orbitmodel.plan.timing import Timings
 from orbitmodel.plan.tracker import Tracker
 from orbitmodel.plan.true_body import EpisodeBodyDynamics
@@ -100,12 +108,13 @@ class PlannerPilot(Pilot):
         config: PlannerConfig = PlannerConfig(),
         sim: SimConfig = SimConfig(),
         timings: Timings | None = None,
+        imagined: ImaginedDepth | None = None,
     ):
         if variant.privileged != type(self).privileged:
             raise ValueError(f"variant {variant.value} needs {'OraclePilot' if variant.privileged else 'PlannerPilot'}")
         if (depth is None) != (variant.obstacles == "true"):
             raise ValueError(f"variant {variant.value}: give a depth source exactly when it plans around depth")
-        motions = ("static", "true", "frozen") if variant.privileged else ("static", "tracker")
+        motions = ("static", "true", "frozen") if variant.privileged else ("static", "tracker", "imagined")
         if config.obstacle_motion not in motions:
             raise ValueError(
                 f"obstacle_motion={config.obstacle_motion}: pilot {variant.value} takes {', '.join(motions)}"
@@ -126,6 +135,14 @@ class PlannerPilot(Pilot):
         self.mppi = MPPI(config.mppi, noise_basis=basis)
         self.memory = PointMemory(config.memory_frames)
         self.tracker = Tracker(config.tracker) if config.obstacle_motion == "tracker" else None
+        self.imagined = imagined
+        if (imagined is not None) != (config.obstacle_motion == "imagined") or (
+            imagined is not None and not getattr(dynamics, "reads_latent", False)
+        ):
+            raise ValueError(
+                "obstacle_motion=imagined: give the imagined-depth head exactly then, to a planner whose "
+                "dynamics imagine latents (a probe that reads them)"
+            )
         self._true: TrueObstacles | None = None
         self.goal = torch.zeros(3)
         self.goal_radius = 0.5
@@ -208,6 +225,11 @@ class PlannerPilot(Pilot):
             if self.tracker is None:
                 self.memory.add(points, radii)
                 cloud = self.memory.cloud(c.reach)
+            elif self.imagined is not None:  # what is in view now, the imagined maps replace
+                self.memory.add(points, radii)
+                cloud = self.memory.cloud(c.reach)
+                outside = outside_view(cloud.points, obs["state"], self.camera, c.max_range)
+                cloud = PointCloud(cloud.points[outside], cloud.radii[outside], c.reach)
             else:
                 edge = border_points(depth, self.camera, c.max_range, c.support)
                 self.tracker.add(points, radii, self._step * DT, edge)
@@ -218,9 +240,19 @@ class PlannerPilot(Pilot):
     def plan_times(self) -> torch.Tensor | None:
         """(H,) seconds into the episode of the rollout's states (frames t+1..t+H of frame t, this
         step), for obstacles that move; None when the planner takes them to stand still."""
-        if self.config.obstacle_motion == "static":
+        if self.config.obstacle_motion in ("static", "imagined"):  # imagined maps carry their own time
             return None
         return (self._step + 1 + torch.arange(self.config.mppi.horizon, dtype=torch.float64)) * DT
+
+    def round_field(self, field, states: torch.Tensor):
+        """The field one MPPI round's candidates (``states`` (K, H, 16)) are costed against: ``field``,
+        or with ``obstacle_motion="imagined"`` each candidate's imagined depth over it."""
+        if self.imagined is None:
+            return field
+        with self.timings("imagined-depth"):
+            maps = self.imagined.maps(self.dynamics.imagined_latents)  # (K, S, 16, 16) metres
+            c = self.config
+            return ImaginedField(maps, states, self.dynamics.step, self.camera, c.max_range, c.footprint, field)
 
     def _planned(self, result, field, states: torch.Tensor, seconds: float) -> None:
         """Keep what a replan found: its effective samples, its time, and with ``record`` the best

@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from scenes import sphere_depth, state_at
 
 from orbitdata.fly.pilot import Task
 from orbitdata.fly.rollout import fly_episode
@@ -36,24 +37,8 @@ CAMERA = Camera.from_sim(SimConfig())
 H = 50  # a 2 s plan
 
 
-def state_at(position) -> np.ndarray:
-    """(16,) state at ``position`` (m), at rest, identity attitude (the camera looks along +x)."""
-    return np.r_[position, np.zeros(3), 1, 0, 0, 1, 0, 0, np.zeros(3), 1].astype(np.float32)
-
-
 def depth_map(position, spheres) -> np.ndarray:
-    """(16, 16) z-depth (m) of ``spheres`` [(centre, radius)] seen from a body at ``position``
-    with identity attitude: each cell's ray cast exactly; the far plane where it meets none."""
-    rays = CAMERA.cell_rays()  # (16, 16, 3) body = world here, unit z-depth
-    origin = np.asarray(position, float) + np.asarray(CAMERA.position)
-    depth = np.full(rays.shape[:2], CAMERA.far)
-    for centre, radius in spheres:
-        oc = origin - np.asarray(centre, float)
-        a, b, c = (rays * rays).sum(-1), (rays * oc).sum(-1), oc @ oc - radius**2
-        disc = b * b - a * c
-        s = (-b - np.sqrt(np.maximum(disc, 0))) / a
-        depth = np.where((disc >= 0) & (s > 0) & (s < depth), s, depth)
-    return depth
+    return sphere_depth(CAMERA, position, spheres)
 
 
 def watch(tracker: Tracker, spheres, frames: int, camera_velocity=(0.0, 0.0, 0.0)) -> float:

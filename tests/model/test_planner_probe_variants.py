@@ -220,3 +220,34 @@ def test_the_probe_setting_travels_through_the_cli_and_orbitdatas_registry(run, 
     options = dict(run=str(run), preset="cpu", samples="8", horizon="6", probe="paper_probe")
     pilot = make_pilot("planner", dataclasses.replace(base, sim=sim), **options)
     assert pilot.config.probe == "paper_probe" and pilot.dynamics.probe.config.inputs == "latent"
+
+
+def test_the_imagined_depth_planner_flies_through_the_cli_with_a_probe_that_reads_latents_only(
+    run, tiny_dataset_master, tmp_path
+):
+    from orbitmodel.plan.depth_recipe import ImaginedDepthConfig
+    from orbitmodel.plan.imagined import ImaginedField
+    from orbitmodel.plan.imagined_fit import fit_imagined_depth
+
+    small = ImaginedDepthConfig(windows=4, test_windows=2, horizon=6, hidden=16, epochs=1, batch_size=4)
+    fit_imagined_depth(run, str(tiny_dataset_master), small, overwrite=True)
+    out = tmp_path / "imagined.json"
+    grid = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "3"]
+    moves = ["--set", "samples=8", "--set", "horizon=6", "--set", "obstacle_motion=imagined"]
+    invoke("eval", "closed-loop", run, "--pilot", "planner", "--preset", "cpu", *grid, *moves, "--json", out)
+    report = json.loads(out.read_text())
+    assert report["planner"]["obstacle_motion"] == "imagined" and "imagined-depth" in report["time_share"]
+    pilot, _ = build_pilot(Variant.PLANNER, run, planner_config("cpu", obstacle_motion="imagined", **SMALL))
+    pilot.reset(Task((5.0, 0, 0), 0.5, (0.0, 0, 0), 0))
+    rng = np.random.default_rng(0)
+    obs = {
+        "image": rng.integers(0, 255, (64, 64, 3), dtype=np.uint8),
+        "state": np.r_[np.zeros(6), 1, 0, 0, 1, 0, 0, np.zeros(3), 1],
+    }
+    pilot.act(obs)
+    states = torch.zeros(8, 6, 16)
+    assert isinstance(pilot.round_field(None, states), ImaginedField)  # 3 steps of 2 frames, one map each
+    with pytest.raises(ValueError, match="imagines no latents"):
+        build_pilot(
+            Variant.PLANNER, run, planner_config("cpu", obstacle_motion="imagined", probe="thrust_only", **SMALL)
+        )
