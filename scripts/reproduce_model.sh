@@ -29,6 +29,8 @@
 # EXECUTOR=ray spreads its chunks over the Ray cluster that RAY_ADDRESS names (docs/planner.md);
 # without them the grids fly as reported (one episode at a time, here). A grid flown with either is
 # another command, so it is flown again.
+# TIER=dynamic builds the dynamic tier's results instead (its dataset, run and grids; below), and
+# WAY=imagined|tracker names the way of predicting the debris that its planner.json flies.
 set -euo pipefail
 OUT=$(realpath -m "${1:?usage: bash scripts/reproduce_model.sh OUT [EPISODES_PER_SETTING]}")
 N=${2:-20}
@@ -142,6 +144,49 @@ refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RU
   [ -f "$run/depth/model.safetensors" ] || step "depth-refit-$(basename "$run")" "$BIN/orbitmodel" depth "$run" "$DATA" "$@" "${DEPTH[@]}"
 }
 
+if [ "${TIER:-static}" = dynamic ]; then
+  # The dynamic tier (docs/results.md "The dynamic tier"): its 3000-episode 64 px dataset, the flown
+  # recipe trained on it, the probe, the depth refit and the imagined-depth head (way a), then the
+  # tier's grid (3, 7 and 10 pieces of debris at 1 and 3 m/s) on validation seeds 0, 1 and 2 and
+  # test seeds 3, 4 and 5 (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
+  # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
+  # on the validation seeds), the oracles and the expert. The Diffusion Policy is not trained on the
+  # tier yet.
+  DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn-step5" GDIR_ROOT="$OUT/dynamic/grid"
+  WAY=${WAY:-tracker}
+  IMAGINED=()
+  [ "${QUICK:-0}" = 1 ] && IMAGINED=(--frames 8 --test-frames 4 --epochs 1)
+  [ -f "$DATA/meta/info.json" ] || step generate-dynamic "$BIN/orbitdata" generate "$DATA" --tier dynamic \
+    --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
+  step train-dynamic train_wm "$WMS" cpu-step5
+  [ -f "$WMS/probe/model.safetensors" ] || step probe-dynamic "$BIN/orbitmodel" probe "$WMS" "$DATA" "${PROBE[@]}"
+  "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
+  refit "$WMS"
+  [ -f "$WMS/depth-imagined/model.safetensors" ] || step imagined-dynamic "$BIN/orbitmodel" depth "$WMS" "$DATA" \
+    --imagined --eval-split val "${IMAGINED[@]}"
+  for seed in 0 1 2 3 4 5; do
+    GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds 1,3 --episodes "$N" --seed "$seed")
+    GDIR="$GDIR_ROOT/seed$seed"
+    mkdir -p "$GDIR"
+    spawn fly_model planner-imagined planner --set obstacle_motion=imagined
+    spawn fly_model planner-tracker planner --set obstacle_motion=tracker
+    step "dynamic-seed$seed-planner" join
+    spawn fly_model oracle-true oracle-true --set obstacle_motion=true
+    spawn fly_model oracle-frozen oracle-true --set obstacle_motion=frozen
+    step "dynamic-seed$seed-oracles" join
+    spawn fly_model oracle-nominal oracle-true --set obstacle_motion=true --set body=nominal
+    spawn fly_model oracle-learned-dyn oracle-learned-dyn --set obstacle_motion=true
+    step "dynamic-seed$seed-oracles-2" join
+    step "dynamic-seed$seed-expert" fly_data expert
+    cp "$GDIR/planner-$WAY.json" "$GDIR/planner.json"
+  done
+  mkdir -p "$GDIR_ROOT/test"
+  for pilot in planner planner-imagined planner-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn expert; do
+    "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
+  done
+  printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
+  exit 0
+fi
 [ -f "$DATA/meta/info.json" ] || step generate "$BIN/orbitdata" generate "$DATA" --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
 # The flown run: preset cpu-step5 steps 5 frames per prediction, so 10 predictor calls imagine a
 # 50-frame plan (rollout horizon in model steps); it holds 5 % of the training episodes out, the
