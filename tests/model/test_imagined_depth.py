@@ -22,7 +22,6 @@ from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import PlannerConfig
 from orbitmodel.plan.depth_recipe import ImaginedDepthConfig
 from orbitmodel.plan.dynamics import LearnedDynamics
-from orbitmodel.plan.factory import PredictedDepth
 from orbitmodel.plan.imagined import ImaginedDepth, ImaginedDepthHead, ImaginedField, outside_view
 from orbitmodel.plan.imagined_fit import fit_imagined_depth, load_imagined_depth
 from orbitmodel.plan.mppi import MPPIConfig
@@ -153,24 +152,32 @@ def test_the_imagined_planner_costs_each_candidate_against_its_own_imagined_maps
     torch.manual_seed(0)
     head = ImaginedDepthHead(model.config.latent_dim, 16)
     config = PlannerConfig(mppi=MPPIConfig(samples=8, horizon=5), obstacle_motion="imagined")
+    wall = np.full((16, 16), 3.0)  # a wall 3 m ahead in every frame: points in view
     pilot = PlannerPilot(
         Variant.PLANNER,
         LearnedDynamics(model, ImagineAll()),
-        PredictedDepth(model),
+        lambda obs: wall,
         Camera.from_sim(sim),
         config,
         sim,
         imagined=ImaginedDepth(head, 50.1),
     )
-    fields = []
-    round_field = pilot.round_field
+    fields, clouds = [], []
+    round_field, obstacles = pilot.round_field, pilot._obstacles
     pilot.round_field = lambda f, s: fields.append(round_field(f, s)) or fields[-1]
+    pilot._obstacles = lambda obs, depth: clouds.append((obs["state"], obstacles(obs, depth))) or clouds[-1][1]
     result = fly_episode(CubeSatEnv(sim), pilot, grid_seed(0, 3, 1.0, 0), 3, 1.0)
     assert result.length == 6 and fields and all(isinstance(f, ImaginedField) for f in fields)
     field = fields[-1]
     z = pilot.dynamics.imagined_latents  # (K, 5, D): the last round's
     with torch.no_grad():
         assert torch.equal(field.keep.reshape(8, 5, 16, 16), head(z) * 50.1 < 10.0)
+    # The memory holds the wall's points; what the camera sees now, the imagined maps alone stand for.
+    remembered, (last, _) = pilot.memory.cloud().points, clouds[-1]
+    assert not outside_view(remembered, last, pilot.camera, config.max_range).all()
+    for state, cloud in clouds:
+        assert len(cloud.points) == 0 or outside_view(cloud.points, state, pilot.camera, config.max_range).all()
+    assert len(fields) == len(clouds) and all(f.base is c for f, (_, c) in zip(fields, clouds))  # one round a replan
     with pytest.raises(ValueError, match="imagined"):  # a head without the setting, or the setting without one
         PlannerPilot(
             Variant.PLANNER, pilot.dynamics, pilot.depth, pilot.camera, PlannerConfig(), sim, imagined=pilot.imagined
