@@ -56,9 +56,14 @@ def imagine_depth_pairs(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Latents (n, 1 + steps, D), the last encoded then the imagined ones, and their frames' true
     depth (n, 1 + steps, 16, 16) metres, of n random windows of ``split``."""
+    from orbitdata.load import collate_windows
+
     step = model.config.frame_step
     if cfg.horizon % step:
-        raise RunError(f"--horizon {cfg.horizon}: give a multiple of the run's {step} frames per step")
+        raise RunError(
+            f"the imagined-depth fit covers {cfg.horizon} frames, which the run's steps of {step} frames do "
+            "not divide; fit it on a run whose frame step divides the planner's horizon"
+        )
     steps = cfg.horizon // step
     windows = load_model_windows(
         dataset,
@@ -76,8 +81,6 @@ def imagine_depth_pairs(
     chosen = np.sort(np.random.default_rng(seed).choice(len(windows), n, replace=False))
     latents, depth = [], []
     for start in range(0, n, 64):
-        from orbitdata.load import collate_windows
-
         batch = collate_windows(windows.__getitems__([int(i) for i in chosen[start : start + 64]]))
         z = model.encode(batch[S.IMAGE][:, : cfg.context], batch[S.STATE][:, : cfg.context])  # (b, c, D)
         future = model.rollout(z, batch[S.ACTION][:, :-1].float(), cfg.context)  # (b, steps, D)
