@@ -67,22 +67,15 @@ def depth(
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
     closed-loop` uses RUN/depth when it is there (`--set depth_head=stage1` for the Stage I head).
     """
+    recipe = dict(epochs=epochs, lr=lr, near_weight=near_weight, near_m=near_m, seed=seed, eval_split=eval_split)
     if imagined:
-        _imagined(run, dataset, frames, test_frames, epochs, lr, near_weight, near_m, seed, eval_split, overwrite)
+        cfg = ImaginedDepthConfig(windows=frames or _I.windows, test_windows=test_frames or _I.test_windows, **recipe)
+        _imagined(run, dataset, cfg, overwrite)
         return
     from orbitmodel.plan.depth_bands import comparison_lines
     from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head
 
-    cfg = DepthRefitConfig(
-        frames=frames or _D.frames,
-        test_frames=test_frames or _D.test_frames,
-        epochs=epochs,
-        lr=lr,
-        near_weight=near_weight,
-        near_m=near_m,
-        seed=seed,
-        eval_split=eval_split,
-    )
+    cfg = DepthRefitConfig(frames=frames or _D.frames, test_frames=test_frames or _D.test_frames, **recipe)
     result = refit_depth_head(run, dataset, cfg, overwrite=overwrite)
     for line in comparison_lines(result):
         typer.echo(line)
@@ -90,20 +83,10 @@ def depth(
     typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run)}")
 
 
-def _imagined(run, dataset, windows, test_windows, epochs, lr, near_weight, near_m, seed, eval_split, overwrite):
+def _imagined(run: Path, dataset: str, cfg: ImaginedDepthConfig, overwrite: bool) -> None:
     """``orbitmodel depth --imagined``: the head on imagined latents (``plan.imagined_fit``)."""
     from orbitmodel.plan.imagined_fit import fit_imagined_depth, imagined_folder, step_lines
 
-    cfg = ImaginedDepthConfig(
-        windows=windows or _I.windows,
-        test_windows=test_windows or _I.test_windows,
-        epochs=epochs,
-        lr=lr,
-        near_weight=near_weight,
-        near_m=near_m,
-        seed=seed,
-        eval_split=eval_split,
-    )
     result = fit_imagined_depth(run, dataset, cfg, overwrite=overwrite)
     for line in step_lines(result):
         typer.echo(line)

@@ -11,6 +11,17 @@ from orbitmodel.data import EVAL_SPLITS
 MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to plan around
 
 
+def check_fit(cfg) -> None:
+    """The checks both recipes share: their optimisation (epochs, batch_size, lr), the near-cell
+    weighting (near_weight, near_m) and the split they are scored on (ValueError naming the field)."""
+    if min(cfg.epochs, cfg.batch_size) < 1:
+        raise ValueError("epochs and batch_size must be >= 1")
+    if cfg.eval_split not in EVAL_SPLITS:
+        raise ValueError(f"eval_split={cfg.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
+    if not (cfg.lr > 0 and cfg.near_weight >= 0 and cfg.near_m > 0):
+        raise ValueError(f"lr={cfg.lr} and near_m={cfg.near_m} must be > 0, near_weight={cfg.near_weight} >= 0")
+
+
 @dataclass(frozen=True)
 class DepthRefitConfig:
     """The refit's recipe (``docs/planner.md`` gives the comparison it was chosen from; the fit
@@ -38,12 +49,9 @@ class DepthRefitConfig:
     eval_split: str = "test"
 
     def __post_init__(self):
-        if min(self.frames, self.test_frames, self.epochs, self.batch_size) < 1:
-            raise ValueError("frames, test_frames, epochs and batch_size must be >= 1")
-        if self.eval_split not in EVAL_SPLITS:
-            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
-        if not (self.lr > 0 and self.near_weight >= 0 and self.near_m > 0):
-            raise ValueError(f"lr={self.lr} and near_m={self.near_m} must be > 0, near_weight={self.near_weight} >= 0")
+        if min(self.frames, self.test_frames) < 1:
+            raise ValueError("frames and test_frames must be >= 1")
+        check_fit(self)
 
 
 @dataclass(frozen=True)
@@ -76,7 +84,6 @@ class ImaginedDepthConfig:
     eval_split: str = "test"
 
     def __post_init__(self):
-        if min(self.windows, self.test_windows, self.context, self.horizon, self.hidden, self.epochs) < 1:
-            raise ValueError("windows, test_windows, context, horizon, hidden and epochs must be >= 1")
-        if self.eval_split not in EVAL_SPLITS:
-            raise ValueError(f"eval_split={self.eval_split!r}: choose one of {', '.join(EVAL_SPLITS)}")
+        if min(self.windows, self.test_windows, self.context, self.horizon, self.hidden) < 1:
+            raise ValueError("windows, test_windows, context, horizon and hidden must be >= 1")
+        check_fit(self)

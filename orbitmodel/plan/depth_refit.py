@@ -73,6 +73,34 @@ def _patches(
     return torch.cat(tokens), torch.cat(depth)
 
 
+def fit_near_weighted(head, inputs: torch.Tensor, depth: torch.Tensor, cfg, scale: float) -> tuple[int, list[float]]:
+    """Train ``head`` (inputs (N, ...) -> depth / ``scale``) on the true ``depth`` (N, 16, 16) metres
+    with the near cells weighted (module docstring): AdamW, cosine decay to zero, batches drawn in
+    a seeded order. ``cfg`` gives epochs, batch_size, lr, near_weight, near_m and seed (the refit's
+    and the imagined-depth fit's recipes). Returns the optimiser steps and each epoch's last loss;
+    the head is left in eval mode."""
+    steps_per_epoch = max(1, len(inputs) // cfg.batch_size)
+    opt = torch.optim.AdamW(head.parameters(), lr=cfg.lr, weight_decay=0.0)
+    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs * steps_per_epoch)
+    g = torch.Generator().manual_seed(cfg.seed)
+    losses = []
+    with torch.enable_grad():
+        for _ in range(cfg.epochs):
+            order = torch.randperm(len(inputs), generator=g)
+            for s in range(steps_per_epoch):
+                i = order[s * cfg.batch_size : (s + 1) * cfg.batch_size]
+                pred, true = head(inputs[i].float()) * scale, depth[i]
+                weight = 1 + cfg.near_weight * (true < cfg.near_m).float()
+                loss = (weight * (pred - true) ** 2).mean() / scale**2
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                opt.step()
+                sched.step()
+            losses.append(float(loss.detach()))
+    head.eval()
+    return cfg.epochs * steps_per_epoch, losses
+
+
 def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
     with torch.no_grad():
         return torch.cat([head(tokens[s : s + 512].float()) for s in range(0, len(tokens), 512)]) * scale
@@ -99,25 +127,7 @@ def refit_depth_head(
     head = copy.deepcopy(model.depth_head).train()
     for p in head.parameters():
         p.requires_grad_(True)
-    steps_per_epoch = max(1, cfg.frames // cfg.batch_size)
-    opt = torch.optim.AdamW(head.parameters(), lr=cfg.lr, weight_decay=0.0)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs * steps_per_epoch)
-    g = torch.Generator().manual_seed(cfg.seed)
-    losses = []
-    with torch.enable_grad():
-        for _ in range(cfg.epochs):
-            order = torch.randperm(cfg.frames, generator=g)
-            for s in range(steps_per_epoch):
-                i = order[s * cfg.batch_size : (s + 1) * cfg.batch_size]
-                pred, true = head(train_x[i].float()) * scale, train_d[i]
-                weight = 1 + cfg.near_weight * (true < cfg.near_m).float()
-                loss = (weight * (pred - true) ** 2).mean() / scale**2
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                sched.step()
-            losses.append(float(loss.detach()))
-    head.eval()
+    steps, losses = fit_near_weighted(head, train_x, train_d, cfg, scale)
     result = {
         "run": str(run),
         "dataset": str(dataset),
@@ -136,7 +146,7 @@ def refit_depth_head(
         resume=False,
         overwrite=True,
     )
-    RunDir(out).save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
+    RunDir(out).save_final(head.state_dict(), steps)
     write_json_atomic(out / EVAL, result)
     return result
 

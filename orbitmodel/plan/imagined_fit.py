@@ -27,6 +27,7 @@ from orbitmodel.data import load_model_windows, read_dataset_meta, split_selecti
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.depth_bands import depth_by_band
 from orbitmodel.plan.depth_recipe import ImaginedDepthConfig
+from orbitmodel.plan.depth_refit import fit_near_weighted
 from orbitmodel.plan.imagined import ImaginedDepth, ImaginedDepthHead
 from orbitmodel.runs import (
     CONFIG,
@@ -129,25 +130,7 @@ def fit_imagined_depth(
     torch.manual_seed(cfg.seed)
     head = ImaginedDepthHead(model.config.latent_dim, cfg.hidden)
     x, y = train_z.flatten(0, 1), train_d.flatten(0, 1)  # every latent, encoded or imagined, is a sample
-    steps_per_epoch = max(1, len(x) // cfg.batch_size)
-    opt = torch.optim.AdamW(head.parameters(), lr=cfg.lr, weight_decay=0.0)
-    sched = torch.optim.lr_scheduler.CosineAnnealingLR(opt, cfg.epochs * steps_per_epoch)
-    g = torch.Generator().manual_seed(cfg.seed)
-    losses = []
-    with torch.enable_grad():
-        for _ in range(cfg.epochs):
-            order = torch.randperm(len(x), generator=g)
-            for s in range(steps_per_epoch):
-                i = order[s * cfg.batch_size : (s + 1) * cfg.batch_size]
-                pred, true = head(x[i]) * scale, y[i]
-                weight = 1 + cfg.near_weight * (true < cfg.near_m).float()
-                loss = (weight * (pred - true) ** 2).mean() / scale**2
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                sched.step()
-            losses.append(float(loss.detach()))
-    head.eval()
+    steps, losses = fit_near_weighted(head, x, y, cfg, scale)
     result = {
         "run": str(run),
         "dataset": str(dataset),
@@ -164,7 +147,7 @@ def fit_imagined_depth(
         resume=False,
         overwrite=True,
     )
-    folder.save_final(head.state_dict(), cfg.epochs * steps_per_epoch)
+    folder.save_final(head.state_dict(), steps)
     write_json_atomic(out / EVAL, result)
     return result
 

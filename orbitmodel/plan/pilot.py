@@ -222,14 +222,12 @@ class PlannerPilot(Pilot):
         c = self.config
         with self.timings("points"):
             points, radii = depth_to_points(depth, obs["state"], self.camera, c.max_range, c.footprint, c.support)
-            if self.imagined is not None:  # what is in view now, the imagined maps replace
+            if self.tracker is None:
                 self.memory.add(points, radii)
                 cloud = self.memory.cloud(c.reach)
-                outside = outside_view(cloud.points, obs["state"], self.camera, c.max_range)
-                cloud = PointCloud(cloud.points[outside], cloud.radii[outside], c.reach)
-            elif self.tracker is None:
-                self.memory.add(points, radii)
-                cloud = self.memory.cloud(c.reach)
+                if self.imagined is not None:  # what is in view now, the imagined maps replace
+                    outside = outside_view(cloud.points, obs["state"], self.camera, c.max_range)
+                    cloud = PointCloud(cloud.points[outside], cloud.radii[outside], c.reach)
             else:
                 edge = border_points(depth, self.camera, c.max_range, c.support)
                 self.tracker.add(points, radii, self._step * DT, edge)
