@@ -6,7 +6,8 @@ so that a run records every choice it was made with (``RUN/config.json``) and no
 picks a default by the preset's name. ``paper`` is upstream Orbit-Planner's Stage I at 224 px
 (for a GPU); ``cpu`` is the same family scaled to train on a 2-core machine from a 64 px dataset
 in under an hour (sizes chosen by measurement, ``docs/model.md``); ``cpu-step5`` is ``cpu``
-stepping 5 frames per prediction, the run the planner flies; ``tiny`` is for tests.
+stepping 5 frames per prediction, the run the planner flies; ``cpu-step5-dynamic`` is that run for
+the dynamic tier's shorter, faster-spinning episodes; ``tiny`` is for tests.
 """
 
 from __future__ import annotations
@@ -157,13 +158,20 @@ class TrainConfig(StageTrainConfig):
 KINDS = ("latent", "state")  # the probe on imagined latents; the state-only reference MLP
 INTEGRATORS = ("upstream", "coasting")
 # what the latent probe's MLP reads per step: z_k; [z_k, z_k - z_{k-1}]; and the thrusts of step k
-# too; or the thrusts of step k alone, no latent (Table I's thrust-only row: what thrusts explain)
-INPUTS = ("latent", "latent+change", "latent+change+thrust", "thrust")
+# too, in a branch of their own, which the latent features may modulate (+film: how a thrust turns
+# the body then depends on what the latents say of it); or the thrusts of step k alone, no latent
+# (Table I's thrust-only row: what thrusts explain)
+INPUTS = ("latent", "latent+change", "latent+change+thrust", "latent+change+thrust+film", "thrust")
 
 
 def reads_thrust(inputs: str) -> bool:
     """Whether a probe with these ``inputs`` reads each step's thrusts (and so needs their width)."""
-    return inputs == "thrust" or inputs.endswith("+thrust")
+    return "thrust" in inputs.split("+")
+
+
+def modulates_thrust(inputs: str) -> bool:
+    """Whether the latent features scale and shift the thrust branch's hidden layer (FiLM)."""
+    return inputs.endswith("+film")
 
 
 def reads_latent(inputs: str) -> bool:
@@ -189,6 +197,10 @@ class ProbeTrainConfig(StageTrainConfig):
             train on a seeded subset of N windows whose imagined latents are computed once and
             kept (see ``probe.cache``); the state-only reference then trains on the same N.
         scale_windows: training windows whose true increments set the output scale.
+        max_body_rate: 0: every training window. R > 0: only windows whose body rate stays at or
+            below R rad/s at every frame (``data.calm_windows``), for the cached subset and the
+            output scale; a pilot spinning faster is lost whatever the probe says, and the MSE of
+            such windows would outweigh every calm one. Needs ``cache_windows`` > 0.
         loop: the training loop's settings (``loop_settings.LoopSettings``).
     """
 
@@ -199,6 +211,7 @@ class ProbeTrainConfig(StageTrainConfig):
     increment_weight: float = 0.0
     cache_windows: int = 0
     scale_windows: int = 2048
+    max_body_rate: float = 0.0
     loop: LoopSettings = LoopSettings(
         batch_size=256,
         lr=3e-4,
@@ -224,6 +237,12 @@ class ProbeTrainConfig(StageTrainConfig):
             raise ValueError(f"increment_weight={self.increment_weight}: give a weight >= 0")
         if self.cache_windows < 0:
             raise ValueError(f"cache_windows={self.cache_windows}: give 0 (no cache) or a number of windows")
+        if self.max_body_rate < 0:
+            raise ValueError(f"max_body_rate={self.max_body_rate}: give 0 (every window) or a rate > 0 in rad/s")
+        if self.max_body_rate and not self.cache_windows:
+            raise ValueError(
+                f"max_body_rate={self.max_body_rate}: it selects the cached windows; give cache_windows > 0"
+            )
         object.__setattr__(self, "weights", tuple(self.weights))
 
 
@@ -236,8 +255,12 @@ class ProbeRecipe:
         inputs: "latent" (upstream): the MLP reads z_k. "latent+change": it reads
             [z_k, z_k - z_{k-1}] (the world model predicts the change of z, and the increments are
             about change). "latent+change+thrust": also the thrusts of step k (the world model's
-            action of that step, 8 s values), which order the frames within a step. "thrust": the
-            thrusts of step k alone, no latent (the thrust-only reference of Table I).
+            action of that step, 8 s values), which order the frames within a step.
+            "latent+change+thrust+film": the latent features also scale and shift the thrust
+            branch's first hidden layer, so the increments a thrust makes can differ from body to
+            body (a shifted centre of mass, a faulty thruster) as far as the latents tell them
+            apart. "thrust": the thrusts of step k alone, no latent (the thrust-only reference of
+            Table I).
         integrator: "upstream": p' = p + dp, v' = v + dv. "coasting": zero increments hold the
             world-frame velocity and the position follows it (see ``probe.integrator``).
         hidden, layers: ``layers`` hidden layers of ``hidden`` units with GELU, then 10 outputs.
@@ -412,6 +435,23 @@ def _cpu_step5() -> Preset:
     )
 
 
+def _cpu_step5_dynamic() -> Preset:
+    # cpu-step5 for the dynamic tier, whose episodes are shorter (79 frames on average against
+    # the static tier's 111) and spin faster (faulty thrusters, an off-centre mass): windows of
+    # 16 steps (80 frames) reach only the longest, most spun-up half of its episodes, and 100-frame
+    # probe windows a fifth of them. Stage I cuts windows of 10 steps; the probe reads 2 steps of
+    # context (the cpu planner's history) and trains on the windows whose body rate stays at or
+    # below 3 rad/s (chosen on the tier's validation windows, docs/results.md).
+    step5 = _cpu_step5()
+    probe = replace(step5.probe, train=replace(step5.probe.train, context=2, max_body_rate=3.0))
+    return replace(
+        step5.with_train(window=10),
+        name="cpu-step5-dynamic",
+        probe=probe,
+        description="cpu-step5 for the dynamic tier: shorter windows, a probe trained on calm windows",
+    )
+
+
 def _tiny() -> Preset:
     model = ModelConfig(
         image_size=64,
@@ -470,7 +510,13 @@ def _tiny() -> Preset:
     return Preset("tiny", "a tiny model for tests", model, train, probe)
 
 
-PRESETS: dict[str, Callable[[], Preset]] = {"paper": _paper, "cpu": _cpu, "cpu-step5": _cpu_step5, "tiny": _tiny}
+PRESETS: dict[str, Callable[[], Preset]] = {
+    "paper": _paper,
+    "cpu": _cpu,
+    "cpu-step5": _cpu_step5,
+    "cpu-step5-dynamic": _cpu_step5_dynamic,
+    "tiny": _tiny,
+}
 
 
 def get_preset(name: str) -> Preset:

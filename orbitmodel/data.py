@@ -13,6 +13,7 @@ import numpy as np
 
 from orbitdata import schema as S
 from orbitdata.load.config import IS_PAD
+from orbitdata.state import STATE_SLICES
 
 
 @dataclass(frozen=True)
@@ -157,6 +158,20 @@ def load_model_windows(
 
     frames = load_windows(source, context=context * frame_step, horizon=horizon * frame_step, stride=stride, **kwargs)
     return frames if frame_step == 1 else ModelStepWindows(frames, frame_step, frame_states)
+
+
+def calm_windows(windows, max_rate: float) -> list[int]:
+    """Indices of the windows (a ``WindowDataset`` or :class:`ModelStepWindows`) whose body rate
+    stays at or below ``max_rate`` rad/s at every real frame, in table order."""
+    frames = getattr(windows, "frames", windows)
+    column = frames.steps.data.table.column(S.STATE).combine_chunks()
+    states = column.flatten().to_numpy(zero_copy_only=False).reshape(len(column), -1)
+    fast = np.flatnonzero(np.linalg.norm(states[:, STATE_SLICES["w"]], axis=1) > max_rate)  # rows over the rate
+    index = frames.index
+    # the first fast row at or after each window's first row: the window is calm when it lies past the window
+    at = np.searchsorted(fast, index.row)
+    first_fast = np.append(fast, np.iinfo(np.int64).max)[at]
+    return np.flatnonzero(first_fast >= index.row + index.n_real).tolist()
 
 
 # ---- the validation split: held-out training episodes, where every choice is made ----------------

@@ -26,18 +26,21 @@ def presets() -> None:
     from orbitmodel.plan.config import PLANNER_PRESETS, default_planner_preset
 
     typer.echo("world model (orbitmodel train --preset NAME):")
+    width = max(map(len, PRESETS))
     for name, factory in PRESETS.items():
         p = factory()
         m, probe = p.model, p.probe
         typer.echo(
-            f"  {name:9s} {WorldModel(m).num_parameters() / 1e6:6.2f}M params  {m.image_size} px, "
+            f"  {name:{width}s} {WorldModel(m).num_parameters() / 1e6:6.2f}M params  {m.image_size} px, "
             f"patch {m.patch_size}, ViT {m.depth}x{m.width}, latent {m.latent_dim}, "
             f"predictor {m.pred_depth}x{m.latent_dim}, {m.frame_step} frame(s) a step; window "
             f"{p.train.window}, batch {p.train.loop.batch_size}, SIGReg {m.lambda_sigreg}"
             + (f", {p.train.val_fraction:.0%} of the train episodes held out" if p.train.val_fraction else "")
             + f"; probe {probe.inputs}, {probe.integrator}"
             + (", per frame" if probe.per_frame else "")
-            + f", {probe.train.loop.epochs} epochs\n            {p.description}"
+            + f", context {probe.train.context}"
+            + (f", windows at or below {probe.train.max_body_rate:g} rad/s" if probe.train.max_body_rate else "")
+            + f", {probe.train.loop.epochs} epochs\n  {'':{width}s} {p.description}"
         )
     typer.echo(f"planner (orbitmodel eval closed-loop RUN --preset NAME; default here: {default_planner_preset()}):")
     for name, factory in PLANNER_PRESETS.items():

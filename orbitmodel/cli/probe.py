@@ -96,6 +96,18 @@ def probe(
             min=0, help="train on this many windows whose latents are imagined once (0 = every step, as upstream)"
         ),
     ] = None,
+    context: Annotated[
+        Optional[int],
+        typer.Option(min=1, help="model steps of context before each window's horizon (default: the probe recipe's)"),
+    ] = None,
+    max_body_rate: Annotated[
+        Optional[float],
+        typer.Option(
+            min=0.0,
+            help="train on the windows whose body rate stays at or below this many rad/s (0 = every window) "
+            "[default: the probe recipe's]",
+        ),
+    ] = None,
     workers: Annotated[Optional[int], typer.Option(min=0, help="DataLoader worker processes")] = None,
     seed: Annotated[Optional[int], typer.Option(min=0, help="data order and initialisation")] = None,
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
@@ -144,6 +156,8 @@ def probe(
         lr=lr,
         weights=weights,
         cache_windows=cache_windows,
+        context=context,
+        max_body_rate=max_body_rate,
         num_workers=workers,
         seed=seed,
     )
@@ -182,6 +196,14 @@ def eval_probe(
             "preset: 2) [default: the model's own]",
         ),
     ] = None,
+    context: Annotated[
+        Optional[int],
+        typer.Option(
+            min=1,
+            help="model steps encoded before the horizon, which sets the windows: score probes trained with "
+            "other contexts on the same windows [default: the probe's training context]",
+        ),
+    ] = None,
 ) -> None:
     """The paper's Table I on the same windows, at the planner's history (2) and the model's: the
     paper's probe (latents only), our best latent-only probe, the run's probe (the planner's), it
@@ -203,6 +225,7 @@ def eval_probe(
         figures=figures,
         history=history,
         split=split,
+        context=context,
     )
     try:
         result = evaluate_probe(req, rigid_body(dataset))

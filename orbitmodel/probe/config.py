@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 from orbitdata import schema as S
-from orbitmodel.config import INPUTS, INTEGRATORS, KINDS, reads_latent, reads_thrust
+from orbitmodel.config import INPUTS, INTEGRATORS, KINDS, modulates_thrust, reads_latent, reads_thrust
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,10 @@ class ProbeConfig:
     @property
     def reads_latent(self) -> bool:
         return reads_latent(self.inputs)
+
+    @property
+    def modulates_thrust(self) -> bool:
+        return modulates_thrust(self.inputs)
 
     @property
     def dims(self) -> tuple[int, ...]:

@@ -55,6 +55,7 @@ class EvalRequest:
     figures: bool = True
     history: int | None = None  # latents the world model sees per imagined step (None: its own, config.history)
     split: str = "test"  # or "val": the run's validation episodes (choices are made there; test only reports)
+    context: int | None = None  # model steps encoded before the horizon (None: the probe's training context)
 
 
 def select_windows(dataset: str, context: int, horizon: int, count: int, seed: int, split: str = "test", episodes=None):
@@ -184,8 +185,11 @@ def evaluate_probe(req: EvalRequest, physics: table1.Physics | None = None) -> d
             f"{req.run} predicts {s} frames per step; give horizons that are multiples of {s} "
             f"(got {', '.join(map(str, req.horizons))})"
         )
+    if req.context is not None and req.context < 1:
+        raise ValueError(f"--context {req.context}: encode at least 1 step before the horizon")
     # the context frames: every s-th of (steps - 1) s + 1, the last one where the probe starts
-    context, n = (int(probe_config["train"]["context"]) - 1) * s + 1, max(req.horizons)
+    steps = req.context or int(probe_config["train"]["context"])
+    context, n = (steps - 1) * s + 1, max(req.horizons)
     split, episodes = split_selection(req.split, world_model.run.validation)
     chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed, split, episodes)
     windows = load_windows(

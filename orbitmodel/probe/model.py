@@ -43,14 +43,18 @@ class Increments(nn.Module):
     """MLP features (..., d_in) -> increments (..., 10), in physical units; a probe reading thrusts
     adds a second MLP's increments from the step's (standardised) thrusts. Each frame's rate change
     is linear in its thrusts; concatenated to the latent features they are learnt slowly, so they
-    get a branch of their own (docs/model.md). A probe reading thrusts alone (inputs "thrust") has
-    the thrust branch only: no weight sees a latent."""
+    get a branch of their own (docs/model.md). With inputs "...+film" the latent features scale and
+    shift that branch's first hidden layer (zero at the start: the additive branch), so what a
+    thrust does can depend on the body the latents describe. A probe reading thrusts alone (inputs
+    "thrust") has the thrust branch only: no weight sees a latent."""
 
     def __init__(self, config: ProbeConfig):
         super().__init__()
         self.config = config
         self.net = mlp(config.dims) if config.reads_latent else None
         self.thrust_net = mlp(config.thrust_dims) if config.reads_thrust else None
+        # FiLM: the latent features -> a scale and a shift of the thrust branch's first hidden layer
+        self.film = nn.Linear(config.dims[0], 2 * config.thrust_dims[1]) if config.modulates_thrust else None
         self.register_buffer("scale", torch.ones(INCREMENT_DIM))
         self.initialize_weights()
 
@@ -62,6 +66,9 @@ class Increments(nn.Module):
             if net is not None:
                 nn.init.zeros_(net[-1].weight)
                 nn.init.zeros_(net[-1].bias)
+        if self.film is not None:  # unmodulated at the start: the additive probe
+            nn.init.zeros_(self.film.weight)
+            nn.init.zeros_(self.film.bias)
 
     def set_scale(self, scale: torch.Tensor) -> None:
         """Per-increment units (10,): the RMS of the true increments of the training windows."""
@@ -71,7 +78,11 @@ class Increments(nn.Module):
         """(B, n, d_in) [and thrusts (B, n, action_dim)] -> (B, n substeps, 10): each step's
         increments in time order."""
         out = self.net(x) if self.net is not None else self.thrust_net(thrust)
-        if self.net is not None and self.thrust_net is not None:
+        if self.film is not None:
+            scale, shift = self.film(x).chunk(2, dim=-1)
+            hidden = self.thrust_net[0](thrust) * (1 + scale) + shift
+            out = out + self.thrust_net[1:](hidden)
+        elif self.net is not None and self.thrust_net is not None:
             out = out + self.thrust_net(thrust)
         return out.reshape(*out.shape[:-2], out.shape[-2] * self.config.substeps, -1) * self.scale
 

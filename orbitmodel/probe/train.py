@@ -37,7 +37,14 @@ from torch import nn
 from orbitdata import schema as S
 from orbitdata.load import collate_windows
 from orbitmodel.config import KINDS, ProbeRecipe, ProbeTrainConfig, reads_thrust
-from orbitmodel.data import FRAME_STATES, DatasetMeta, load_model_windows, read_dataset_meta, training_episodes
+from orbitmodel.data import (
+    FRAME_STATES,
+    DatasetMeta,
+    calm_windows,
+    load_model_windows,
+    read_dataset_meta,
+    training_episodes,
+)
 from orbitmodel.kinematics import FUEL, ROT, P, V, W
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
@@ -203,6 +210,20 @@ def trained_recipe(run: str | Path) -> ProbeRecipe:
     )
 
 
+def calm_subset(windows, train: ProbeTrainConfig) -> list[int]:
+    """The cached windows: a seeded draw of ``cache_windows`` of the training windows, or of those
+    whose body rate stays at or below ``max_body_rate`` when it is set."""
+    if not train.max_body_rate:
+        return subset(len(windows), train.cache_windows, train.loop.seed)
+    calm = calm_windows(windows, train.max_body_rate)
+    if not calm:
+        raise RunError(
+            f"--max-body-rate {train.max_body_rate:g}: no training window stays at or below that body rate "
+            "(rad/s); give a larger rate, or 0 for every window"
+        )
+    return [calm[i] for i in subset(len(calm), train.cache_windows, train.loop.seed)]
+
+
 def increment_scale(
     dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1, episodes=None
 ) -> torch.Tensor:
@@ -221,8 +242,9 @@ def increment_scale(
         episodes=episodes,
         frame_states=per_frame,
     )
+    pool = calm_windows(windows, train.max_body_rate) if train.max_body_rate else range(len(windows))
     g = torch.Generator().manual_seed(train.loop.seed)
-    chosen = torch.randperm(len(windows), generator=g)[: train.scale_windows].tolist()
+    chosen = [pool[i] for i in torch.randperm(len(pool), generator=g)[: train.scale_windows].tolist()]
     states = collate_windows(windows.__getitems__(chosen))[FRAME_STATES if per_frame else S.STATE]  # (N, T, 16)
     inc = increments_of(states, config.dt, config.coasting)  # (N, T-1, 10)
     return inc.flatten(0, 1).pow(2).mean(0).sqrt()  # (10,)
@@ -334,18 +356,6 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
             "only; pass --increment-weight 0 with --state-only"
         )
     config = probe_config(req.recipe, req.kind, stage1.preset.model.latent_dim, frame_step)
-    out = probe_folder(req.run, req.kind, req.variant)
-    if req.overwrite:
-        # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
-        # again must not reuse latents imagined by another version of the model code.
-        (out / CACHE_FILE).unlink(missing_ok=True)
-    run = RunDir(out)
-    parts = {"probe": config.to_dict(), "train": t.to_dict(), "dataset": meta.to_dict(), "stage1_run": str(req.run)}
-    if latent:
-        parts["world_model"] = wm_print  # a probe reads one world model's latents only
-    if req.variant != FLOWN:
-        parts["variant"] = req.variant
-    run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     episodes = training_episodes(req.dataset, (), (), stage1.validation)  # the run's validation episodes stay out
     windows = load_model_windows(
         req.dataset,
@@ -358,9 +368,21 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         episodes=episodes,
         frame_states=config.substeps > 1,
     )
+    chosen = calm_subset(windows, t) if t.cache_windows else None  # refused before anything is written
+    out = probe_folder(req.run, req.kind, req.variant)
+    if req.overwrite:
+        # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
+        # again must not reuse latents imagined by another version of the model code.
+        (out / CACHE_FILE).unlink(missing_ok=True)
+    run = RunDir(out)
+    parts = {"probe": config.to_dict(), "train": t.to_dict(), "dataset": meta.to_dict(), "stage1_run": str(req.run)}
+    if latent:
+        parts["world_model"] = wm_print  # a probe reads one world model's latents only
+    if req.variant != FLOWN:
+        parts["variant"] = req.variant
+    run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     data = windows
     if t.cache_windows:
-        chosen = subset(len(windows), t.cache_windows, t.loop.seed)
         if latent:
             data = TensorWindows(
                 imagined(world_model, windows, chosen, req, wm_print, meta, device, out, stage1.validation.episodes)

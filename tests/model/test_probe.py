@@ -301,6 +301,46 @@ def test_a_probe_reading_thrusts_standardises_them_with_the_data_stats():
     assert "thrust_mean" not in PhysicsProbe(ProbeConfig(latent_dim=4, hidden=8)).state_dict()  # others load as before
 
 
+def test_a_film_probe_starts_as_the_additive_one_and_learns_a_thrust_response_per_body():
+    """inputs "...+thrust+film": untrained, it gives the additive probe's increments; trained on two
+    bodies that the latent tells apart and whose thrust turns them opposite ways (the sign of the
+    response flips with one latent feature), it fits what the additive branch cannot: one map from
+    thrust to increment serves both bodies only on average."""
+    from orbitmodel.probe.model import Increments
+
+    def config(inputs):
+        return ProbeConfig(latent_dim=4, hidden=32, inputs=inputs, action_dim=2)
+
+    g = torch.Generator().manual_seed(0)
+    additive, film = Increments(config("latent+change+thrust")), Increments(config("latent+change+thrust+film"))
+    film.load_state_dict({**film.state_dict(), **additive.state_dict()})  # the same branches, FiLM at zero
+    x, thrust = torch.randn(64, 1, 8, generator=g), torch.randn(64, 1, 2, generator=g)
+    torch.nn.init.normal_(additive.thrust_net[-1].weight, generator=g)
+    film.thrust_net[-1].weight.data.copy_(additive.thrust_net[-1].weight)
+    assert torch.allclose(film(x, thrust), additive(x, thrust))
+
+    def bodies(n):  # the latent says which body; its rates turn opposite ways under the same thrust
+        body = torch.where(torch.rand(n, 1, 1, generator=g) < 0.5, -1.0, 1.0)
+        x, thrust = torch.cat([body, torch.zeros(n, 1, 7)], dim=-1), torch.randn(n, 1, 2, generator=g)
+        target = torch.zeros(n, 1, 10)
+        target[..., 6:9] = body * thrust[..., :1]  # the body-rate increments
+        return x, thrust, target
+
+    train, held_out = bodies(512), bodies(512)
+
+    def fitted(model) -> float:  # the MSE on held-out draws after fitting the training draws
+        torch.manual_seed(0)
+        opt = torch.optim.Adam(model.parameters(), lr=1e-2)
+        for _ in range(300):
+            opt.zero_grad()
+            torch.nn.functional.mse_loss(model(*train[:2]), train[2]).backward()
+            opt.step()
+        with torch.no_grad():
+            return float(torch.nn.functional.mse_loss(model(*held_out[:2]), held_out[2]))
+
+    assert fitted(film) < 0.02 < 0.2 < fitted(Increments(config("latent+change+thrust")))
+
+
 def test_a_thrust_only_probe_has_no_latent_input():
     """inputs "thrust": the thrust branch alone, so no weight sees a latent: random latents give
     the same states, other thrusts other states (every frame of a 2-frame step, as the flown head)."""

@@ -411,3 +411,67 @@ def test_table_one_agrees_with_an_independent_per_frame_computation(tiny_dataset
         for h in table["horizons"]:
             mine = float(np.mean([e[:h].mean() for e in per_window]))
             assert mine == pytest.approx(table["table"]["probe"][q][f"h{h}"]["mean"], rel=1e-4, abs=1e-6), (q, h)
+
+
+def test_calm_windows_are_those_whose_every_frame_stays_under_the_rate(tiny_dataset_master):
+    from orbitdata.load import collate_windows
+    from orbitmodel.data import calm_windows, load_model_windows
+    from orbitmodel.kinematics import W
+
+    windows = load_model_windows(tiny_dataset_master, 2, context=2, horizon=2, stride=1, columns=[S.STATE])
+    frames = collate_windows(windows.frames.__getitems__(list(range(len(windows)))))[S.STATE]  # every frame
+    peak = frames[..., W].norm(dim=-1).amax(1)  # (N,) the fastest frame of each window
+    rate = float(peak.median())
+    calm = calm_windows(windows, rate)
+    assert calm == [i for i in range(len(windows)) if peak[i] <= rate]
+    assert 0 < len(calm) < len(windows)
+
+
+def test_a_probe_with_a_rate_limit_trains_on_calm_windows_only(run, tiny_dataset_master):
+    from orbitmodel.kinematics import W
+
+    def peaks():  # the fastest body rate of each window the probe trained on
+        return load_file(run / "probe" / CACHE_FILE)[S.STATE][..., W].norm(dim=-1).amax(1)
+
+    train_probe(request(run, tiny_dataset_master, max_steps=1))
+    every = peaks()
+    rate = float(every.median())
+    train_probe(replace(request(run, tiny_dataset_master, max_steps=1, max_body_rate=rate), overwrite=True))
+    calm = peaks()
+    assert (every > rate).any() and (calm <= rate).all()
+    assert len(calm) >= int((every <= rate).sum())  # as many windows as there are calm ones, up to the cache's size
+    config = json.loads((run / "probe" / "config.json").read_text())
+    assert config["train"]["max_body_rate"] == rate
+
+
+def test_the_context_and_rate_flags_and_a_rate_no_window_meets(run, tiny_dataset_master):
+    data = str(tiny_dataset_master)
+    flags = ["--context", "2", "--max-body-rate", "1000", "--max-steps", "1"]
+    assert runner.invoke(app, ["probe", str(run), data, *flags]).exit_code == 0
+    train = json.loads((run / "probe" / "config.json").read_text())["train"]
+    assert (train["context"], train["max_body_rate"]) == (2, 1000.0)  # the flags land in the probe's record
+    one_line_error(
+        runner.invoke(app, ["probe", str(run), data, "--max-body-rate", "1e-9", "--overwrite"]), "--max-body-rate 1e-09"
+    )
+    assert (run / "probe" / "model.safetensors").exists()  # refused before --overwrite removed anything
+    one_line_error(
+        runner.invoke(app, ["probe", str(run), data, "--max-body-rate", "1", "--cache-windows", "0", "--overwrite"]),
+        "cache_windows",
+    )
+
+
+def test_eval_context_sets_the_windows_so_probes_of_other_contexts_share_them(run, tiny_dataset_master, tmp_path):
+    """--context N encodes N steps before the horizon whatever context the probe trained with: the
+    windows (and so the constant-velocity row) are those of a probe trained with context N."""
+    train_probe(request(run, tiny_dataset_master, max_steps=1, context=2))
+
+    def scored(*flags):
+        out = tmp_path / ("eval" + "".join(flags))
+        args = ["eval", "probe", str(run), str(tiny_dataset_master), "--windows", "2", "--horizon", "5"]
+        res = runner.invoke(app, [*args, "--out", str(out), "--no-figures", *flags])
+        assert res.exit_code == 0, res.output
+        return json.loads((out / TABLE_JSON).read_text())
+
+    own, wider = scored(), scored("--context", "4")
+    assert (own["context"], wider["context"]) == (2, 4)  # frames: one model step per frame in the tiny run
+    assert own["table"]["probe"] != wider["table"]["probe"]
