@@ -145,24 +145,31 @@ refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RU
 }
 
 if [ "${TIER:-static}" = dynamic ]; then
-  # The dynamic tier (docs/results.md "The dynamic tier"): its 3000-episode 64 px dataset, the flown
-  # recipe trained on it, the probe, the depth refit and the imagined-depth head (way a), then the
+  # The dynamic tier (docs/results.md "The dynamic tier"): its 3000-episode 64 px dataset, the
+  # tier's recipe (cpu-step5-dynamic: cpu-step5 with the probe chosen for the tier) trained on it, the probe, the depth refit and the imagined-depth head (way a), then the
   # tier's grid (3, 7 and 10 pieces of debris at 1 and 3 m/s) on validation seeds 0, 1 and 2 and
   # test seeds 3, 4 and 5 (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
   # on the validation seeds), the oracles and the expert. The Diffusion Policy is not trained on the
   # tier yet.
-  DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn-step5" GDIR_ROOT="$OUT/dynamic/grid"
+  DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
   IMAGINED=()
   [ "${QUICK:-0}" = 1 ] && IMAGINED=(--frames 8 --test-frames 4 --epochs 1)
+  # the tier's probe trains on a cache of its calm windows (--max-body-rate needs one)
+  [ "${QUICK:-0}" = 1 ] && PROBE=(--max-steps 3 --cache-windows 64 --batch-size 16)
   [ -f "$DATA/meta/info.json" ] || step generate-dynamic "$BIN/orbitdata" generate "$DATA" --tier dynamic \
     --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
-  step train-dynamic train_wm "$WMS" cpu-step5
+  # the flown recipe for the tier's shorter, faster-spinning episodes (docs/model.md)
+  step train-dynamic train_wm "$WMS" cpu-step5-dynamic
   [ -f "$WMS/probe/model.safetensors" ] || step probe-dynamic "$BIN/orbitmodel" probe "$WMS" "$DATA" "${PROBE[@]}"
-  # The tier's held-out episodes hold 53 windows of the probe's horizon (the static dataset's, 90 and more).
+  # The tier's held-out episodes hold 53 windows of 8 context steps and the probe's horizon (the
+  # static dataset's, 90 and more): the windows docs/results.md scores every tier probe on.
   [ "${QUICK:-0}" = 1 ] || VAL_WINDOWS=(--windows 53)
-  "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
+  for history in 2 8; do
+    "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history "$history" --context 8 \
+      --out "$WMS/eval-val-history$history" --no-figures "${VAL_WINDOWS[@]}"
+  done
   refit "$WMS"
   [ -f "$WMS/depth-imagined/model.safetensors" ] || step imagined-dynamic "$BIN/orbitmodel" depth "$WMS" "$DATA" \
     --imagined --eval-split val "${IMAGINED[@]}"

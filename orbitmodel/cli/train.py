@@ -49,6 +49,9 @@ def train(
         ),
     ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=2, help="windows per step and process")] = None,
+    window: Annotated[
+        Optional[int], typer.Option(min=2, help="model steps per training window (default: the preset's)")
+    ] = None,
     lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
     lambda_sigreg: Annotated[
         Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
@@ -84,6 +87,7 @@ def train(
         epochs=epochs,
         max_steps=max_steps,
         batch_size=batch_size,
+        window=window,
         lr=lr,
         num_workers=workers,
         seed=seed,

@@ -172,6 +172,8 @@ def test_run_folder_with_another_config_needs_overwrite(tiny_dataset_master, tra
     args = ["train", str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "2", "--out", str(run)]
     _one_line_exit_2(runner.invoke(app, args), "another config", "--overwrite")
     assert runner.invoke(app, [*args, "--overwrite"]).exit_code == 0
+    assert runner.invoke(app, [*args, "--window", "4", "--overwrite"]).exit_code == 0
+    assert json.loads((run / "config.json").read_text())["preset"]["train"]["window"] == 4  # the flag, recorded
 
 
 def test_a_corrupt_checkpoint_is_one_line(trained, tmp_path):
