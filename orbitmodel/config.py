@@ -199,8 +199,8 @@ class ProbeTrainConfig(StageTrainConfig):
         scale_windows: training windows whose true increments set the output scale.
         max_body_rate: 0: every training window. R > 0: only windows whose body rate stays at or
             below R rad/s at every frame (``data.calm_windows``), for the cached subset and the
-            output scale; a pilot spinning faster is lost whatever the probe says, and the MSE of
-            such windows would outweigh every calm one. Needs ``cache_windows`` > 0.
+            output scale: with the MSE loss a few spinning windows outweigh every calm one, and
+            calm flight is what a planner needs predicted. Needs ``cache_windows`` > 0.
         loop: the training loop's settings (``loop_settings.LoopSettings``).
     """
 
