@@ -146,9 +146,10 @@ refit() {  # refit RUN [OPTIONS...]: the depth head refitted for the planner (RU
 
 if [ "${TIER:-static}" = dynamic ]; then
   # The dynamic tier (docs/results.md "The dynamic tier"): its 3000-episode 64 px dataset, the
-  # tier's recipe (cpu-step5-dynamic: cpu-step5 with the probe chosen for the tier) trained on it, the probe, the depth refit and the imagined-depth head (way a), then the
-  # tier's grid (3, 7 and 10 pieces of debris at 1 and 3 m/s) on validation seeds 0, 1 and 2 and
-  # test seeds 3, 4 and 5 (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
+  # tier's recipe (cpu-step5-dynamic: cpu-step5 with the probe chosen for the tier) trained on it,
+  # the probe, the depth refit and the imagined-depth head (way a), then the tier's grid (3, 7 and
+  # 10 pieces of debris at 1 and 3 m/s) on validation seeds 0, 1 and 2 and test seeds 3, 4 and 5
+  # (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
   # on the validation seeds), the oracles and the expert. The Diffusion Policy is not trained on the
   # tier yet.
