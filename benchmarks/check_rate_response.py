@@ -18,25 +18,22 @@ import argparse
 
 import numpy as np
 import torch
+from check_learned_dynamics import observed  # the planner's dynamics shown a window's context (this folder)
 
 from orbitdata import schema as S
 from orbitdata.load import load_windows, read_meta
 from orbitmodel.data import split_selection
 from orbitmodel.kinematics import W
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
+from orbitmodel.plan.dynamics import RigidBodyDynamics
 from orbitmodel.probe import PhysicsProbe
 from orbitmodel.probe.evaluate import select_windows
 
 
 def learned_rollout(model, probe, window: dict, history: int, context: int, horizon: int) -> torch.Tensor:
     """(horizon, 16): the planner's dynamics, shown the context frames, fed the recorded thrusts."""
-    dyn = LearnedDynamics(model, probe, history=history)
-    for t in range(context):
-        obs = {"image": window[S.IMAGE][t].permute(1, 2, 0).numpy(), "state": window[S.STATE][t].numpy()}
-        dyn.observe(obs, None if t == 0 else window[S.ACTION][t - 1].numpy())
     actions = window[S.ACTION][context - 1 : context - 1 + horizon][None]
-    return dyn.rollout(window[S.STATE][context - 1], actions)[0]
+    return observed(model, probe, window, history, context).rollout(window[S.STATE][context - 1], actions)[0]
 
 
 def summary(pred: torch.Tensor, true: torch.Tensor) -> str:

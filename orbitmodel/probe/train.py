@@ -26,6 +26,7 @@ are the same.
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from importlib.metadata import version
 from pathlib import Path
@@ -210,26 +211,32 @@ def trained_recipe(run: str | Path) -> ProbeRecipe:
     )
 
 
-def calm_subset(windows, train: ProbeTrainConfig) -> list[int]:
-    """The cached windows: a seeded draw of ``cache_windows`` of the training windows, or of those
-    whose body rate stays at or below ``max_body_rate`` when it is set."""
+def training_pool(windows, train: ProbeTrainConfig) -> Sequence[int]:
+    """The training windows a probe draws from (its cache and its output scale): every one, or
+    those whose body rate stays at or below ``max_body_rate`` when it is set."""
     if not train.max_body_rate:
-        return subset(len(windows), train.cache_windows, train.loop.seed)
+        return range(len(windows))
     calm = calm_windows(windows, train.max_body_rate)
     if not calm:
         raise RunError(
             f"--max-body-rate {train.max_body_rate:g}: no training window stays at or below that body rate "
             "(rad/s); give a larger rate, or 0 for every window"
         )
-    return [calm[i] for i in subset(len(calm), train.cache_windows, train.loop.seed)]
+    return calm
 
 
 def increment_scale(
-    dataset: str, train: ProbeTrainConfig, config: ProbeConfig, frame_step: int = 1, episodes=None
+    dataset: str,
+    train: ProbeTrainConfig,
+    config: ProbeConfig,
+    pool: Sequence[int],
+    frame_step: int = 1,
+    episodes=None,
 ) -> torch.Tensor:
-    """RMS (10,) of the true per-step increments over up to ``scale_windows`` training windows
-    (a seeded draw), the probe's output units; a step is ``frame_step`` frames, or one frame
-    for a per-frame probe (``config.substeps == frame_step``)."""
+    """RMS (10,) of the true per-step increments over up to ``scale_windows`` of the training
+    windows ``pool`` (:func:`training_pool`: indices into windows of the same context, horizon,
+    stride and episodes; a seeded draw), the probe's output units; a step is
+    ``frame_step`` frames, or one frame for a per-frame probe (``config.substeps == frame_step``)."""
     per_frame = config.substeps > 1
     windows = load_model_windows(
         dataset,
@@ -242,7 +249,6 @@ def increment_scale(
         episodes=episodes,
         frame_states=per_frame,
     )
-    pool = calm_windows(windows, train.max_body_rate) if train.max_body_rate else range(len(windows))
     g = torch.Generator().manual_seed(train.loop.seed)
     chosen = [pool[i] for i in torch.randperm(len(pool), generator=g)[: train.scale_windows].tolist()]
     states = collate_windows(windows.__getitems__(chosen))[FRAME_STATES if per_frame else S.STATE]  # (N, T, 16)
@@ -368,7 +374,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         episodes=episodes,
         frame_states=config.substeps > 1,
     )
-    chosen = calm_subset(windows, t) if t.cache_windows else None  # refused before anything is written
+    pool = training_pool(windows, t)  # refused before anything is written
     out = probe_folder(req.run, req.kind, req.variant)
     if req.overwrite:
         # The cache is keyed on the Stage I weights, not on the code that rolled them out: starting
@@ -383,6 +389,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
     data = windows
     if t.cache_windows:
+        chosen = [pool[i] for i in subset(len(pool), t.cache_windows, t.loop.seed)]
         if latent:
             data = TensorWindows(
                 imagined(world_model, windows, chosen, req, wm_print, meta, device, out, stage1.validation.episodes)
@@ -398,7 +405,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         model.set_state_stats(stage1.dataset.state_mean, stage1.dataset.state_std)
         module = StateObjective(model, t)
     if not req.resume:
-        model.increments.set_scale(increment_scale(req.dataset, t, config, frame_step, episodes))
+        model.increments.set_scale(increment_scale(req.dataset, t, config, pool, frame_step, episodes))
         if latent and config.reads_thrust:
             model.set_thrust_stats(meta.action_mean, meta.action_std)
     job = ProbeJob(module, model, req.kind, t.context)
