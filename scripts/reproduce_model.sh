@@ -151,8 +151,9 @@ if [ "${TIER:-static}" = dynamic ]; then
   # 10 pieces of debris at 1 and 3 m/s) on validation seeds 0, 1 and 2 and test seeds 3, 4 and 5
   # (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
-  # on the validation seeds), the oracles and the expert. The Diffusion Policy is not trained on the
-  # tier yet.
+  # on the validation seeds), both ways again with the body fitted to the pilot's history in place
+  # of the probe's states (planner-fitted-*), the oracles (oracle-fitted: the true debris and the
+  # fitted body) and the expert. The Diffusion Policy is not trained on the tier yet.
   DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
   IMAGINED=()
@@ -187,11 +188,18 @@ if [ "${TIER:-static}" = dynamic ]; then
     spawn fly_model oracle-nominal oracle-true --set obstacle_motion=true --set body=nominal
     spawn fly_model oracle-learned-dyn oracle-learned-dyn --set obstacle_motion=true
     step "dynamic-seed$seed-oracles-2" join
+    # the body fitted to each pilot's own history (--set body=fitted, docs/planner.md)
+    spawn fly_model planner-fitted-tracker planner --set obstacle_motion=tracker --set body=fitted
+    spawn fly_model planner-fitted-imagined planner --set obstacle_motion=imagined --set body=fitted
+    step "dynamic-seed$seed-fitted" join
+    spawn fly_model oracle-fitted oracle-true --set obstacle_motion=true --set body=fitted
+    step "dynamic-seed$seed-fitted-2" join
     step "dynamic-seed$seed-expert" fly_data expert
     cp "$GDIR/planner-$WAY.json" "$GDIR/planner.json"
   done
   mkdir -p "$GDIR_ROOT/test"
-  for pilot in planner planner-imagined planner-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn expert; do
+  for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
+    oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted expert; do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
   done
   printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"

@@ -40,8 +40,8 @@ def plan_batch(pilots: list, observations: list[dict]) -> list[np.ndarray]:
             cls, tokens = encode_frames(model, [o["image"] for o in observations])  # (N, width), (N, P, width)
             states = joined([torch.as_tensor(o["state"], dtype=torch.float32)[None] for o in observations])
             z = model.latent_from_cls(cls, states)  # (N, D)
-        for p, z_i in zip(pilots, z):
-            p.dynamics.push(z_i, p._previous)
+        for p, z_i, o in zip(pilots, z, observations):
+            p.dynamics.push(z_i, p._previous, o)
         if isinstance(lead.depth, PredictedDepth) and lead.depth.model is model:
             patches = tokens
     else:

@@ -26,7 +26,7 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # How the planner expects the obstacles to move over a plan's horizon: "static", "tracker" and
 # "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
-BODIES = ("true", "nominal")  # the body a rigid-body oracle plans a dynamic-tier episode with
+BODIES = ("true", "nominal", "fitted")  # the body a rigid-body pilot plans a dynamic-tier episode with
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,11 @@ class PlannerConfig:
             episode's (its mass, inertia, centre of mass and thruster fault, and the CW terms:
             ``plan.true_body``), or "nominal", the fault-free design body with the CW terms
             (``oracle-nominal``: what ignoring the fault costs). The static tier has one body.
+            "fitted": the thrust response fitted to the pilot's own last ``fit_frames`` frames
+            (``plan.fitted_body``). It reads no record, so the planner may fly it too: the world
+            model then sees (depth head, imagined depth) and the fitted body gives the states.
+        fit_frames: frames of history the fitted body is fitted to (``body="fitted"``).
+        fit_ridge: how hard the fitted body is pulled towards the design's (``body="fitted"``).
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -99,6 +104,8 @@ class PlannerConfig:
     obstacle_motion: str = "static"
     tracker: TrackerConfig = field(default_factory=TrackerConfig)
     body: str = "true"
+    fit_frames: int = 40
+    fit_ridge: float = 1e-5
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -124,7 +131,14 @@ class PlannerConfig:
                 "true or frozen (oracles handed the scenario)"
             )
         if self.body not in BODIES:
-            raise ValueError(f"body={self.body!r}: use true (the episode's body and fault) or nominal (the design's)")
+            raise ValueError(
+                f"body={self.body!r}: use true (the episode's body and fault), nominal (the design's) or fitted "
+                "(fitted to the pilot's own history)"
+            )
+        if self.fit_frames < 1 or self.fit_ridge <= 0:
+            raise ValueError(
+                f"fit_frames={self.fit_frames} and fit_ridge={self.fit_ridge}: give at least 1 frame and a positive ridge"
+            )
         if self.reach < self.cost.margin + self.cost.hull_radius:
             raise ValueError(
                 f"reach={self.reach} m is shorter than the collision ramp "
@@ -135,8 +149,8 @@ class PlannerConfig:
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
     own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
-    flies and ``body`` when "true" (the default), so that the flights of the defaults all record
-    the same settings."""
+    flies, ``body`` when "true" (the default) and the fit's knobs when no body is fitted, so that
+    the flights of the defaults all record the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
         del out["probe"]
@@ -146,6 +160,8 @@ def recorded(config: PlannerConfig) -> dict:
         del out["tracker"]
     if config.body == "true":
         del out["body"]
+    if config.body != "fitted":
+        del out["fit_frames"], out["fit_ridge"]
     return out
 
 

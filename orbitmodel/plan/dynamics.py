@@ -104,6 +104,13 @@ class RigidBodyDynamics:
             states = lead._rollout(start, joined(actions))  # (N K, H, 16)
         return list(states.split([len(a) for a in actions]))
 
+    def _accelerations(self, actions, scale, mass, inertia) -> tuple[torch.Tensor, torch.Tensor]:
+        """Body-frame acceleration and angular acceleration (K, H, 3) each of the thrusts
+        ``actions`` (K, H, 8) scaled by what the tank gives (``scale`` (K, H)), with the mass and
+        inertia (K, H) of each step: the thruster geometry's wrench."""
+        wrench = (actions * scale[..., None]) @ self.W.T  # (K, H, 6)
+        return wrench[..., :3] / mass[..., None], wrench[..., 3:] / inertia[..., None]
+
     def _rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         # Everything but the attitude chain is a cumulative sum, so it runs as a few batched
         # ops over the whole horizon; only R <- R exp(w h) is a loop (one bmm per substep).
@@ -117,9 +124,9 @@ class RigidBodyDynamics:
         fuel = (s0[:, FUEL] * self.cubesat.fuel_mass - (torch.cumsum(burn, 1) - burn)).clamp(min=0.0)  # (K, H) kg
         scale = (fuel / burn.clamp(min=1e-12)).clamp(max=1.0)  # (K, H)
         mass, inertia = self.cubesat.mass_properties(fuel)  # (K, H) each, held over the step
-        wrench = (actions * scale[..., None]) @ self.W.T  # (K, H, 6) body frame
-        accel = (wrench[..., :3] / mass[..., None]).repeat_interleave(n, 1)  # (K, H n, 3) m/s^2, body
-        alpha = (wrench[..., 3:] / inertia[..., None]).repeat_interleave(n, 1)  # (K, H n, 3) rad/s^2, body
+        accel, alpha = self._accelerations(actions, scale, mass, inertia)  # (K, H, 3) each, body frame
+        accel = accel.repeat_interleave(n, 1)  # (K, H n, 3) m/s^2
+        alpha = alpha.repeat_interleave(n, 1)  # (K, H n, 3) rad/s^2
         w = s0[:, None, W] + torch.cumsum(alpha * h, 1)  # (K, H n, 3) after each substep
         # The simulator's fine steps inside one of ours turn by sum_i w_i h/f = (w - c alpha h) h
         # and move by (v - c a h) h, with c = (f - 1) / 2f: the same scheme, summed exactly.
@@ -205,10 +212,11 @@ class LearnedDynamics:
             cls, _ = self.frames(obs["image"])  # (1, width)
             state = torch.as_tensor(obs["state"], dtype=torch.float32)[None]  # (1, 16)
             z = self.model.latent_from_cls(cls, state)[0]  # (D,)
-        self.push(z, previous_action)
+        self.push(z, previous_action, obs)
 
-    def push(self, z: torch.Tensor, previous_action: np.ndarray | None) -> None:
-        """Take the new frame's latent z (D,), encoded already (``plan.batch`` encodes N frames at once)."""
+    def push(self, z: torch.Tensor, previous_action: np.ndarray | None, obs: dict | None = None) -> None:
+        """Take the new frame's latent z (D,), encoded already (``plan.batch`` encodes N frames at
+        once); ``obs``, the frame's observation, is for subclasses that also read the state."""
         if previous_action is not None and len(self._z):
             self._actions.append(torch.as_tensor(previous_action, dtype=torch.float32))
         elif len(self._z):  # a gap in the action record: the old context no longer leads here

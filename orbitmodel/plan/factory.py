@@ -16,6 +16,7 @@ from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import PlannerConfig, planner_config
 from orbitmodel.plan.depth_refit import refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
+from orbitmodel.plan.fitted_body import FittedBodyDynamics, FittedBodyLearnedDynamics
 from orbitmodel.plan.frames import FrameEncoder, PredictedDepth
 from orbitmodel.plan.imagined_fit import load_imagined_depth
 from orbitmodel.plan.obstacles import Camera
@@ -100,14 +101,24 @@ def build_pilot(
         if config.compile:
             model.compile_rollout()
         probe = load_planner_probe(run, model.fingerprint, config.probe)
-        dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)
+        if config.body == "fitted":  # the world model sees; the fitted body gives the states
+            body = FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
+            imagine = config.obstacle_motion == "imagined"
+            dynamics = FittedBodyLearnedDynamics(
+                model, probe, body, imagine, timings=timings, history=config.history or None, frames=frames
+            )
+        else:
+            dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)
     else:
         if config.probe:
             raise ValueError(
                 f"probe={config.probe}: pilot {variant.value} plans with the rigid-body model, which reads no probe; "
                 "drop the probe setting or fly a pilot that plans with the world model"
             )
-        dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
+        if config.body == "fitted":
+            dynamics = FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
+        else:
+            dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
     depth = {
         "depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head), frames),
         "sensor": lambda: sensor_depth,

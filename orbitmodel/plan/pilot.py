@@ -119,10 +119,15 @@ class PlannerPilot(Pilot):
             raise ValueError(
                 f"obstacle_motion={config.obstacle_motion}: pilot {variant.value} takes {', '.join(motions)}"
             )
-        if config.body != "true" and not (variant.privileged and not variant.learned_dynamics):
+        if config.body == "nominal" and not (variant.privileged and not variant.learned_dynamics):
             raise ValueError(
                 f"body={config.body}: only the rigid-body oracles handed the scenario plan with a chosen body "
                 "(oracle-true); drop the body setting"
+            )
+        if config.body == "fitted" and variant == Variant.ORACLE_LEARNED_DYN:
+            raise ValueError(
+                "body=fitted: oracle-learned-dyn plans with the learned dynamics; the true obstacles with the "
+                "fitted body are oracle-true with body=fitted"
             )
         self.variant, self.config, self.sim = variant, config, sim
         self.name = variant.value
@@ -286,7 +291,8 @@ class PlannerPilot(Pilot):
 class OraclePilot(PlannerPilot):
     """A planning pilot handed the true obstacles (privileged): the oracles of the grid. One that
     plans with the rigid body plans a dynamic-tier episode with that episode's body, fault and CW
-    terms (``plan.true_body``; ``body="nominal"``: the design's body, no fault)."""
+    terms (``plan.true_body``; ``body="nominal"``: the design's body, no fault; ``body="fitted"``: the
+    body fitted to its own history, ``plan.fitted_body``, which reads no record)."""
 
     privileged = True
 
@@ -305,7 +311,7 @@ class OraclePilot(PlannerPilot):
                 "(their exact motion) or obstacle_motion=frozen (held where they are at each replan)"
             )
         self._true = TrueObstacles(scenario, "true" if motion == "static" else motion)
-        if not self.variant.learned_dynamics:  # the rigid body: the episode's own on the dynamic tier
+        if not self.variant.learned_dynamics and self.config.body != "fitted":  # the episode's own body
             if scenario.dynamics is None:
                 self.dynamics = self._rigid
             else:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shutil
+
 import pytest
 
 
@@ -19,3 +21,16 @@ def tiny_run(tiny_dataset_master, tmp_path_factory):
         )
     )
     return out
+
+
+@pytest.fixture(scope="session")
+def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
+    """A copy of the tiny run with a real physics probe in RUN/probe (two tiny epochs): what the
+    planner loads. Shared: flights read it, none writes to it."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.probe.train import ProbeRequest, train_probe
+
+    run = tmp_path_factory.mktemp("probed") / "tiny"
+    shutil.copytree(tiny_run, run)
+    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
+    return run

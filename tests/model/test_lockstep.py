@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
 
 import numpy as np
 import pytest
@@ -29,18 +28,6 @@ torch.set_num_threads(1)
 runner = CliRunner()
 GRID = dict(obstacles=(1, 3), speeds=(1.0, 2.0), episodes=2, seed=7)
 SMALL = planner_config("cpu", samples=8, horizon=5)
-
-
-@pytest.fixture(scope="module")
-def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
-    """A copy of the tiny run with a real physics probe (two tiny epochs)."""
-    from orbitmodel.config import get_preset
-    from orbitmodel.probe.train import ProbeRequest, train_probe
-
-    run = tmp_path_factory.mktemp("probed") / "tiny"
-    shutil.copytree(tiny_run, run)
-    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
-    return run
 
 
 @pytest.fixture(scope="module")

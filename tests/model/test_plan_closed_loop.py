@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 
 import pytest
 import torch
@@ -25,18 +24,6 @@ from orbitmodel.plan.pilot import Variant
 
 torch.set_num_threads(1)
 runner = CliRunner()
-
-
-@pytest.fixture(scope="module")
-def probed_run(tiny_run, tiny_dataset_master, tmp_path_factory):
-    """A copy of the tiny run with a real physics probe in RUN/probe (two tiny epochs)."""
-    from orbitmodel.config import get_preset
-    from orbitmodel.probe.train import ProbeRequest, train_probe
-
-    run = tmp_path_factory.mktemp("probed") / "tiny"
-    shutil.copytree(tiny_run, run)
-    train_probe(ProbeRequest(run=run, dataset=str(tiny_dataset_master), recipe=get_preset("tiny").probe, device="cpu"))
-    return run
 
 
 @pytest.mark.parametrize("episodes", [3000, 8000])  # the 64 px dataset of this repo, and the README's

@@ -1,0 +1,175 @@
+"""A body inferred from the pilot's own history: the thrust response fitted to the frames it flew.
+
+On the dynamic tier each episode's body is drawn (mass, inertia, centre of mass) and one thruster
+may fail (``docs/design.md``). A pilot may not read that record; it reads its state and knows the
+thrusts it commanded. Over one frame the body's response is linear in the thrusts:
+
+    u_k  = R_k^T (R_{k+1} v_{k+1} - R_k v_k)   the change of velocity, in the body frame at k
+    dw_k = w_{k+1} - w_k                        the change of body rate
+    [u_k, dw_k] = [a_k, 1] @ B                 B (9, 6): per thruster, and a constant
+
+(a stuck thruster is the constant, an off or weak one a smaller row, the centre of mass and
+inertia the torque rows; the gyroscopic torque of the drawn inertia is left out). ``B`` is fitted
+by ridge regression to the last ``frames`` observed frames, pulled towards the design's nominal
+body with weight ``ridge``, so before any history, and along thrust patterns the history never
+excited, the pilot plans with the nominal body. :class:`FittedBodyDynamics` rolls candidates out
+with the simulator's integrator (``RigidBodyDynamics``) and the fitted response.
+"""
+
+from __future__ import annotations
+
+import copy
+from collections import deque
+
+import numpy as np
+import torch
+
+from orbitdata.sim.config import SimConfig
+from orbitmodel.kinematics import FUEL, ROT, V, W, rot6d_to_matrix
+from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, joined
+from orbitmodel.plan.timing import Timings
+
+
+def nominal_response(sim: SimConfig, fuel_ratio: float) -> torch.Tensor:
+    """B (9, 6) of the design's body with ``fuel_ratio`` of its propellant: per unit thrust of each
+    thruster the change of body-frame velocity (m/s) and body rate (rad/s) over one frame, and no constant."""
+    cubesat = sim.cubesat
+    mass, inertia = cubesat.mass_properties(fuel_ratio * cubesat.fuel_mass)
+    wrench = RigidBodyDynamics(sim).W  # (6, 8)
+    per_frame = torch.cat([wrench[:3] / mass, wrench[3:] / inertia]) * float(sim.dt)  # (6, 8)
+    return torch.cat([per_frame.T, torch.zeros(1, 6)])  # (9, 6)
+
+
+def frame_changes(states: torch.Tensor) -> torch.Tensor:
+    """states (n+1, 16) of consecutive frames -> (n, 6): each frame's [u_k, dw_k] (module docstring)."""
+    R = rot6d_to_matrix(states[:, ROT])  # (n+1, 3, 3) body -> world
+    v_world = (R @ states[:, V, None]).squeeze(-1)  # (n+1, 3)
+    u = (R[:-1].transpose(-1, -2) @ (v_world[1:] - v_world[:-1])[..., None]).squeeze(-1)  # (n, 3)
+    return torch.cat([u, states[1:, W] - states[:-1, W]], -1)
+
+
+def fit_response(states: torch.Tensor, actions: torch.Tensor, prior: torch.Tensor, ridge: float) -> torch.Tensor:
+    """B (9, 6) fitted to states (n+1, 16) and the n actions (n, 8) between them, pulled towards
+    ``prior`` (9, 6) with weight ``ridge`` on every entry (n = 0: the prior)."""
+    if len(actions) == 0:
+        return prior.clone()
+    X = torch.cat([actions, actions.new_ones(len(actions), 1)], -1).double()  # (n, 9)
+    Y = frame_changes(states.double())  # (n, 6)
+    gram = X.T @ X + ridge * torch.eye(X.shape[1], dtype=X.dtype)
+    return torch.linalg.solve(gram, X.T @ Y + ridge * prior.double()).float()
+
+
+class FittedBodyDynamics(RigidBodyDynamics):
+    """The rigid-body rollout with each episode's thrust response fitted to its last ``frames``
+    observed frames (:func:`fit_response`). Each episode has its own :meth:`fork`."""
+
+    def __init__(
+        self,
+        sim: SimConfig = SimConfig(),
+        substeps: int = 1,
+        timings: Timings | None = None,
+        frames: int = 40,
+        ridge: float = 1e-3,
+    ):
+        super().__init__(sim, substeps, timings)
+        if frames < 1 or ridge <= 0:
+            raise ValueError(f"fit_frames={frames} and fit_ridge={ridge}: give at least 1 frame and a positive ridge")
+        self.sim, self.frames, self.ridge = sim, int(frames), float(ridge)
+        self.reset()
+
+    def reset(self) -> None:
+        self._states: deque[torch.Tensor] = deque(maxlen=self.frames + 1)
+        self._actions: deque[torch.Tensor] = deque(maxlen=self.frames)
+
+    def fork(self) -> "FittedBodyDynamics":
+        twin = copy.copy(self)
+        twin.reset()
+        return twin
+
+    def observe(self, obs: dict, previous_action: np.ndarray | None) -> None:
+        """One more frame; ``previous_action`` led to it from the last observed one (None: a gap,
+        after which the history starts again)."""
+        if previous_action is not None and self._states:
+            self._actions.append(torch.as_tensor(previous_action, dtype=torch.float32))
+        elif self._states:
+            self.reset()
+        self._states.append(torch.as_tensor(obs["state"], dtype=torch.float32))
+
+    def response(self) -> torch.Tensor:
+        """B (9, 6) fitted to the history (the nominal body's before any frame)."""
+        if not self._states:
+            raise RuntimeError("observe() a frame before rollout()")
+        states = torch.stack(list(self._states))
+        prior = nominal_response(self.sim, float(states[-1, FUEL]))
+        taken = len(self._actions)
+        return fit_response(
+            states[len(states) - 1 - taken :],
+            torch.stack(list(self._actions)) if taken else states.new_zeros(0, 8),
+            prior,
+            self.ridge,
+        )
+
+    @torch.inference_mode()
+    def rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        return self.rollout_many([self], [state0], [actions])[0]
+
+    @staticmethod
+    @torch.inference_mode()
+    def rollout_many(
+        members: list["FittedBodyDynamics"], state0s: list[torch.Tensor], actions: list[torch.Tensor]
+    ) -> list[torch.Tensor]:
+        """Every episode's candidates through its own fitted response, in one pass."""
+        lead = members[0]
+        with lead.timings("rollout"):
+            maps = joined([m.response()[None].expand(len(a), -1, -1) for m, a in zip(members, actions)])  # (N K, 9, 6)
+            start = joined([s.float().expand(len(a), -1) for s, a in zip(state0s, actions)])  # (N K, 16)
+            lead._maps = maps
+            try:
+                states = lead._rollout(start, joined(actions))
+            finally:
+                del lead._maps
+        return list(states.split([len(a) for a in actions]))
+
+    def _accelerations(self, actions, scale, mass, inertia):
+        """Body-frame acceleration and angular acceleration (K, H, 3) each, from the fitted maps."""
+        given = actions * scale[..., None]
+        X = torch.cat([given, given.new_ones(*given.shape[:-1], 1)], -1)  # (K, H, 9)
+        change = X @ self._maps  # (K, H, 6) per frame
+        return change[..., :3] / self.dt, change[..., 3:] / self.dt
+
+
+class FittedBodyLearnedDynamics(LearnedDynamics):
+    """The world-model planner with the fitted body's states: the world model encodes each frame
+    (its depth head reads them) and, when ``imagine`` (``obstacle_motion="imagined"``), rolls each
+    candidate's latents out for the imagined depth; the states the cost reads come from
+    :class:`FittedBodyDynamics`, not from the probe. Without ``imagine`` no latent is rolled out."""
+
+    def __init__(self, model, probe, body: FittedBodyDynamics, imagine: bool, **kwargs):
+        self.body, self.imagine = body, bool(imagine)
+        super().__init__(model, probe, **kwargs)
+
+    def reset(self) -> None:
+        super().reset()
+        self.body.reset()
+
+    def fork(self) -> "FittedBodyLearnedDynamics":
+        twin = copy.copy(self)
+        twin.body = self.body.fork()  # before the reset, which would otherwise clear this one's history
+        twin.reset()
+        return twin
+
+    def push(self, z: torch.Tensor, previous_action: np.ndarray | None, obs: dict | None = None) -> None:
+        if obs is None:
+            raise ValueError("the fitted body reads each frame's state: push(z, previous_action, obs)")
+        super().push(z, previous_action, obs)
+        self.body.observe(obs, previous_action)
+
+    @staticmethod
+    @torch.inference_mode()
+    def rollout_many(
+        members: list["FittedBodyLearnedDynamics"], state0s: list[torch.Tensor], actions: list[torch.Tensor]
+    ) -> list[torch.Tensor]:
+        """The fitted body's states; the world model's imagined latents beside them when ``imagine``."""
+        if members[0].imagine:
+            LearnedDynamics.rollout_many(members, state0s, actions)  # sets each member's imagined_latents
+        return FittedBodyDynamics.rollout_many([m.body for m in members], state0s, actions)
