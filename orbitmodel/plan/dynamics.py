@@ -104,14 +104,15 @@ class RigidBodyDynamics:
             states = lead._rollout(start, joined(actions))  # (N K, H, 16)
         return list(states.split([len(a) for a in actions]))
 
-    def _accelerations(self, actions, scale, mass, inertia) -> tuple[torch.Tensor, torch.Tensor]:
+    def _accelerations(self, actions, scale, mass, inertia, response=None) -> tuple[torch.Tensor, torch.Tensor]:
         """Body-frame acceleration and angular acceleration (K, H, 3) each of the thrusts
         ``actions`` (K, H, 8) scaled by what the tank gives (``scale`` (K, H)), with the mass and
-        inertia (K, H) of each step: the thruster geometry's wrench."""
+        inertia (K, H) of each step: the thruster geometry's wrench. (``response``: a subclass's
+        own thrust response per candidate, ``plan.fitted_body``.)"""
         wrench = (actions * scale[..., None]) @ self.W.T  # (K, H, 6)
         return wrench[..., :3] / mass[..., None], wrench[..., 3:] / inertia[..., None]
 
-    def _rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+    def _rollout(self, state0: torch.Tensor, actions: torch.Tensor, response=None) -> torch.Tensor:
         # Everything but the attitude chain is a cumulative sum, so it runs as a few batched
         # ops over the whole horizon; only R <- R exp(w h) is a loop (one bmm per substep).
         K, H, _ = actions.shape
@@ -124,7 +125,7 @@ class RigidBodyDynamics:
         fuel = (s0[:, FUEL] * self.cubesat.fuel_mass - (torch.cumsum(burn, 1) - burn)).clamp(min=0.0)  # (K, H) kg
         scale = (fuel / burn.clamp(min=1e-12)).clamp(max=1.0)  # (K, H)
         mass, inertia = self.cubesat.mass_properties(fuel)  # (K, H) each, held over the step
-        accel, alpha = self._accelerations(actions, scale, mass, inertia)  # (K, H, 3) each, body frame
+        accel, alpha = self._accelerations(actions, scale, mass, inertia, response)  # (K, H, 3) each, body frame
         accel = accel.repeat_interleave(n, 1)  # (K, H n, 3) m/s^2
         alpha = alpha.repeat_interleave(n, 1)  # (K, H n, 3) rad/s^2
         w = s0[:, None, W] + torch.cumsum(alpha * h, 1)  # (K, H n, 3) after each substep

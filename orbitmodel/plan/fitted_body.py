@@ -69,7 +69,7 @@ class FittedBodyDynamics(RigidBodyDynamics):
         substeps: int = 1,
         timings: Timings | None = None,
         frames: int = 40,
-        ridge: float = 1e-3,
+        ridge: float = 1e-5,
     ):
         super().__init__(sim, substeps, timings)
         if frames < 1 or ridge <= 0:
@@ -123,18 +123,15 @@ class FittedBodyDynamics(RigidBodyDynamics):
         with lead.timings("rollout"):
             maps = joined([m.response()[None].expand(len(a), -1, -1) for m, a in zip(members, actions)])  # (N K, 9, 6)
             start = joined([s.float().expand(len(a), -1) for s, a in zip(state0s, actions)])  # (N K, 16)
-            lead._maps = maps
-            try:
-                states = lead._rollout(start, joined(actions))
-            finally:
-                del lead._maps
+            states = lead._rollout(start, joined(actions), maps)
         return list(states.split([len(a) for a in actions]))
 
-    def _accelerations(self, actions, scale, mass, inertia):
-        """Body-frame acceleration and angular acceleration (K, H, 3) each, from the fitted maps."""
+    def _accelerations(self, actions, scale, mass, inertia, response):
+        """Body-frame acceleration and angular acceleration (K, H, 3) each, from each candidate's
+        fitted response (K, 9, 6)."""
         given = actions * scale[..., None]
         X = torch.cat([given, given.new_ones(*given.shape[:-1], 1)], -1)  # (K, H, 9)
-        change = X @ self._maps  # (K, H, 6) per frame
+        change = X @ response  # (K, H, 6) per frame
         return change[..., :3] / self.dt, change[..., 3:] / self.dt
 
 
