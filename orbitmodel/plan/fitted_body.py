@@ -30,12 +30,13 @@ from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics, joined
 from orbitmodel.plan.timing import Timings
 
 
-def nominal_response(sim: SimConfig, fuel_ratio: float) -> torch.Tensor:
+def nominal_response(sim: SimConfig, fuel_ratio: float, wrench: torch.Tensor | None = None) -> torch.Tensor:
     """B (9, 6) of the design's body with ``fuel_ratio`` of its propellant: per unit thrust of each
-    thruster the change of body-frame velocity (m/s) and body rate (rad/s) over one frame, and no constant."""
+    thruster the change of body-frame velocity (m/s) and body rate (rad/s) over one frame, and no
+    constant. ``wrench``: the thrusters' (6, 8) wrench matrix, when the caller holds it already."""
     cubesat = sim.cubesat
     mass, inertia = cubesat.mass_properties(fuel_ratio * cubesat.fuel_mass)
-    wrench = RigidBodyDynamics(sim).W  # (6, 8)
+    wrench = RigidBodyDynamics(sim).W if wrench is None else wrench  # (6, 8)
     per_frame = torch.cat([wrench[:3] / mass, wrench[3:] / inertia]) * float(sim.dt)  # (6, 8)
     return torch.cat([per_frame.T, torch.zeros(1, 6)])  # (9, 6)
 
@@ -100,7 +101,7 @@ class FittedBodyDynamics(RigidBodyDynamics):
         if not self._states:
             raise RuntimeError("observe() a frame before rollout()")
         states = torch.stack(list(self._states))
-        prior = nominal_response(self.sim, float(states[-1, FUEL]))
+        prior = nominal_response(self.sim, float(states[-1, FUEL]), self.W)
         taken = len(self._actions)
         return fit_response(
             states[len(states) - 1 - taken :],
