@@ -90,7 +90,7 @@ class RigidBodyDynamics:
     def rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
         """state0 (16,) or (K, 16), actions (K, H, 8) thrust in [0,1] -> states (K, H, 16)."""
         with self.timings("rollout"):
-            return self._rollout(state0, actions)
+            return self._rollout(state0, actions, self.responses([self], [len(actions)]))
 
     @staticmethod
     @torch.inference_mode()
@@ -100,15 +100,21 @@ class RigidBodyDynamics:
         """Every episode's candidates in one call: state0s N x (16,), actions N x (K, H, 8) -> N x (K, H, 16)."""
         lead = members[0]
         with lead.timings("rollout"):
-            start = joined([s.float().expand(len(a), -1) for s, a in zip(state0s, actions)])  # (N K, 16)
-            states = lead._rollout(start, joined(actions))  # (N K, H, 16)
-        return list(states.split([len(a) for a in actions]))
+            sizes = [len(a) for a in actions]
+            start = joined([s.float().expand(k, -1) for s, k in zip(state0s, sizes)])  # (N K, 16)
+            states = lead._rollout(start, joined(actions), lead.responses(members, sizes))  # (N K, H, 16)
+        return list(states.split(sizes))
+
+    def responses(self, members: list["RigidBodyDynamics"], sizes: list[int]) -> torch.Tensor | None:
+        """Each candidate's thrust response, for ``sizes[i]`` candidates of ``members[i]``: None,
+        the thruster geometry's wrench for all (a subclass fitting its own: ``plan.fitted_body``)."""
+        return None
 
     def _accelerations(self, actions, scale, mass, inertia, response=None) -> tuple[torch.Tensor, torch.Tensor]:
         """Body-frame acceleration and angular acceleration (K, H, 3) each of the thrusts
         ``actions`` (K, H, 8) scaled by what the tank gives (``scale`` (K, H)), with the mass and
-        inertia (K, H) of each step: the thruster geometry's wrench. (``response``: a subclass's
-        own thrust response per candidate, ``plan.fitted_body``.)"""
+        inertia (K, H) of each step: the thruster geometry's wrench. (``response``: what
+        :meth:`responses` gave, which this class ignores.)"""
         wrench = (actions * scale[..., None]) @ self.W.T  # (K, H, 6)
         return wrench[..., :3] / mass[..., None], wrench[..., 3:] / inertia[..., None]
 

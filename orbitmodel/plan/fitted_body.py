@@ -110,22 +110,9 @@ class FittedBodyDynamics(RigidBodyDynamics):
             self.ridge,
         )
 
-    @torch.inference_mode()
-    def rollout(self, state0: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
-        return self.rollout_many([self], [state0], [actions])[0]
-
-    @staticmethod
-    @torch.inference_mode()
-    def rollout_many(
-        members: list["FittedBodyDynamics"], state0s: list[torch.Tensor], actions: list[torch.Tensor]
-    ) -> list[torch.Tensor]:
-        """Every episode's candidates through its own fitted response, in one pass."""
-        lead = members[0]
-        with lead.timings("rollout"):
-            maps = joined([m.response()[None].expand(len(a), -1, -1) for m, a in zip(members, actions)])  # (N K, 9, 6)
-            start = joined([s.float().expand(len(a), -1) for s, a in zip(state0s, actions)])  # (N K, 16)
-            states = lead._rollout(start, joined(actions), maps)
-        return list(states.split([len(a) for a in actions]))
+    def responses(self, members: list["FittedBodyDynamics"], sizes: list[int]) -> torch.Tensor:
+        """(sum(sizes), 9, 6): each member's fitted response, for each of its candidates."""
+        return joined([m.response()[None].expand(k, -1, -1) for m, k in zip(members, sizes)])
 
     def _accelerations(self, actions, scale, mass, inertia, response):
         """Body-frame acceleration and angular acceleration (K, H, 3) each, from each candidate's

@@ -135,7 +135,7 @@ def test_the_planner_with_the_fitted_body_plans_with_its_states_and_keeps_the_wo
     assert isinstance(pilot.dynamics, FittedBodyLearnedDynamics) and not pilot.dynamics.imagine
     dyn = pilot.fork().dynamics
     assert dyn.body is not pilot.dynamics.body
-    image = np.zeros((tiny_run_image_size(pilot),) * 2 + (3,), np.uint8)
+    image = np.zeros((pilot.dynamics.model.config.image_size,) * 2 + (3,), np.uint8)
     for j in range(FIT + 1):
         dyn.observe({"image": image, "state": truth[j]}, actions[j - 1] if j else None)
     assert len(dyn._z) and len(dyn.body._actions) == FIT
@@ -153,7 +153,3 @@ def test_the_planner_with_the_fitted_body_plans_with_its_states_and_keeps_the_wo
     assert tuple(imagining.imagined_latents.shape) == (1, steps, dyn.model.config.latent_dim)
     with pytest.raises(ValueError, match="oracle-learned-dyn"):
         build_pilot("oracle-learned-dyn", probed_run, planner_config("cpu", body="fitted", obstacle_motion="true"))
-
-
-def tiny_run_image_size(pilot) -> int:
-    return int(pilot.dynamics.model.config.image_size)
