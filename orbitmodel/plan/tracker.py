@@ -6,8 +6,9 @@ a surface's neighbouring cells touch, so one surface is one component at any ran
 continues the track whose points, carried along the track's velocity to this frame's time, come
 nearest to it, their spheres within ``gate`` metres (nearest pairs first, one cluster per
 track); a cluster that continues none starts a track. A track's velocity is the least-squares
-slope of its clusters' centroids against time over its last ``window`` frames, capped at
-``speed_cap``, and zero until ``min_frames`` of those frames fed the fit.
+slope of its clusters' centroids against time over its last ``window`` frames, shrunk towards
+zero by the slope's standard error (``confidence``), capped at ``speed_cap``, and zero until
+``min_frames`` of those frames fed the fit.
 
 A depth map sees only the near face of an object, so the centroid of what is seen moves when the
 view changes, and most when the image's border cuts the object: a cluster with a point on the
@@ -31,7 +32,8 @@ from orbitmodel.plan.obstacles import PointCloud
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    """The tracker's knobs (to be chosen on validation seeds; these defaults are a reasoned start).
+    """The tracker's knobs: ``point_frames``, ``link`` and ``confidence`` chosen on the dynamic tier's
+    validation episodes (``benchmarks/check_tracker.py``, docs/results.md), the others a reasoned start.
 
     Args:
         window: frames of a track whose centroids the velocity is fitted to (25 = 1 s: the 16x16
@@ -47,15 +49,19 @@ class TrackerConfig:
             (fewer: velocity zero, the tracker does not invent motion from a glimpse).
         speed_cap: m/s, the fastest a track may move (the dynamic tier draws debris up to 1 m/s).
         forget: frames a track is kept, carried along its velocity, after it was last seen.
+        confidence: the fitted slope v is shrunk to ``v max(0, 1 - confidence^2 se^2 / |v|^2)``,
+            se^2 the variance of the slope's estimate from the fit's residuals (0: no shrinkage;
+            a coarse map's centroids wander, and a slope no larger than its noise is dropped).
     """
 
     window: int = 25
-    point_frames: int = 10
-    link: float = 0.5
+    point_frames: int = 25
+    link: float = 0.25
     gate: float = 0.5
     min_frames: int = 8
     speed_cap: float = 1.5
     forget: int = 50
+    confidence: float = 3.0
 
     def __post_init__(self):
         if not 2 <= self.min_frames <= self.window or not 1 <= self.point_frames <= self.window:
@@ -63,10 +69,10 @@ class TrackerConfig:
                 f"min_frames={self.min_frames} must be in 2..window={self.window} and "
                 f"point_frames={self.point_frames} in 1..window"
             )
-        if self.link < 0 or self.gate <= 0 or self.speed_cap < 0 or self.forget < 1:
+        if self.link < 0 or self.gate <= 0 or self.speed_cap < 0 or self.forget < 1 or self.confidence < 0:
             raise ValueError(
-                f"link={self.link} must be >= 0, gate={self.gate} > 0, speed_cap={self.speed_cap} >= 0 "
-                f"and forget={self.forget} >= 1"
+                f"link={self.link} must be >= 0, gate={self.gate} > 0, speed_cap={self.speed_cap} >= 0, "
+                f"forget={self.forget} >= 1 and confidence={self.confidence} >= 0"
             )
 
 
@@ -81,11 +87,19 @@ def clusters(points: np.ndarray, radii: np.ndarray, link: float) -> np.ndarray:
     return connected_components(gap <= link, directed=False)[1]
 
 
-def fit_velocity(times: np.ndarray, centroids: np.ndarray) -> np.ndarray:
-    """(3,) m/s: the least-squares slope of ``centroids`` (F, 3) metres against ``times`` (F,) s."""
+def fit_velocity(times: np.ndarray, centroids: np.ndarray, confidence: float = 0.0) -> np.ndarray:
+    """(3,) m/s: the least-squares slope of ``centroids`` (F, 3) metres against ``times`` (F,) s,
+    shrunk towards zero by ``confidence`` standard errors (:class:`TrackerConfig`)."""
     dt = times - times.mean()
     spread = (dt**2).sum()
-    return (dt[:, None] * (centroids - centroids.mean(0))).sum(0) / spread if spread > 0 else np.zeros(3)
+    if spread <= 0:
+        return np.zeros(3)
+    slope = (dt[:, None] * (centroids - centroids.mean(0))).sum(0) / spread
+    if confidence > 0:
+        residual = centroids - centroids.mean(0) - dt[:, None] * slope  # (F, 3)
+        variance = (residual**2).sum() / max(len(times) - 2, 1) / spread  # of the slope, summed over axes
+        slope = slope * max(0.0, 1.0 - confidence**2 * variance / max(float(slope @ slope), 1e-12))
+    return slope
 
 
 @dataclass
@@ -122,7 +136,7 @@ class Track:
         if len(fed) < config.min_frames:
             self.velocity = np.zeros(3)
             return
-        v = fit_velocity(np.array([f.time for f in fed]), np.stack([f.centroid for f in fed]))
+        v = fit_velocity(np.array([f.time for f in fed]), np.stack([f.centroid for f in fed]), config.confidence)
         speed = float(np.linalg.norm(v))
         self.velocity = v * (config.speed_cap / speed) if speed > config.speed_cap else v
 

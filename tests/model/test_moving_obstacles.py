@@ -30,7 +30,7 @@ from orbitmodel.plan.factory import sensor_depth
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera, PointCloud, TrueObstacles, border_points, depth_to_points, signed_distance
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
-from orbitmodel.plan.tracker import MovingCloud, Tracker, TrackerConfig
+from orbitmodel.plan.tracker import MovingCloud, Tracker, TrackerConfig, fit_velocity
 
 torch.set_num_threads(1)
 CAMERA = Camera.from_sim(SimConfig())
@@ -129,6 +129,31 @@ def test_a_track_seen_in_fewer_than_min_frames_stands_still_and_the_speed_is_cap
     assert np.linalg.norm(capped.tracks[0].velocity) == pytest.approx(0.3)
 
 
+def test_confidence_drops_a_slope_no_larger_than_its_noise_and_keeps_a_clear_one():
+    rng = np.random.default_rng(0)
+    times = np.arange(25) * DT
+    wander = rng.normal(0.0, 1.0, (25, 3))
+    still = np.array([3.0, 0.0, 0.0]) + 0.15 * wander  # a coarse map's centroid, 0.15 m each axis
+    moving = np.array([3.0, 0.0, 0.0]) + 0.05 * wander + np.outer(times, [0.0, 0.8, 0.0])
+    # Unshrunk, a still object's wandering centroid gets a speed of its own; three standard
+    # errors of the fit drop it, and the exact shrinkage is v (1 - 9 se^2 / |v|^2).
+    raw = fit_velocity(times, still)
+    assert np.linalg.norm(raw) > 0.1
+    assert fit_velocity(times, still, confidence=3.0).tolist() == [0.0, 0.0, 0.0]
+    dt = times - times.mean()
+    se2 = ((still - still.mean(0) - dt[:, None] * raw) ** 2).sum() / 23 / (dt**2).sum()
+    shrunk = fit_velocity(times, still, confidence=0.5)
+    np.testing.assert_allclose(shrunk, raw * max(0.0, 1 - 0.25 * se2 / (raw @ raw)), rtol=1e-12)
+    # A slope well above its noise (0.05 m) loses only a sliver and keeps its direction.
+    kept = fit_velocity(times, moving, confidence=3.0)
+    assert np.linalg.norm(kept - [0.0, 0.8, 0.0]) < 0.1
+    assert (
+        kept @ fit_velocity(times, moving) / np.linalg.norm(kept) / np.linalg.norm(fit_velocity(times, moving)) > 0.999
+    )
+    with pytest.raises(ValueError, match="confidence"):
+        TrackerConfig(confidence=-1.0)
+
+
 def test_a_track_out_of_view_is_carried_along_then_forgotten():
     tracker = Tracker(TrackerConfig(forget=5))
     watch(tracker, [(np.array([2.6, -0.3, 0.0]), np.array([0.0, 0.6, 0.0]), 0.6)], 30)
@@ -170,7 +195,7 @@ def moving_scenario(centre, velocity) -> Scenario:
 
 def field_for(motion: str, centre, velocity):
     if motion == "tracker":
-        tracker = Tracker()
+        tracker = Tracker(TrackerConfig(confidence=0.0))
         assert watch(tracker, [(centre, velocity, RADIUS)], NOW_FRAME + 1) == pytest.approx(NOW)
         return tracker.field(NOW, reach=1.0)
     return TrueObstacles(moving_scenario(centre, velocity), motion).now(NOW)
@@ -262,11 +287,18 @@ def test_the_static_planner_flies_the_old_call_path_to_the_bit():
 
 def test_the_tracking_planner_follows_a_rendered_moving_sphere():
     centre, velocity = (2.6, -0.9, 0.0), (0.0, 0.6, 0.0)
-    pilot = sensor_pilot(obstacle_motion="tracker")
-    actions = fly(pilot, moving_scenario(centre, velocity))
+    unshrunk = sensor_pilot(obstacle_motion="tracker", tracker=TrackerConfig(confidence=0.0))
+    actions = fly(unshrunk, moving_scenario(centre, velocity))
     assert len(actions) > 5 and np.isfinite(actions).all()
-    (track,) = pilot.tracker.tracks  # the rendered depth_low, through the pilot's own cell filter
+    (track,) = unshrunk.tracker.tracks  # the rendered depth_low, through the pilot's own cell filter
     assert np.linalg.norm(track.velocity - velocity) < 0.2, track.velocity  # the truth is 0.6 m/s
+    # The default shrinks the short track's slope towards zero by its noise: slower, same direction.
+    pilot = sensor_pilot(obstacle_motion="tracker")
+    fly(pilot, moving_scenario(centre, velocity))
+    (track,) = pilot.tracker.tracks
+    speed = np.linalg.norm(track.velocity)
+    assert 0.05 < speed <= np.linalg.norm(unshrunk.tracker.tracks[0].velocity), track.velocity
+    assert track.velocity @ velocity / speed / 0.6 > 0.9, track.velocity
 
 
 def test_the_oracles_take_true_or_frozen_and_the_planner_static_or_tracker():
