@@ -4,7 +4,8 @@
 
 On the run's validation episodes (the train-split episodes it held out), every frame's recorded
 16x16 depth (``observation.depth_low``: a perfect depth head) is fed, as the planner feeds it, to
-the tracker with each setting of its knobs (``SETTINGS``), and to the static planner's 50-frame point memory.
+the tracker with each setting of its knobs (``SETTINGS``), and to the static planner's 50-frame
+point memory.
 Every 10th frame t, each is asked for the clearance at query points k = 10, 25 and 50 frames
 ahead (0.4, 1 and 2 s): 96 points drawn uniformly in a 3 m ball around where the recorded flight
 was at t + k (the same points for every setting). The answer is set against the clearance to the
@@ -14,8 +15,10 @@ debris where they really were then (the privileged poses, read here only to scor
   surface), the share the setting calls safe;
 - false alarm: of the points at least 0.5 m beyond danger, the share the setting calls in danger.
 
-A point the camera never saw is missed by every setting alike. Prints figures and writes them
-as JSON; asserts nothing. The flights are ``--set obstacle_motion=tracker --set tracker.KNOB=...``.
+A point the camera never saw is missed by every setting alike. Beside these, each track seen at a
+scored frame has its velocity set against the true velocity of the debris nearest its points
+(mean error, m/s, and the same for a velocity of zero). Prints figures and writes them as JSON;
+asserts nothing. The flights are ``--set obstacle_motion=tracker --set KNOB=VALUE``.
 """
 
 from __future__ import annotations
@@ -96,9 +99,13 @@ def queries(episode) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
     return out
 
 
-def flown(episode, memory, plan: PlannerConfig, camera: Camera, asked) -> list[np.ndarray]:
-    """The clearance (Q,) ``memory`` (a Tracker, or a PointMemory) predicts at each of ``asked``."""
+def flown(episode, memory, plan: PlannerConfig, camera: Camera, asked) -> tuple[list[np.ndarray], list]:
+    """The clearance (Q,) ``memory`` (a Tracker, or a PointMemory) predicts at each of ``asked``,
+    and (a tracker's) [(velocity error, zero velocity's error)] m/s of its tracks seen at those frames."""
     states, maps = episode.states.astype(np.float64), depth_maps(episode)
+    poses = episode.scenario.obstacle_poses(np.arange(-1, len(episode) + 1) * S.DT)[..., :3]  # (L + 2, N, 3)
+    velocities = (poses[2:] - poses[:-2]) / (2 * S.DT)  # (L, N, 3) m/s, central differences
+    speeds = []
     by_frame: dict[int, list] = {}
     for i, (t, k, points, _) in enumerate(asked):
         by_frame.setdefault(t, []).append((i, k, points))
@@ -109,13 +116,19 @@ def flown(episode, memory, plan: PlannerConfig, camera: Camera, asked) -> list[n
         if isinstance(memory, Tracker):
             memory.add(points, radii, t * S.DT, border_points(maps[t], camera, plan.max_range, plan.support))
             field = memory.field(t * S.DT, plan.reach) if t in by_frame else None
+            for track in memory.tracks if t in by_frame else []:
+                if track.unseen == 0:
+                    seen = track.frames[-1].points  # (n, 3)
+                    nearest = np.linalg.norm(seen[:, None] - poses[t + 1][None], axis=-1).min(0).argmin()
+                    truth = velocities[t, nearest]
+                    speeds.append((float(np.linalg.norm(track.velocity - truth)), float(np.linalg.norm(truth))))
         else:
             memory.add(points, radii)
             field = memory.cloud(plan.reach) if t in by_frame else None
         for i, k, q in by_frame.get(t, []):
             times = torch.tensor([(t + k) * S.DT], dtype=torch.float64)
             out[i] = field.clearance(torch.from_numpy(q).float()[:, None], times)[:, 0].numpy()
-    return out
+    return out, speeds
 
 
 def main() -> None:
@@ -124,6 +137,7 @@ def main() -> None:
     ap.add_argument("dataset", help="the dynamic-tier dataset the run was trained on")
     ap.add_argument("--episodes", type=int, default=None, help="score only the first N validation episodes")
     ap.add_argument("--json", type=Path, help="write the figures here")
+    ap.add_argument("--settings", nargs="+", help="score only these of SETTINGS (names as printed, without 'tracker ')")
     args = ap.parse_args()
     torch.set_num_threads(1)
     held = sorted(read_run_config(args.run).validation.episodes)[: args.episodes]
@@ -133,13 +147,16 @@ def main() -> None:
     memories |= {
         f"tracker {name}": (lambda knobs=knobs: Tracker(dataclasses.replace(START, **knobs)))
         for name, knobs in SETTINGS.items()
+        if not args.settings or name in args.settings
     }
     tallies = {name: {k: np.zeros(4, int) for k in AHEAD} for name in memories}  # danger, missed, clear, alarm
+    speeds: dict[str, list] = {name: [] for name in memories}
     for e in held:
         episode = load_episode(Path(args.dataset), e)
         asked = queries(episode)
         for name, make in memories.items():
-            predicted = flown(episode, make(), plan, camera, asked)
+            predicted, errors = flown(episode, make(), plan, camera, asked)
+            speeds[name] += errors
             for (_, k, _, truth), guess in zip(asked, predicted):
                 inside, clear = truth < danger, truth >= danger + CLEAR
                 tallies[name][k] += [
@@ -150,9 +167,12 @@ def main() -> None:
                 ]
     rows = []
     print(f"{len(held)} validation episodes of {args.dataset}; danger = within {danger:.2f} m of a surface")
-    print(f"{'memory':<40} " + "  ".join(f"{k:>2} ahead: missed  alarm" for k in AHEAD))
+    print(f"{'memory':<50} " + "  ".join(f"{k:>2} ahead: missed  alarm" for k in AHEAD) + "  velocity error (zero's)")
     for name, tally in tallies.items():
         row = {"memory": name}
+        if speeds[name]:
+            errors = np.array(speeds[name])
+            row["velocity"] = {"tracks": len(errors), "error": errors[:, 0].mean(), "zero_error": errors[:, 1].mean()}
         for k, (inside, missed, clear, alarm) in tally.items():
             row[str(k)] = {
                 "danger": int(inside),
@@ -161,9 +181,11 @@ def main() -> None:
                 "false_alarm": alarm / max(clear, 1),
             }
         rows.append(row)
+        velocity = row.get("velocity")
         print(
-            f"{name:<40} "
+            f"{name:<50} "
             + "  ".join(f"         {row[str(k)]['missed']:.3f}  {row[str(k)]['false_alarm']:.3f}" for k in AHEAD)
+            + (f"  {velocity['error']:.3f} ({velocity['zero_error']:.3f})" if velocity else "")
         )
     if args.json:
         args.json.write_text(
