@@ -153,7 +153,8 @@ if [ "${TIER:-static}" = dynamic ]; then
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
   # on the validation seeds), both ways again with the body fitted to the pilot's history in place
   # of the probe's states (planner-fitted-*), the oracles (oracle-fitted: the true debris and the
-  # fitted body) and the expert. The Diffusion Policy is not trained on the tier yet.
+  # fitted body), the expert, and the Diffusion Policy trained on the tier's expert episodes with the
+  # flown recipe (preset cpu), flown as the static grid flies it.
   DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
   IMAGINED=()
@@ -173,6 +174,10 @@ if [ "${TIER:-static}" = dynamic ]; then
       --out "$WMS/eval-val-history$history" --no-figures "${VAL_WINDOWS[@]}"
   done
   refit "$WMS"
+  DPD="$OUT/dp-dyn" RESUME=()
+  [ -d "$DPD/checkpoints" ] && RESUME=(--resume)
+  [ -f "$DPD/model.safetensors" ] || step train-diffusion-dynamic "$BIN/orbitmodel" train-policy "$DATA" --preset cpu \
+    --val-fraction 0.05 --out "$DPD" "${RESUME[@]}" "${STEPS[@]}"
   [ -f "$WMS/depth-imagined/model.safetensors" ] || step imagined-dynamic "$BIN/orbitmodel" depth "$WMS" "$DATA" \
     --imagined --eval-split val "${IMAGINED[@]}"
   for seed in 0 1 2 3 4 5; do
@@ -195,11 +200,13 @@ if [ "${TIER:-static}" = dynamic ]; then
     spawn fly_model oracle-fitted oracle-true --set obstacle_motion=true --set body=fitted
     step "dynamic-seed$seed-fitted-2" join
     step "dynamic-seed$seed-expert" fly_data expert
+    step "dynamic-seed$seed-diffusion" fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DPD" --preset cpu \
+      "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}"
     cp "$GDIR/planner-$WAY.json" "$GDIR/planner.json"
   done
   mkdir -p "$GDIR_ROOT/test"
   for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
-    oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted expert; do
+    oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted expert diffusion; do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
   done
   printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
