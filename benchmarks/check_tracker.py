@@ -3,10 +3,9 @@
     python benchmarks/check_tracker.py RUN DATASET [--episodes 136] [--json OUT]
 
 On the run's validation episodes (the train-split episodes it held out), every frame's recorded
-16x16 depth (``observation.depth_low``: a perfect depth head) is fed, as the planner feeds it, to
-the tracker with each setting of its knobs (``SETTINGS``), and to the static planner's 50-frame
-point memory.
-Every 10th frame t, each is asked for the clearance at query points k = 10, 25 and 50 frames
+16x16 depth (``observation.depth_low``, what ``oracle-true-dyn-sensor`` sees in place of the depth
+head) is fed, as the planner feeds it, to the tracker with each setting of its knobs
+(``SETTINGS``), and to the static planner's 50-frame point memory. Every 10th frame t, each is asked for the clearance at query points k = 10, 25 and 50 frames
 ahead (0.4, 1 and 2 s): 96 points drawn uniformly in a 3 m ball around where the recorded flight
 was at t + k (the same points for every setting). The answer is set against the clearance to the
 debris where they really were then (the privileged poses, read here only to score):
