@@ -5,9 +5,10 @@
 On the run's validation episodes (the train-split episodes it held out), every frame's recorded
 16x16 depth (``observation.depth_low``, what ``oracle-true-dyn-sensor`` sees in place of the depth
 head) is fed, as the planner feeds it, to the tracker with each setting of its knobs
-(``SETTINGS``), and to the static planner's 50-frame point memory. Every 10th frame t, each is asked for the clearance at query points k = 10, 25 and 50 frames
-ahead (0.4, 1 and 2 s): 96 points drawn uniformly in a 3 m ball around where the recorded flight
-was at t + k (the same points for every setting). The answer is set against the clearance to the
+(``SETTINGS``), and to the static planner's 50-frame point memory. Every 10th frame t, each is
+asked for the clearance at query points k = 10, 25 and 50 frames ahead (0.4, 1 and 2 s): 96
+points drawn uniformly in a 3 m ball around where the recorded flight was at t + k (the same
+points for every setting). The answer is set against the clearance to the
 debris where they really were then (the privileged poses, read here only to score):
 
 - missed: of the points that were in danger (within the hull plus the cost's margin of a true
@@ -98,33 +99,50 @@ def queries(episode) -> list[tuple[int, int, np.ndarray, np.ndarray]]:
     return out
 
 
-def flown(episode, memory, plan: PlannerConfig, camera: Camera, asked) -> tuple[list[np.ndarray], list]:
-    """The clearance (Q,) ``memory`` (a Tracker, or a PointMemory) predicts at each of ``asked``,
-    and (a tracker's) [(velocity error, zero velocity's error)] m/s of its tracks seen at those frames."""
+def seen(episode, plan: PlannerConfig, camera: Camera) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Each frame's (points (n, 3), radii (n,), on the image border (n,)), as the planner makes them."""
     states, maps = episode.states.astype(np.float64), depth_maps(episode)
-    poses = episode.scenario.obstacle_poses(np.arange(-1, len(episode) + 1) * S.DT)[..., :3]  # (L + 2, N, 3)
-    velocities = (poses[2:] - poses[:-2]) / (2 * S.DT)  # (L, N, 3) m/s, central differences
-    speeds = []
+    return [
+        (
+            *depth_to_points(maps[t], states[t], camera, plan.max_range, plan.footprint, plan.support),
+            border_points(maps[t], camera, plan.max_range, plan.support),
+        )
+        for t in range(len(episode))
+    ]
+
+
+def true_motion(episode) -> tuple[np.ndarray, np.ndarray]:
+    """(L, N, 3) metres and (L, N, 3) m/s: each obstacle's centre and velocity (central differences)
+    at every frame."""
+    centres = episode.scenario.obstacle_poses(np.arange(-1, len(episode) + 1) * S.DT)[..., :3]  # (L + 2, N, 3)
+    return centres[1:-1], (centres[2:] - centres[:-2]) / (2 * S.DT)
+
+
+def flown(memory, frames, motion, reach: float, asked) -> tuple[list[np.ndarray], list]:
+    """The clearance (Q,) ``memory`` (a Tracker, or a PointMemory) fed ``frames`` (:func:`seen`)
+    predicts at each of ``asked``, and (a tracker's) [(velocity error, zero velocity's error)] m/s
+    of its tracks seen at those frames, against ``motion`` (:func:`true_motion`)."""
     by_frame: dict[int, list] = {}
     for i, (t, k, points, _) in enumerate(asked):
         by_frame.setdefault(t, []).append((i, k, points))
     out: list[np.ndarray] = [None] * len(asked)
+    speeds = []
     memory.reset()
-    for t in range(len(episode)):
-        points, radii = depth_to_points(maps[t], states[t], camera, plan.max_range, plan.footprint, plan.support)
+    for t, (points, radii, edge) in enumerate(frames):
         if isinstance(memory, Tracker):
-            memory.add(points, radii, t * S.DT, border_points(maps[t], camera, plan.max_range, plan.support))
-            field = memory.field(t * S.DT, plan.reach) if t in by_frame else None
-            for track in memory.tracks if t in by_frame else []:
-                if track.unseen == 0:
-                    seen = track.frames[-1].points  # (n, 3)
-                    nearest = np.linalg.norm(seen[:, None] - poses[t + 1][None], axis=-1).min(0).argmin()
-                    truth = velocities[t, nearest]
-                    speeds.append((float(np.linalg.norm(track.velocity - truth)), float(np.linalg.norm(truth))))
+            memory.add(points, radii, t * S.DT, edge)
         else:
             memory.add(points, radii)
-            field = memory.cloud(plan.reach) if t in by_frame else None
-        for i, k, q in by_frame.get(t, []):
+        if t not in by_frame:
+            continue
+        field = memory.field(t * S.DT, reach) if isinstance(memory, Tracker) else memory.cloud(reach)
+        for track in memory.tracks if isinstance(memory, Tracker) else []:
+            if track.unseen == 0:
+                centres, velocities = motion[0][t], motion[1][t]
+                nearest = np.linalg.norm(track.frames[-1].points[:, None] - centres[None], axis=-1).min(0).argmin()
+                truth = velocities[nearest]
+                speeds.append((float(np.linalg.norm(track.velocity - truth)), float(np.linalg.norm(truth))))
+        for i, k, q in by_frame[t]:
             times = torch.tensor([(t + k) * S.DT], dtype=torch.float64)
             out[i] = field.clearance(torch.from_numpy(q).float()[:, None], times)[:, 0].numpy()
     return out, speeds
@@ -152,9 +170,9 @@ def main() -> None:
     speeds: dict[str, list] = {name: [] for name in memories}
     for e in held:
         episode = load_episode(Path(args.dataset), e)
-        asked = queries(episode)
+        asked, frames, motion = queries(episode), seen(episode, plan, camera), true_motion(episode)
         for name, make in memories.items():
-            predicted, errors = flown(episode, make(), plan, camera, asked)
+            predicted, errors = flown(make(), frames, motion, plan.reach, asked)
             speeds[name] += errors
             for (_, k, _, truth), guess in zip(asked, predicted):
                 inside, clear = truth < danger, truth >= danger + CLEAR

@@ -94,9 +94,10 @@ def fit_velocity(times: np.ndarray, centroids: np.ndarray, confidence: float = 0
     spread = (dt**2).sum()
     if spread <= 0:
         return np.zeros(3)
-    slope = (dt[:, None] * (centroids - centroids.mean(0))).sum(0) / spread
+    centred = centroids - centroids.mean(0)  # (F, 3)
+    slope = (dt[:, None] * centred).sum(0) / spread
     if confidence > 0:
-        residual = centroids - centroids.mean(0) - dt[:, None] * slope  # (F, 3)
+        residual = centred - dt[:, None] * slope  # (F, 3)
         variance = (residual**2).sum() / max(len(times) - 2, 1) / spread  # of the slope, summed over axes
         slope = slope * max(0.0, 1.0 - confidence**2 * variance / max(float(slope @ slope), 1e-12))
     return slope
