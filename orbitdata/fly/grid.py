@@ -8,13 +8,14 @@ episodes as the expert. One pilot (made once by its factory) flies every episode
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from orbitdata.fly.config import FlightConfig
 from orbitdata.fly.pilot import Pilot
+from orbitdata.fly.record import episode_summary
 from orbitdata.fly.registry import PilotFactory, make_pilot
 from orbitdata.fly.rollout import EpisodeResult, FrameSink, fly_episode
 from orbitdata.scenario.config import DYNAMIC, STATIC
@@ -37,6 +38,8 @@ class CellResult:
     # unsurvivable on the way to them (``Dynamics.unsurvivable_draws``); 0 on the static tier.
     debris: int = 0
     unsurvivable_draws: int = 0
+    # one ``record.episode_summary`` per episode flown, with its setting, number and seed
+    records: list[dict] = field(default_factory=list)
 
     def add(self, outcome: str) -> None:
         setattr(self, outcome, getattr(self, outcome) + 1)
@@ -124,6 +127,15 @@ def fly_grid(
                     )
                     cell.add(result.outcome)
                     cell.add_scenario(result.scenario)
+                    cell.records.append(
+                        {
+                            "obstacles": n,
+                            "speed": float(v),
+                            "episode": k,
+                            "seed": grid_seed(seed, n, v, k),
+                            **episode_summary(result, sim.cubesat),
+                        }
+                    )
                     if on_episode:
                         on_episode(cell, k, result)
                 cells.append(cell)
@@ -138,8 +150,9 @@ def pooled(cells: list[CellResult]) -> tuple[int, int]:
 
 
 def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | None = None, tier: str = STATIC) -> dict:
-    """The ``--json`` table: the pilot, the grid seed, the outcome counts per setting and (``flight``)
-    how it flew (pilot options, codec, thrust noise). A grid of another tier than the static one
+    """The ``--json`` table: the pilot, the grid seed, the outcome counts per setting, (``flight``)
+    how it flew (pilot options, codec, thrust noise) and each episode's record
+    (``record.episode_summary``, where the cells kept them). A grid of another tier than the static one
     names it (``tier``) and, for the dynamic tier, counts the debris draws rejected as unsurvivable
     against the pieces kept (``rejections``: the tier's rejection rate is rejected / (rejected + kept))."""
     extra = {}
@@ -167,4 +180,5 @@ def grid_report(pilot: str, seed: int, cells: list[CellResult], flight: dict | N
             }
             for c in cells
         ],
+        **({"episodes": [r for c in cells for r in c.records]} if any(c.records for c in cells) else {}),
     }

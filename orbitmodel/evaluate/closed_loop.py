@@ -22,12 +22,13 @@ import torch
 
 from orbitdata.config import GenerationConfig
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
+from orbitdata.fly.record import episode_summary
 from orbitdata.seeding import episode_seed, grid_seed
+from orbitdata.sim.config import CubeSatConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitmodel.baselines.diffusion.sampling import PolicySampling
 from orbitmodel.evaluate.executors import EXECUTORS, run_local, run_ray
 from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode, GridEpisode, chunks, fly_lockstep
-from orbitmodel.kinematics import FUEL, P
 from orbitmodel.plan.config import PLANNER_PRESETS, PlannerConfig, default_planner_preset, planner_config, recorded
 from orbitmodel.plan.factory import build_pilot, camera_for_run
 from orbitmodel.plan.pilot import Variant
@@ -131,38 +132,16 @@ def check_unseen_seeds(seeds: list[int], root_seed: int, episodes: int) -> None:
         )
 
 
-def episode_record(n: int, v: float, k: int, seed: int, result) -> dict:
-    goal = np.asarray(result.scenario.goal)
+def episode_record(n: int, v: float, k: int, seed: int, result, cubesat: CubeSatConfig = CubeSatConfig()) -> dict:
+    """One episode of the grid: its setting, number and seed, ``orbitdata.fly.record``'s summary
+    (``cubesat``: the body flown, for the delta-v) and what the pilot reported."""
     return {
         "obstacles": n,
         "speed": v,
         "episode": k,
         "seed": seed,
-        "outcome": result.outcome,
-        "frames": int(result.length),
-        "min_clearance_m": float(result.min_clearance.min()),
-        "goal_distance_m": float(np.linalg.norm(result.states[-1, P] - goal)),
-        "fuel_used": float(result.states[0, FUEL.start] - result.states[-1, FUEL.start]),
-        **dynamic_factors(result.scenario),
+        **episode_summary(result, cubesat),
         **result.pilot_info,
-    }
-
-
-def dynamic_factors(scenario) -> dict:
-    """What a dynamic-tier episode was dealt, for success by factor and the grid's rejection rate
-    (nothing for a static episode): the debris pieces and draws rejected on the way to them, how
-    many pieces move, the fault and its onset frame, the CW flag and eclipse."""
-    dyn = scenario.dynamics
-    if dyn is None:
-        return {}
-    return {
-        "debris": len(scenario.obstacles),
-        "unsurvivable_draws": int(dyn.unsurvivable_draws),
-        "debris_moving": sum(1 for m in dyn.debris if any(m.velocity) or any(m.angular_velocity)),
-        "fault": dyn.fault.kind,
-        "fault_onset_step": int(dyn.fault.onset_step),
-        "cw": bool(dyn.cw),
-        "eclipse": bool(dyn.sensing.eclipse),
     }
 
 
@@ -313,7 +292,7 @@ class ClosedLoop:
             n, v, k, seed = self.order[part[i]]
             entry = FlownEpisode(
                 part[i],
-                episode_record(n, v, k, seed, result),
+                episode_record(n, v, k, seed, result, self.sim.cubesat),
                 [1e3 * s for s in getattr(pilot, "step_seconds", [])],
                 [1e3 * s for s in getattr(pilot, "replan_seconds", [])],
             )
