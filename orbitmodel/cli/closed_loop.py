@@ -23,6 +23,7 @@ def register(app: typer.Typer) -> None:
     app.command("table")(table)
     app.command("flips")(flips)
     app.command("pool")(pool)
+    app.command("factors")(factors)
 
 
 def _numbers(text: str, kind, flag: str) -> list:
@@ -268,6 +269,32 @@ def pool(
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(pooled, indent=2) + "\n")
+
+
+@friendly
+def factors(
+    results: Annotated[
+        list[Path], typer.Argument(help="grid results with their episodes: eval closed-loop, orbitdata fly, eval pool")
+    ],
+    json_out: Annotated[Optional[Path], typer.Option("--json", help="write the breakdowns here")] = None,
+) -> None:
+    """Print each grid's success by what its episodes were dealt (debris moving or still, a faulty
+    thruster and its kind, eclipse, the CW terms), each with its 95 % Wilson interval, and how they
+    flew: failures by kind, the closest approach, and the delta-v and time to the goal of a success.
+    One row per file, named by the file."""
+    from orbitmodel.evaluate.factors import breakdown, factor_tables
+    from orbitmodel.evaluate.figure6 import read_report
+
+    rows = []
+    for path in results:
+        try:
+            rows.append((path.stem, breakdown(read_report(path))))
+        except ValueError as err:
+            fail(f"{path}: {err}")
+    typer.echo(factor_tables(rows), nl=False)
+    if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
+        json_out.write_text(json.dumps({name: b for name, b in rows}, indent=2) + "\n")
 
 
 @friendly

@@ -105,7 +105,8 @@ FLIGHT_KEYS = ("preset", "pilot_settings", "image_codec")  # how a grid was flow
 def pool_seeds(reports: list[dict]) -> dict:
     """One pilot's grid flown on several root seeds, as one table: per setting, the episodes and
     outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
-    and ``worst_setting`` names the lowest-rate (seed, setting). Refuses reports of different
+    ``worst_setting`` names the lowest-rate (seed, setting) and ``episodes`` holds every seed's
+    episode records (where each seed has them). Refuses reports of different
     pilots, grids, pilot settings (a policy's sampling, the camera codec, the planner's probe or
     obstacle motion) or a repeated seed:
     pooling is for fresh episodes of one way of flying only."""
@@ -166,6 +167,10 @@ def pool_seeds(reports: list[dict]) -> dict:
         "settings": list(pooled.values()),
         "per_seed": per_seed,
         "worst_setting": worst,
+        # every seed's episodes, where each recorded them (eval factors breaks them down)
+        **(
+            {"episodes": [e for r in reports for e in r["episodes"]]} if all(r.get("episodes") for r in reports) else {}
+        ),
     }
 
 

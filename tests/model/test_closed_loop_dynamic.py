@@ -43,6 +43,7 @@ def test_a_dynamic_grid_counts_the_tiers_outcomes_rejections_and_factors(request
         assert episode["debris"] == 3
         assert episode["fault"] in ("none", "off", "scaled", "stuck")
         assert isinstance(episode["cw"], bool) and isinstance(episode["eclipse"], bool)
+        assert episode["fuel_used"] > 0 and episode["delta_v_mps"] > 0  # the oracle thrusts from the first frame
 
 
 def test_an_oracle_on_moving_debris_must_say_how_it_moves_before_anything_flies(request_dynamic):
