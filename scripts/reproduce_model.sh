@@ -205,10 +205,14 @@ if [ "${TIER:-static}" = dynamic ]; then
     cp "$GDIR/planner-$WAY.json" "$GDIR/planner.json"
   done
   mkdir -p "$GDIR_ROOT/test"
+  POOLED=()
   for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
     oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted expert diffusion; do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
+    POOLED+=("$GDIR_ROOT/test/$pilot.json")
   done
+  # success by factor (the fault, eclipse, ...), closest approach, delta-v and time to goal
+  "$BIN/orbitmodel" eval factors "${POOLED[@]}" --json "$GDIR_ROOT/test/factors.json" >"$GDIR_ROOT/test/factors.md"
   printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
   exit 0
 fi
