@@ -122,8 +122,9 @@ def fly_grid(
             for v in speeds:
                 cell = CellResult(obstacles=n, speed=float(v), episodes=episodes)
                 for k in range(episodes):
+                    episode_seed = grid_seed(seed, n, v, k)
                     result = fly_episode(
-                        env, flyer, grid_seed(seed, n, v, k), n, v, frame_sink=frame_sink, image_quality=image_quality
+                        env, flyer, episode_seed, n, v, frame_sink=frame_sink, image_quality=image_quality
                     )
                     cell.add(result.outcome)
                     cell.add_scenario(result.scenario)
@@ -132,7 +133,7 @@ def fly_grid(
                             "obstacles": n,
                             "speed": float(v),
                             "episode": k,
-                            "seed": grid_seed(seed, n, v, k),
+                            "seed": episode_seed,
                             **episode_summary(result, sim.cubesat),
                         }
                     )

@@ -132,7 +132,7 @@ def check_unseen_seeds(seeds: list[int], root_seed: int, episodes: int) -> None:
         )
 
 
-def episode_record(n: int, v: float, k: int, seed: int, result, cubesat: CubeSatConfig = CubeSatConfig()) -> dict:
+def episode_record(n: int, v: float, k: int, seed: int, result, cubesat: CubeSatConfig) -> dict:
     """One episode of the grid: its setting, number and seed, ``orbitdata.fly.record``'s summary
     (``cubesat``: the body flown, for the delta-v) and what the pilot reported."""
     return {

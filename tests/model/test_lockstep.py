@@ -124,7 +124,9 @@ def test_an_episode_that_ends_mid_batch_keeps_its_own_frames():
     flown = ClosedLoop(req).fly().episodes
     assert [e["frames"] for e in flown] == frames
     assert [e["outcome"] for e in flown] == [r.outcome for r in expected]
-    assert [episode_record(n, v, k, s, r)["frames"] for (n, v, k, s), r in zip(loop.order, got)] == frames
+    assert [
+        episode_record(n, v, k, s, r, loop.sim.cubesat)["frames"] for (n, v, k, s), r in zip(loop.order, got)
+    ] == frames
 
 
 def test_a_grid_on_ray_is_the_local_grid(probed_run, monkeypatch):
