@@ -2,7 +2,7 @@
 
     python benchmarks/bench_plan.py [--run RUN] [--planner paper|cpu] [--samples K] [--horizon H]
         [--history N] [--threads 1] [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile]
-        [--probe NAME ...]
+        [--probe NAME ...] [--profile]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,
@@ -19,6 +19,12 @@ predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and thro
 faster, whatever K, so it says whether the 40 ms goal is reachable by sampling fewer candidates.
 ``--compile`` runs the planner's imagined step through ``torch.compile``; it compiles during the
 untimed warm-up steps that fill the context.
+``--profile`` adds where the K candidates' rollout spends its time (torch.profiler's op table)
+and its arithmetic: the multiply-adds of its matrix products and the time they need at the rate
+this CPU reaches on one product of the same shape, a floor no scheduling of the same predictor
+beats; and the rollout with the other ways this CPU offers: the math attention kernel instead of
+the fused one, torch.compile, int8 dynamic quantisation of the linear layers and bfloat16 (each
+with its error).
 ``--probe NAME`` (repeatable) also times the planner reading another of the run's probes
 (``PlannerConfig.probe``: a Table I variant such as ``thrust_only``, or ``latent_probe``), each
 line beside the run's own probe's; without ``--run``, an untrained probe of that variant's recipe.
@@ -30,6 +36,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+import warnings
 
 import numpy as np
 import torch
@@ -171,6 +178,88 @@ def sequential_floor(args, horizon: int | None) -> str:
     )
 
 
+def rollout_profile(args) -> str:
+    """The K-candidate rollout alone: its op table, its matrix products' floor, and other kernels."""
+    import copy
+
+    from torch.nn.attention import SDPBackend, sdpa_kernel
+    from torch.profiler import ProfilerActivity, profile
+
+    pilot, _ = make_pilot(args, args.samples, args.horizon, 1)
+    model, history = pilot.dynamics.model, pilot.dynamics.history
+    K, horizon = pilot.config.mppi.samples, pilot.config.mppi.horizon
+    c = model.config
+    steps = horizon // c.frame_step
+    g = torch.Generator().manual_seed(0)
+    z = torch.randn(K, history, c.latent_dim, generator=g)
+    actions = torch.rand(K, history - 1 + steps, c.step_action_dim, generator=g)
+
+    def timed(fn, n: int = 15) -> tuple[float, float]:
+        for _ in range(3):
+            fn()
+        times = []
+        for _ in range(n):
+            t = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t)
+        return 1e3 * float(np.median(times)), 1e3 * float(np.percentile(times, 95))
+
+    def roll(m=model):
+        return m.rollout(z, actions, history=history)
+
+    lines = [f"rollout alone, K={K} H={horizon} ({steps} predictor calls) history {history}:"]
+    eager = timed(roll)
+    lines.append(f"  eager (fused attention)   {eager[0]:7.1f} ms median {eager[1]:7.1f} p95")
+    with profile(activities=[ProfilerActivity.CPU]) as prof:
+        for _ in range(5):
+            roll()
+    total = sum(e.self_cpu_time_total for e in prof.key_averages())
+    top = sorted(prof.key_averages(), key=lambda e: -e.self_cpu_time_total)[:8]
+    lines.append(
+        "  ops: "
+        + ", ".join(f"{e.key.removeprefix('aten::')} {100 * e.self_cpu_time_total / total:.0f} %" for e in top)
+    )
+    # multiply-adds of the matrix products: per token and block, qkv + proj + the MLP; each imagined
+    # step runs its `history` tokens through every block, then the projector on the last
+    rows = K * min(history, steps)
+    block = 3 * c.latent_dim**2 + c.latent_dim**2 + 2 * c.latent_dim * c.pred_mlp
+    macs = steps * (K * history * c.pred_depth * block + K * c.latent_dim**2)
+    a = torch.randn(rows, c.latent_dim, generator=g)
+    w = torch.randn(c.pred_mlp, c.latent_dim, generator=g)
+    ms_product = timed(lambda: torch.nn.functional.linear(a, w), n=50)[0]
+    rate = 2 * rows * c.latent_dim * c.pred_mlp / (ms_product * 1e-3) / 1e9
+    lines.append(
+        f"  matrix products: {2 * macs / 1e9:.2f} GFLOP per rollout; this CPU reaches {rate:.0f} GFLOP/s on one "
+        f"({rows} x {c.latent_dim}) x ({c.latent_dim} x {c.pred_mlp}) product, so they need {2 * macs / rate / 1e6:.1f} ms at least"
+    )
+    with sdpa_kernel(SDPBackend.MATH):
+        math = timed(roll)
+    lines.append(f"  math attention kernel     {math[0]:7.1f} ms median {math[1]:7.1f} p95")
+    quantised = copy.deepcopy(model)
+    with warnings.catch_warnings():  # torch.ao's eager quantisation warns that it moves to torchao
+        warnings.simplefilter("ignore")
+        quantised.predictor = torch.ao.quantization.quantize_dynamic(
+            quantised.predictor, {torch.nn.Linear}, dtype=torch.qint8
+        )
+    reference = roll()
+    error = (roll(quantised) - reference).abs().max().item() / reference.abs().mean().item()
+    q = timed(lambda: roll(quantised))
+    lines.append(
+        f"  int8 dynamic quantisation {q[0]:7.1f} ms median {q[1]:7.1f} p95 (largest error {100 * error:.0f} % of the mean |z|)"
+    )
+    half = copy.deepcopy(model).to(torch.bfloat16)
+    error = (half.rollout(z.bfloat16(), actions.bfloat16(), history=history).float() - reference).abs().max().item()
+    b = timed(lambda: half.rollout(z.bfloat16(), actions.bfloat16(), history=history))
+    lines.append(
+        f"  bfloat16                  {b[0]:7.1f} ms median {b[1]:7.1f} p95 (largest error "
+        f"{100 * error / reference.abs().mean().item():.0f} % of the mean |z|)"
+    )
+    model.compile_rollout()
+    compiled = timed(roll)
+    lines.append(f"  torch.compile             {compiled[0]:7.1f} ms median {compiled[1]:7.1f} p95")
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--planner", choices=list(PLANNER_PRESETS), default="paper", help="planner preset")
@@ -186,6 +275,9 @@ def main() -> None:
     parser.add_argument("--floor", action="store_true", help="also time one candidate's H sequential steps")
     parser.add_argument(
         "--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)"
+    )
+    parser.add_argument(
+        "--profile", action="store_true", help="also profile the K candidates' rollout and time other kernels for it"
     )
     parser.add_argument(
         "--probe",
@@ -213,6 +305,8 @@ def main() -> None:
                 print(report(measure(args, args.samples, args.horizon, args.replan_every, name)), flush=True)
             if args.floor:
                 print(sequential_floor(args, args.horizon))
+            if args.profile:
+                print(rollout_profile(args))
             return
         for samples, horizon, every in [
             (256, 50, 1),
