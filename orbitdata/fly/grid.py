@@ -44,11 +44,12 @@ class CellResult:
     def add(self, outcome: str) -> None:
         setattr(self, outcome, getattr(self, outcome) + 1)
 
-    def add_scenario(self, scenario) -> None:
-        """Count a dynamic scenario's debris and its rejected draws."""
-        if scenario.dynamics is not None:
-            self.debris += len(scenario.obstacles)
-            self.unsurvivable_draws += scenario.dynamics.unsurvivable_draws
+    def count(self, record: dict) -> None:
+        """Count one flown episode from its record (``record.episode_summary``): its outcome and, on
+        the dynamic tier, its debris and the draws rejected on the way to them."""
+        self.add(record["outcome"])
+        self.debris += record.get("debris", 0)
+        self.unsurvivable_draws += record.get("unsurvivable_draws", 0)
 
     @property
     def success_rate(self) -> float:
@@ -126,17 +127,15 @@ def fly_grid(
                     result = fly_episode(
                         env, flyer, episode_seed, n, v, frame_sink=frame_sink, image_quality=image_quality
                     )
-                    cell.add(result.outcome)
-                    cell.add_scenario(result.scenario)
-                    cell.records.append(
-                        {
-                            "obstacles": n,
-                            "speed": float(v),
-                            "episode": k,
-                            "seed": episode_seed,
-                            **episode_summary(result, sim.cubesat),
-                        }
-                    )
+                    record = {
+                        "obstacles": n,
+                        "speed": float(v),
+                        "episode": k,
+                        "seed": episode_seed,
+                        **episode_summary(result, sim.cubesat),
+                    }
+                    cell.count(record)
+                    cell.records.append(record)
                     if on_episode:
                         on_episode(cell, k, result)
                 cells.append(cell)

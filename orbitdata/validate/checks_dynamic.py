@@ -6,7 +6,7 @@ whose steps or poses are off: the driver then reads each flagged episode whole a
 is wrong (:mod:`~orbitdata.validate.diagnose_dynamic`), one line per episode.
 
 Tolerances. The model is the simulator's own integrator on the recorded body
-(:mod:`~orbitdata.validate.rigid_body`), so what is left is the float32 rounding of the states
+(:mod:`~orbitdata.validate.residuals`), so what is left is the float32 rounding of the states
 (about 1e-7 of |v|, |w| and of the attitude) and of the record:
 
 * ``VELOCITY_TOL = 1e-5 m/s``: ten times the rounding of a 10 m/s velocity. One thruster's
@@ -34,11 +34,12 @@ import pyarrow as pa
 
 from orbitdata import schema as S
 from orbitdata.sim.config import CubeSatConfig
+from orbitdata.sim.rigid_body import StepBody
 from orbitdata.validate import checks as C
 from orbitdata.validate.dynamic_record import EpisodeRecord, step_body
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.report import Sink
-from orbitdata.validate.rigid_body import StepBody, ThrustResiduals, pose_residuals, thrust_residuals
+from orbitdata.validate.residuals import ThrustResiduals, pose_residuals, thrust_residuals
 
 VELOCITY_TOL = 1e-5
 ANGULAR_TOL = 1e-4
@@ -112,7 +113,7 @@ def thrust_flags(a: Frames, b: Frames, records: dict[int, EpisodeRecord], physic
 
 
 def pose_model(records: dict[int, EpisodeRecord], physics: Physics) -> Callable[[Frames, Frames], tuple]:
-    """The tier's kinematic residuals of steps a -> b (see :func:`rigid_body.pose_residuals`): the
+    """The tier's kinematic residuals of steps a -> b (see :func:`residuals.pose_residuals`): the
     recorded body with its centre of mass offset and its anisotropic inertia; 0 for a step whose
     episode has no well-formed record (``dynamics.record`` reports it)."""
 

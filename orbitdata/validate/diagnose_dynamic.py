@@ -26,6 +26,7 @@ import numpy as np
 from orbitdata import schema as S
 from orbitdata.load.rows import RowReader
 from orbitdata.scenario.dynamics import NO_FAULT
+from orbitdata.sim.rigid_body import FAULT_KINDS, StepBody
 from orbitdata.validate import checks as C
 from orbitdata.validate.checks_dynamic import (
     Flag,
@@ -41,7 +42,6 @@ from orbitdata.validate.checks_dynamic import (
 from orbitdata.validate.dynamic_record import EpisodeRecord
 from orbitdata.validate.frames import Frames
 from orbitdata.validate.report import Sink
-from orbitdata.validate.rigid_body import FAULT_KINDS, StepBody
 
 MAX_DIAGNOSED = 100
 COLUMNS = [

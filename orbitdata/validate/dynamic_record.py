@@ -18,9 +18,9 @@ import pyarrow as pa
 from orbitdata import schema as S
 from orbitdata.scenario.dynamics import BodyParameters, DebrisMotion, Dynamics, Sensing, ThrusterFault
 from orbitdata.scenario.spec import Obstacle, Scenario
+from orbitdata.sim.rigid_body import StepBody
 from orbitdata.validate import checks as C
 from orbitdata.validate.report import Sink
-from orbitdata.validate.rigid_body import StepBody
 
 DYNAMIC_COLUMNS = (S.DEBRIS_MOTION, S.CW, S.MEAN_MOTION, S.BODY, S.FAULT, S.SENSING)
 

@@ -254,9 +254,7 @@ class ClosedLoop:
 
         def land(entry: FlownEpisode) -> None:
             cell = cells[(entry.record["obstacles"], entry.record["speed"])]
-            cell.add(entry.record["outcome"])
-            cell.debris += entry.record.get("debris", 0)
-            cell.unsurvivable_draws += entry.record.get("unsurvivable_draws", 0)
+            cell.count(entry.record)
             flown.append(entry)
             if on_episode:
                 on_episode(cell, entry.record)

@@ -3,7 +3,7 @@
 On the dynamic tier the CubeSat is built differently each episode (mass, inertia, centre of
 mass), one thruster may fail from a given frame on, and the Clohessy-Wiltshire terms may act
 (``orbitdata.scenario.dynamics.Dynamics``). :class:`EpisodeBodyDynamics` rolls candidates out
-through that record with the simulator's own integrator (``orbitdata.validate.rigid_body``, the
+through that record with the simulator's own integrator (``orbitdata.sim.rigid_body``, the
 model the validator checks the dataset against), so an oracle's "true dynamics" are the
 episode's. ``nominal`` keeps the CW terms and drops the rest: the fault-free body of the
 design, what a planner that ignores the fault and the drawn body assumes (``oracle-nominal``).
@@ -21,8 +21,8 @@ import torch
 
 from orbitdata.scenario.dynamics import Dynamics
 from orbitdata.sim.config import SimConfig
+from orbitdata.sim.rigid_body import StepBody, start_of, state_of, step_rows
 from orbitdata.state import FUEL
-from orbitdata.validate.rigid_body import StepBody, start_of, state_of, step_rows
 from orbitmodel.plan.timing import Timings
 
 

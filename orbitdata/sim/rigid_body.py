@@ -15,11 +15,8 @@ is that integrator on the rigid body as the episode record draws it:
 * the state's p and v are the cube centre's (MuJoCo's free joint), which moves with the
   centre of mass plus ``w x r``.
 
-:func:`thrust_residuals` compares the velocities, angular velocities and fuel that the recorded
-thrust gives with those recorded at the step's end. :func:`pose_residuals` is the kinematic
-check of this tier: it finds the constant body wrench that carries the recorded velocities of
-a step's start to those of its end, and compares the pose it flies with the recorded one, so
-that it reads no thrust record.
+The validator checks the dataset against it (:mod:`orbitdata.validate.residuals`) and the
+oracles plan with it (:mod:`orbitmodel.plan.true_body`). It is numpy only: it never imports MuJoCo.
 """
 
 from __future__ import annotations
@@ -45,7 +42,6 @@ from orbitdata.state import (
 )
 
 FAULT_KINDS = (NO_FAULT, "off", "scaled", "stuck")  # codes 0..3 in :class:`StepBody`
-WRENCH_ITERATIONS = 4  # fixed-point steps of the wrench that :func:`pose_residuals` infers
 
 
 @dataclass
@@ -94,12 +90,12 @@ class StepBody:
         return StepBody(**{f.name: changes.get(f.name, getattr(self, f.name)) for f in fields(self)})
 
 
-def _rows(M: np.ndarray, x: np.ndarray) -> np.ndarray:
+def rows(M: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(N, 3, 3) @ (N, 3) row by row."""
     return np.einsum("nij,nj->ni", M, x)
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out = np.empty(np.broadcast_shapes(a.shape, b.shape))
     out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
     out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
@@ -138,7 +134,7 @@ class Motion:
 def start_of(state: np.ndarray) -> Motion:
     """The motion of states (N, 16) float64."""
     R = rot6d_to_matrix(state[:, ROT6D])
-    return Motion(state[:, POSITION].copy(), R, _rows(R, state[:, VELOCITY]), state[:, ANGULAR_VELOCITY].copy())
+    return Motion(state[:, POSITION].copy(), R, rows(R, state[:, VELOCITY]), state[:, ANGULAR_VELOCITY].copy())
 
 
 def state_of(motion: Motion, fuel_ratio: np.ndarray) -> np.ndarray:
@@ -224,14 +220,14 @@ def fly(
     for _ in range(substeps):
         R = _matrix(q)
         turn += R
-        r = _rows(R, c)  # cube centre -> centre of mass, world
-        omega = _rows(R, w)
-        spin = _cross(omega, r)
-        a_com = _rows(R, force)
+        r = rows(R, c)  # cube centre -> centre of mass, world
+        omega = rows(R, w)
+        spin = cross(omega, r)
+        a_com = rows(R, force)
         if cw:
             a_com = a_com + cw_acceleration(p + r, v + spin, n)
-        alpha = (torque - _cross(w, inertia * w)) / inertia  # Euler's equations, body frame
-        a_centre = a_com - _cross(_rows(R, alpha), r) - _cross(omega, spin)
+        alpha = (torque - cross(w, inertia * w)) / inertia  # Euler's equations, body frame
+        a_centre = a_com - cross(rows(R, alpha), r) - cross(omega, spin)
         v = v + h * a_centre
         w = w + h * alpha
         p = p + h * v
@@ -239,20 +235,13 @@ def fly(
     return Motion(p, _matrix(q), v, w, h * turn, q)
 
 
-def _mass(cubesat: CubeSatConfig, body: StepBody, fuel_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def mass_and_inertia(cubesat: CubeSatConfig, body: StepBody, fuel_kg: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mass (N,) and principal inertia (N, 3) with ``fuel_kg`` in the tank: the simulator's
     :func:`orbitdata.sim.dynamic.body_mass_properties` (the dry mass and each dry inertia scaled,
-    the tank as configured), written here so that validation never imports MuJoCo."""
+    the tank as configured), written here so that this module never imports MuJoCo."""
     dry_mass, dry_inertia = cubesat.mass_properties(0.0)
     _, wet_inertia = cubesat.mass_properties(fuel_kg)
     return dry_mass * body.mass_scale + fuel_kg, dry_inertia * body.inertia_scale + (wet_inertia - dry_inertia)[:, None]
-
-
-@dataclass
-class ThrustResiduals:
-    velocity: np.ndarray  # (N,) m/s, world frame
-    angular_velocity: np.ndarray  # (N,) rad/s, body frame
-    fuel: np.ndarray  # (N,) fuel ratio
 
 
 def step_rows(
@@ -274,10 +263,10 @@ def step_rows(
     empties = burn > fuel_kg
     scale = np.where(empties, fuel_kg / np.where(empties, burn, 1.0), 1.0)  # the tank empties part-way
     thrust *= scale[:, None]
-    mass, inertia = _mass(cubesat, body, fuel_kg)
+    mass, inertia = mass_and_inertia(cubesat, body, fuel_kg)
     W = _wrench(cubesat)  # about the cube's centre
     force = thrust @ W[:3].T  # N, body frame
-    torque = thrust @ W[3:].T - _cross(body.com, force)  # about the centre of mass
+    torque = thrust @ W[3:].T - cross(body.com, force)  # about the centre of mass
     end = fly(start, force / mass[:, None], torque, inertia, body, dt, substeps)
     return end, np.maximum(0.0, fuel_kg - burn * scale)
 
@@ -288,45 +277,3 @@ def _wrench(cubesat: CubeSatConfig) -> np.ndarray:
     W = wrench_matrix(cubesat)
     W.flags.writeable = False
     return W
-
-
-def thrust_residuals(
-    s0: np.ndarray,
-    s1: np.ndarray,
-    action: np.ndarray,
-    frame: np.ndarray,
-    body: StepBody,
-    cubesat: CubeSatConfig,
-    dt: float,
-    substeps: int,
-) -> ThrustResiduals:
-    """How far the recorded end of each step s0 -> s1 (states (N, 16) float64) lies from where the
-    commanded ``action`` (N, 8), through the record in ``body``, takes s0."""
-    fuel = s0[:, FUEL.start] * cubesat.fuel_mass  # kg at the step's start
-    end, fuel_left = step_rows(start_of(s0), fuel, action, frame, body, cubesat, dt, substeps)
-    R1 = rot6d_to_matrix(s1[:, ROT6D])
-    return ThrustResiduals(
-        np.linalg.norm(end.v - _rows(R1, s1[:, VELOCITY]), axis=1),
-        np.linalg.norm(end.w - s1[:, ANGULAR_VELOCITY], axis=1),
-        np.abs(fuel_left / cubesat.fuel_mass - s1[:, FUEL.start]),
-    )
-
-
-def pose_residuals(
-    s0: np.ndarray, s1: np.ndarray, body: StepBody, cubesat: CubeSatConfig, dt: float, substeps: int
-) -> tuple[np.ndarray, np.ndarray]:
-    """Position (m) and attitude (rad) residuals of steps s0 -> s1 under the body in ``body``, with
-    the constant body-frame force and torque that carry s0's velocities to s1's (no thrust read)."""
-    start = start_of(s0)
-    R1 = rot6d_to_matrix(s1[:, ROT6D])
-    v1, w1 = _rows(R1, s1[:, VELOCITY]), s1[:, ANGULAR_VELOCITY]
-    _, inertia = _mass(cubesat, body, s0[:, FUEL.start] * cubesat.fuel_mass)
-    force = np.einsum("nji,nj->ni", start.R, v1 - start.v) / dt  # per unit mass, body frame
-    torque = inertia * (w1 - start.w) / dt + _cross(start.w, inertia * start.w)
-    for _ in range(WRENCH_ITERATIONS):
-        end = fly(start, force, torque, inertia, body, dt, substeps)
-        force = force + np.linalg.solve(end.turn, (v1 - end.v)[:, :, None])[:, :, 0]
-        torque = torque + inertia * (w1 - end.w) / dt
-    end = fly(start, force, torque, inertia, body, dt, substeps)
-    cos = (np.einsum("nij,nij->n", end.R, R1) - 1.0) / 2.0
-    return np.linalg.norm(end.p - s1[:, POSITION], axis=1), np.arccos(np.clip(cos, -1.0, 1.0))
