@@ -21,10 +21,10 @@ faster, whatever K, so it says whether the 40 ms goal is reachable by sampling f
 untimed warm-up steps that fill the context.
 ``--profile`` adds where the K candidates' rollout spends its time (torch.profiler's op table)
 and its arithmetic: the multiply-adds of its matrix products and the time they need at the rate
-this CPU reaches on one product of the same shape, a floor no scheduling of the same predictor
-beats; and the rollout with the other ways this CPU offers: the math attention kernel instead of
-the fused one, torch.compile, int8 dynamic quantisation of the linear layers and bfloat16 (each
-with its error).
+this CPU reaches on one product of the predictor's MLP shape (about the least this predictor's
+products take on this CPU, however they are scheduled); and the rollout with the other ways this CPU offers: the math attention kernel instead of
+the fused one, torch.compile, int8 dynamic quantisation of the linear layers and bfloat16 (the
+last two with their error). It runs without ``--compile`` and ``--sweep``.
 ``--probe NAME`` (repeatable) also times the planner reading another of the run's probes
 (``PlannerConfig.probe``: a Table I variant such as ``thrust_only``, or ``latent_probe``), each
 line beside the run's own probe's; without ``--run``, an untrained probe of that variant's recipe.
@@ -219,11 +219,15 @@ def rollout_profile(args) -> str:
         "  ops: "
         + ", ".join(f"{e.key.removeprefix('aten::')} {100 * e.self_cpu_time_total / total:.0f} %" for e in top)
     )
-    # multiply-adds of the matrix products: per token and block, qkv + proj + the MLP; each imagined
-    # step runs its `history` tokens through every block, then the projector on the last
-    rows = K * min(history, steps)
+    # multiply-adds of the matrix products: once per rollout, the action encoder and every block's
+    # AdaLN modulations on the history - 1 + steps actions; per imagined step, the `history` tokens
+    # through every block (qkv + proj + the MLP), then the projector on the last
+    rows = K * history
+    tokens = K * (history - 1 + steps)
     block = 3 * c.latent_dim**2 + c.latent_dim**2 + 2 * c.latent_dim * c.pred_mlp
-    macs = steps * (K * history * c.pred_depth * block + K * c.latent_dim**2)
+    once = tokens * (c.step_action_dim * c.action_hidden + c.action_hidden * c.latent_dim)
+    once += tokens * c.pred_depth * 6 * c.latent_dim**2
+    macs = once + steps * (rows * c.pred_depth * block + K * c.latent_dim**2)
     a = torch.randn(rows, c.latent_dim, generator=g)
     w = torch.randn(c.pred_mlp, c.latent_dim, generator=g)
     ms_product = timed(lambda: torch.nn.functional.linear(a, w), n=50)[0]
@@ -287,6 +291,11 @@ def main() -> None:
         help="also time the planner reading this probe of the run (a Table I variant or latent_probe), repeatable",
     )
     args = parser.parse_args()
+    if args.profile and (args.compile or args.sweep):
+        # --compile would make the profile's eager and copied models run the compiled step
+        parser.error(
+            f"--profile times the rollout eager and compiled itself: drop --{'compile' if args.compile else 'sweep'}"
+        )
     unknown = [p for p in args.probe if p not in PROBES]
     if unknown:
         parser.error(f"--probe {unknown[0]}: choose {LATENT} or a probe variant ({', '.join(PROBES[2:])})")

@@ -6,7 +6,7 @@ whose steps or poses are off: the driver then reads each flagged episode whole a
 is wrong (:mod:`~orbitdata.validate.diagnose_dynamic`), one line per episode.
 
 Tolerances. The model is the simulator's own integrator on the recorded body
-(:mod:`~orbitdata.validate.residuals`), so what is left is the float32 rounding of the states
+(:mod:`~orbitdata.sim.rigid_body`; the residuals against it in :mod:`~orbitdata.validate.residuals`), so what is left is the float32 rounding of the states
 (about 1e-7 of |v|, |w| and of the attitude) and of the record:
 
 * ``VELOCITY_TOL = 1e-5 m/s``: ten times the rounding of a 10 m/s velocity. One thruster's
