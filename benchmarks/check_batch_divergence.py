@@ -1,0 +1,85 @@
+"""Where does a lockstep batch part from the unbatched flight? Thrusts step by step.
+
+    python benchmarks/check_batch_divergence.py RUN [--config configs/dynamic.toml] [--obstacles 3]
+        [--speed 1] [--episodes 4] [--seed 0] [--frames 12] [--set KEY=VALUE ...]
+
+Flies the grid's first ``--episodes`` episodes of one setting for ``--frames`` frames each, once
+one at a time (``orbitdata.fly.rollout.fly_episode``, the unbatched flight) and once all of them
+in one lockstep batch (``orbitmodel.evaluate.lockstep.fly_lockstep``), with the planner preset
+``cpu`` and the ``--set`` changes, on one torch thread. Prints, per episode, both outcomes, the
+first step whose thrusts differ, the largest thrust difference at each step, and the largest
+state difference at the last common frame: rounding that stays at 1e-7 is the batched sums'
+order; a jump marks a threshold that rounding crossed (a depth point kept or dropped, a
+candidate's weight). Asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import torch
+
+from orbitdata.cli.options import key_values
+from orbitdata.config import GenerationConfig
+from orbitdata.fly.rollout import fly_episode
+from orbitdata.sim.env import CubeSatEnv
+from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
+from orbitmodel.evaluate.lockstep import fly_lockstep
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run", help="a trained run with its probe and depth refit")
+    parser.add_argument("--config", default="configs/dynamic.toml", help="scenario and simulator settings (TOML)")
+    parser.add_argument("--obstacles", type=int, default=3)
+    parser.add_argument("--speed", type=float, default=1.0)
+    parser.add_argument("--episodes", type=int, default=4, help="episodes, flown alone and then as one batch")
+    parser.add_argument("--seed", type=int, default=0, help="grid seed (a validation seed)")
+    parser.add_argument("--frames", type=int, default=12, help="frames per episode at most")
+    parser.add_argument("--set", dest="set_", action="append", default=[], metavar="KEY=VALUE")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    settings, preset = pilot_settings(args.run, "cpu", **key_values(args.set_, "--set", "samples=32"))
+    config = GenerationConfig.from_toml(args.config) if args.config else GenerationConfig()
+    req = ClosedLoopRequest(
+        run=args.run,
+        obstacles=(args.obstacles,),
+        speeds=(args.speed,),
+        episodes=args.episodes,
+        seed=args.seed,
+        settings=settings,
+        preset=preset,
+        config=config,
+        max_steps=args.frames,
+    )
+    loop = ClosedLoop(req)
+    env = CubeSatEnv(loop.sim, config.scenario)
+    try:
+        alone = [fly_episode(env, loop.pilot, s, n, v, image_quality=loop.image_quality) for n, v, _, s in loop.order]
+    finally:
+        env.close()
+    batched: dict[int, object] = {}
+    fly_lockstep(
+        loop.pilot,
+        lambda: CubeSatEnv(loop.sim, config.scenario),
+        loop.order,
+        len(loop.order),
+        lambda i, result, *_: batched.update({i: result}),
+        loop.image_quality,
+    )
+    for i, a in enumerate(alone):
+        b = batched[i]
+        T = min(len(a.actions), len(b.actions))
+        thrust = np.abs(a.actions[:T] - b.actions[:T]).max(axis=1)
+        first = int(np.argmax(thrust > 0)) if (thrust > 0).any() else None
+        state = float(np.abs(a.states[T - 1] - b.states[T - 1]).max())
+        steps = np.array2string(thrust, precision=1, max_line_width=400)
+        print(
+            f"episode {i}: {a.outcome} / {b.outcome}, {a.length} / {b.length} frames; first differing thrust at "
+            f"step {first}; largest thrust difference per step {steps}; largest state difference at frame {T - 1}: {state:.2e}"
+        )
+
+
+if __name__ == "__main__":
+    main()
