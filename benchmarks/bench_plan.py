@@ -138,6 +138,18 @@ def report(m: dict) -> str:
     )
 
 
+def call_ms(fn, n: int, warmup: int) -> tuple[float, float]:
+    """(median, p95) ms of ``n`` calls of ``fn`` after ``warmup`` untimed ones."""
+    for _ in range(warmup):
+        fn()
+    times = []
+    for _ in range(n):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return 1e3 * float(np.median(times)), 1e3 * float(np.percentile(times, 95))
+
+
 def sequential_floor(args, horizon: int | None) -> str:
     """Median ms of rolling ONE candidate H steps through the predictor, eager and compiled."""
     pilot, _ = make_pilot(args, 2, horizon, 1)
@@ -160,18 +172,9 @@ def sequential_floor(args, horizon: int | None) -> str:
             zs.append(step_fn(torch.stack(zs[start:end], 1), [m[:, start:end] for m in mods]))
         return torch.stack(zs[history:], 1)
 
-    def median_ms(fn, n: int = 9) -> float:
-        fn()
-        times = []
-        for _ in range(n):
-            t = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t)
-        return 1e3 * float(np.median(times))
-
-    eager = median_ms(lambda: rollout(step))
+    eager = call_ms(lambda: rollout(step), n=9, warmup=1)[0]
     compiled_step = torch.compile(step, dynamic=False)
-    compiled = median_ms(lambda: rollout(compiled_step))
+    compiled = call_ms(lambda: rollout(compiled_step), n=9, warmup=1)[0]
     return (
         f"sequential floor, K=1 H={horizon} ({steps} predictor calls) history {history}: {eager:.1f} ms eager, "
         f"{compiled:.1f} ms with torch.compile ({compiled / steps:.2f} ms per imagined step)"
@@ -195,14 +198,7 @@ def rollout_profile(args) -> str:
     actions = torch.rand(K, history - 1 + steps, c.step_action_dim, generator=g)
 
     def timed(fn, n: int = 15) -> tuple[float, float]:
-        for _ in range(3):
-            fn()
-        times = []
-        for _ in range(n):
-            t = time.perf_counter()
-            fn()
-            times.append(time.perf_counter() - t)
-        return 1e3 * float(np.median(times)), 1e3 * float(np.percentile(times, 95))
+        return call_ms(fn, n=n, warmup=3)
 
     def roll(m=model):
         return m.rollout(z, actions, history=history)
