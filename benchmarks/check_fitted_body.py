@@ -1,6 +1,6 @@
 """How well does a body fitted to the pilot's history predict the body's turn, and from how much history?
 
-    python benchmarks/check_fitted_body.py RUN DATASET [--frames 10 20 40 80] [--ridge 1e-5 1e-3] [--json OUT]
+    python benchmarks/check_fitted_body.py RUN DATASET [--frames 10 20 40 80] [--ridge 1e-5 1e-3] [--inferred] [--json OUT]
 
 On the run's validation episodes (the train-split episodes it held out), at every 10th frame t
 where the body turns at most 3 rad/s, :class:`~orbitmodel.plan.fitted_body.FittedBodyDynamics`
@@ -8,47 +8,27 @@ is shown the frames before t (at most ``frames`` of them, the actions between th
 the recorded thrusts out for 25 frames; its body rate and velocity there are set against the
 recorded ones (mean absolute error over the 3 axes), split by whether the episode has a faulty
 thruster. References: the design's body (no history: the fit's prior) and the body rate held
-constant. Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
+constant. ``--inferred`` scores the fit under RUN/body's learned prior at each ``--frames`` too
+(``orbitmodel body``; ``--set body=inferred``). Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
 import numpy as np
-import pyarrow as pa
-import pyarrow.compute as pc
 import torch
 
-from orbitdata import schema as S
-from orbitdata.load.tables import load_episode_table, load_steps
 from orbitdata.sim.config import SimConfig
 from orbitmodel.kinematics import V, W
 from orbitmodel.plan.fitted_body import FittedBodyDynamics
+from orbitmodel.plan.inferred_body import InferredBodyDynamics, flown_episodes, load_inference
 from orbitmodel.runs import read_run_config
 
 AHEAD, EVERY, MAX_RATE = 25, 10, 3.0
-
-
-def episodes_of(dataset: str, episodes: list[int]) -> list[tuple[np.ndarray, np.ndarray, bool]]:
-    """(states (L, 16), actions (L, 8), faulty) of each of these train-split episodes."""
-    table = load_episode_table(dataset, "train", {})
-    fault = dict(
-        zip(table.column(S.EPISODE_INDEX).to_pylist(), (f["kind"] != "none" for f in table.column("fault").to_pylist()))
-    )
-    steps = load_steps(dataset, "train", False, {}).select_columns([S.EPISODE_INDEX, S.STATE, S.ACTION])
-    rows = steps.with_format("arrow")[:]
-    rows = rows.filter(pc.is_in(rows.column(S.EPISODE_INDEX), value_set=pa.array(episodes, pa.int32())))
-    index = rows.column(S.EPISODE_INDEX).to_numpy()
-    states = np.stack(rows.column(S.STATE).to_numpy(zero_copy_only=False)).astype(np.float32)
-    actions = np.stack(rows.column(S.ACTION).to_numpy(zero_copy_only=False)).astype(np.float32)
-    out = []
-    for e in episodes:  # rows are ordered by (episode, frame)
-        mine = index == e
-        out.append((states[mine], actions[mine], fault[e]))
-    return out
 
 
 def scores(dynamics: FittedBodyDynamics, flown, frames: int) -> dict:
@@ -90,11 +70,12 @@ def main() -> None:
     ap.add_argument("dataset", help="the dynamic-tier dataset the run was trained on")
     ap.add_argument("--frames", type=int, nargs="+", default=[10, 20, 40, 80])
     ap.add_argument("--ridge", type=float, nargs="+", default=[1e-6, 1e-5, 1e-4, 1e-3])
+    ap.add_argument("--inferred", action="store_true", help="also the fit under RUN/body's learned prior")
     ap.add_argument("--json", type=Path, help="write the figures here")
     args = ap.parse_args()
     torch.set_num_threads(1)
     held = read_run_config(args.run).validation.episodes
-    flown = episodes_of(args.dataset, sorted(held))
+    flown = list(flown_episodes(args.dataset, sorted(held)).values())
     sim = SimConfig(render=False)
     rows = [{"frames": 0, "ridge": None, **scores(FittedBodyDynamics(sim, frames=1, ridge=1.0), flown, 0)}]
     rows += [
@@ -102,11 +83,21 @@ def main() -> None:
         for f in args.frames
         for r in args.ridge
     ]
+    if args.inferred:
+        inference, learned = load_inference(args.run)
+        rows += [
+            {
+                "frames": f,
+                "ridge": "inferred",
+                **scores(InferredBodyDynamics(inference, dataclasses.replace(learned, frames=f), sim), flown, f),
+            }
+            for f in args.frames
+        ]
     print(f"{len(held)} validation episodes of {args.dataset}; errors {AHEAD} frames ahead (rad/s, m/s)")
     print("frames  ridge   | fault: rate  velocity  (windows) | no fault: rate  velocity  (windows)")
     for row in rows:
         f, n = row["fault"], row["none"]
-        ridge = "design" if row["ridge"] is None else f"{row['ridge']:.0e}"
+        ridge = {None: "design", "inferred": "learned"}.get(row["ridge"]) or f"{row['ridge']:.0e}"
         print(
             f"{row['frames']:>6}  {ridge:>6}  | {f['rate_mae']:.3f}  {f['velocity_mae']:.3f}  ({f['windows']})"
             f" | {n['rate_mae']:.3f}  {n['velocity_mae']:.3f}  ({n['windows']})"

@@ -152,8 +152,9 @@ if [ "${TIER:-static}" = dynamic ]; then
   # (OUT/dynamic/grid/seedN/PILOT.json, pooled in OUT/dynamic/grid/test/):
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
   # on the validation seeds), both ways again with the body fitted to the pilot's history in place
-  # of the probe's states (planner-fitted-*), the oracles (oracle-fitted: the true debris and the
-  # fitted body), the expert, and the Diffusion Policy trained on the tier's expert episodes with the
+  # of the probe's states (planner-fitted-*) and under the prior learned from the tier's episodes
+  # (planner-inferred-tracker), the oracles (oracle-fitted and oracle-inferred: the true debris and
+  # the fitted or inferred body), the expert, and the Diffusion Policy trained on the tier's expert episodes with the
   # flown recipe (preset cpu), flown as the static grid flies it.
   DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
@@ -161,6 +162,7 @@ if [ "${TIER:-static}" = dynamic ]; then
   [ "${QUICK:-0}" = 1 ] && IMAGINED=(--frames 8 --test-frames 4 --epochs 1)
   # the tier's probe trains on a cache of its calm windows (--max-body-rate needs one)
   [ "${QUICK:-0}" = 1 ] && PROBE=(--max-steps 3 --cache-windows 64 --batch-size 16)
+  [ "${QUICK:-0}" = 1 ] && BODY=(--steps 3)
   [ -f "$DATA/meta/info.json" ] || step generate-dynamic "$BIN/orbitdata" generate "$DATA" --tier dynamic \
     --episodes "$EPISODES" --image-size 64 --workers 2 --seed 0
   # the flown recipe for the tier's shorter, faster-spinning episodes (docs/model.md)
@@ -174,6 +176,8 @@ if [ "${TIER:-static}" = dynamic ]; then
       --out "$WMS/eval-val-history$history" --no-figures "${VAL_WINDOWS[@]}"
   done
   refit "$WMS"
+  # the prior over the tier's bodies that --set body=inferred fits under (RUN/body, docs/planner.md)
+  [ -f "$WMS/body/inference.pt" ] || step body-dynamic "$BIN/orbitmodel" body "$WMS" "$DATA" "${BODY[@]}"
   DPD="$OUT/dp-dyn" RESUME=()
   [ -d "$DPD/checkpoints" ] && RESUME=(--resume)
   [ -f "$DPD/model.safetensors" ] || step train-diffusion-dynamic "$BIN/orbitmodel" train-policy "$DATA" --preset cpu \
@@ -198,7 +202,10 @@ if [ "${TIER:-static}" = dynamic ]; then
     spawn fly_model planner-fitted-imagined planner --set obstacle_motion=imagined --set body=fitted
     step "dynamic-seed$seed-fitted" join
     spawn fly_model oracle-fitted oracle-true --set obstacle_motion=true --set body=fitted
+    spawn fly_model planner-inferred-tracker planner --set obstacle_motion=tracker --set body=inferred
     step "dynamic-seed$seed-fitted-2" join
+    spawn fly_model oracle-inferred oracle-true --set obstacle_motion=true --set body=inferred
+    step "dynamic-seed$seed-inferred" join
     step "dynamic-seed$seed-expert" fly_data expert
     step "dynamic-seed$seed-diffusion" fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DPD" --preset cpu \
       "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}"
@@ -207,7 +214,8 @@ if [ "${TIER:-static}" = dynamic ]; then
   mkdir -p "$GDIR_ROOT/test"
   POOLED=()
   for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
-    oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted expert diffusion; do
+    planner-inferred-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted oracle-inferred \
+    expert diffusion; do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
     POOLED+=("$GDIR_ROOT/test/$pilot.json")
   done

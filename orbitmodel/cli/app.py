@@ -60,7 +60,7 @@ def presets() -> None:
 
 
 def _register() -> None:
-    from orbitmodel.cli import closed_loop, depth, evaluate, policy, probe, push, train
+    from orbitmodel.cli import body, closed_loop, depth, evaluate, policy, probe, push, train
 
     train.register(app)
     evaluate.register(eval_app)
@@ -68,6 +68,7 @@ def _register() -> None:
     closed_loop.register(eval_app)
     probe.register(app, eval_app)
     depth.register(app)
+    body.register(app)
     push.register(app)
 
 

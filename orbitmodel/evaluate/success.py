@@ -39,7 +39,15 @@ def report_totals(report: dict) -> tuple[int, int]:
 FAILURES = ("collision", "timeout", "out_of_fuel")  # the dynamic tier's grids also count TUMBLING
 # Planner settings recorded only when not their default (plan.config.recorded), with that default:
 # seeds flown with different ones are different ways of flying.
-PLANNER_WAYS = {"probe": "the run's own", "obstacle_motion": "static", "tracker": "none", "body": "true"}
+# what a record without the key flew (PlannerConfig's defaults for the fit's knobs)
+PLANNER_WAYS = {
+    "probe": "the run's own",
+    "obstacle_motion": "static",
+    "tracker": "none",
+    "body": "true",
+    "fit_frames": 40,
+    "fit_ridge": 1e-5,
+}
 
 
 def failure_kinds(reports: list[dict]) -> tuple[str, ...]:

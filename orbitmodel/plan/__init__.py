@@ -10,6 +10,9 @@
 * :mod:`~orbitmodel.plan.tracker`: depth points clustered into moving tracks (``obstacle_motion="tracker"``);
 * :mod:`~orbitmodel.plan.depth_refit`: the depth head refitted for near cells (``orbitmodel depth``),
   scored by :mod:`~orbitmodel.plan.depth_bands`;
+* :mod:`~orbitmodel.plan.fitted_body` and :mod:`~orbitmodel.plan.inferred_body`: the body inferred
+  from the pilot's own history (``body="fitted"``; ``"inferred"``, under a prior ``orbitmodel body``
+  learns, its recipe in :mod:`~orbitmodel.plan.body_recipe`);
 * :mod:`~orbitmodel.plan.cost`: collision, progress, effort, spin, heading, speed;
 * :mod:`~orbitmodel.plan.pilot`: the pilots (``orbitdata.fly`` interface) and their variants;
 * :mod:`~orbitmodel.plan.batch`: one control step of several pilots at once (lockstep flights);

@@ -26,7 +26,8 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # How the planner expects the obstacles to move over a plan's horizon: "static", "tracker" and
 # "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
-BODIES = ("true", "nominal", "fitted")  # the body a rigid-body pilot plans a dynamic-tier episode with
+BODIES = ("true", "nominal", "fitted", "inferred")  # the body a rigid-body pilot plans a dynamic-tier episode with
+HISTORY_BODIES = ("fitted", "inferred")  # the bodies a pilot infers from its own history (no record read)
 
 
 @dataclass(frozen=True)
@@ -80,7 +81,11 @@ class PlannerConfig:
             "fitted": the thrust response fitted to the pilot's own last ``fit_frames`` frames
             (``plan.fitted_body``). It reads no record, so the planner may fly it too: the world
             model then sees (depth head, imagined depth) and the fitted body gives the states.
-        fit_frames: frames of history the fitted body is fitted to (``body="fitted"``).
+            "inferred": the fit under a prior a network learned from the tier's training episodes
+            (``plan.inferred_body``; ``orbitmodel body RUN DATASET`` trains it into RUN/body, whose
+            ridge it flies with). It needs a run, so only pilots flown with one.
+        fit_frames: frames of history the body is fitted to (``body="fitted"``, or "inferred": at most
+            the frames its prior was trained on).
         fit_ridge: how hard the fitted body is pulled towards the design's (``body="fitted"``).
     """
 
@@ -132,8 +137,8 @@ class PlannerConfig:
             )
         if self.body not in BODIES:
             raise ValueError(
-                f"body={self.body!r}: use true (the episode's body and fault), nominal (the design's) or fitted "
-                "(fitted to the pilot's own history)"
+                f"body={self.body!r}: use true (the episode's body and fault), nominal (the design's), fitted "
+                "(fitted to the pilot's own history) or inferred (the fit under the prior RUN/body learned)"
             )
         if self.fit_frames < 1 or self.fit_ridge <= 0:
             raise ValueError(
@@ -149,7 +154,8 @@ class PlannerConfig:
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
     own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
-    flies, ``body`` when "true" (the default) and the fit's knobs when no body is fitted, so that
+    flies, ``body`` when "true" (the default) and the fit's knobs when no body is fitted (an
+    inferred body keeps ``fit_frames``; its ridge is the inference's), so that
     the flights of the defaults all record the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
@@ -161,7 +167,9 @@ def recorded(config: PlannerConfig) -> dict:
     if config.body == "true":
         del out["body"]
     if config.body != "fitted":
-        del out["fit_frames"], out["fit_ridge"]
+        del out["fit_ridge"]
+        if config.body != "inferred":
+            del out["fit_frames"]
     return out
 
 

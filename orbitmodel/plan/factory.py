@@ -13,12 +13,13 @@ import numpy as np
 
 from orbitdata.sim.config import SimConfig
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.config import PlannerConfig, planner_config
+from orbitmodel.plan.config import HISTORY_BODIES, PlannerConfig, planner_config
 from orbitmodel.plan.depth_refit import refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.fitted_body import FittedBodyDynamics, FittedBodyLearnedDynamics
 from orbitmodel.plan.frames import FrameEncoder, PredictedDepth
 from orbitmodel.plan.imagined_fit import load_imagined_depth
+from orbitmodel.plan.inferred_body import InferredBodyDynamics, load_inference
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
@@ -101,8 +102,8 @@ def build_pilot(
         if config.compile:
             model.compile_rollout()
         probe = load_planner_probe(run, model.fingerprint, config.probe)
-        if config.body == "fitted":  # the world model sees; the fitted body gives the states
-            body = FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
+        if config.body in HISTORY_BODIES:  # the world model sees; the body inferred from history gives the states
+            body = body_from_history(run, sim, config, timings)
             imagine = config.obstacle_motion == "imagined"
             dynamics = FittedBodyLearnedDynamics(
                 model, probe, body, imagine, timings=timings, history=config.history or None, frames=frames
@@ -115,8 +116,8 @@ def build_pilot(
                 f"probe={config.probe}: pilot {variant.value} plans with the rigid-body model, which reads no probe; "
                 "drop the probe setting or fly a pilot that plans with the world model"
             )
-        if config.body == "fitted":
-            dynamics = FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
+        if config.body in HISTORY_BODIES:
+            dynamics = body_from_history(run, sim, config, timings)
         else:
             dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
     depth = {
@@ -135,6 +136,25 @@ def build_pilot(
         return PlannerPilot(variant, dynamics, depth, camera, config, sim, timings, imagined), sim
     cls = OraclePilot if variant.privileged else PlannerPilot
     return cls(variant, dynamics, depth, camera, config, sim, timings), sim
+
+
+def body_from_history(run: Path | None, sim: SimConfig, config: PlannerConfig, timings: Timings) -> FittedBodyDynamics:
+    """The body a pilot infers from its own history: fitted (``body="fitted"``) or fitted under
+    the prior RUN/body learned (``body="inferred"``; RunError without a run or RUN/body)."""
+    if config.body == "fitted":
+        return FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
+    if run is None:
+        raise RunError("body=inferred reads the prior a run learned (RUN/body): give the pilot a RUN")
+    try:
+        inference, learned = load_inference(run)
+    except FileNotFoundError as err:
+        raise RunError(str(err)) from None
+    if config.fit_frames > learned.frames:
+        raise RunError(
+            f"fit_frames={config.fit_frames}: {run}/body was trained on histories of at most {learned.frames} "
+            f"frames; pass --set fit_frames={learned.frames} or fewer"
+        )
+    return InferredBodyDynamics(inference, learned, sim, config.rigid_substeps, timings, config.fit_frames)
 
 
 def pilot_factory(variant: Variant | str):

@@ -43,7 +43,7 @@ from orbitdata.sim.config import SimConfig
 from orbitdata.sim.thrusters import wrench_matrix
 from orbitmodel.kinematics import P
 from orbitmodel.plan.batch import plan_batch
-from orbitmodel.plan.config import PlannerConfig
+from orbitmodel.plan.config import HISTORY_BODIES, PlannerConfig
 from orbitmodel.plan.imagined import ImaginedDepth, ImaginedField, outside_view
 from orbitmodel.plan.mppi import MPPI
 from orbitmodel.plan.obstacles import (
@@ -124,10 +124,10 @@ class PlannerPilot(Pilot):
                 f"body={config.body}: only the rigid-body oracles handed the scenario plan with a chosen body "
                 "(oracle-true); drop the body setting"
             )
-        if config.body == "fitted" and variant == Variant.ORACLE_LEARNED_DYN:
+        if config.body in HISTORY_BODIES and variant == Variant.ORACLE_LEARNED_DYN:
             raise ValueError(
-                "body=fitted: oracle-learned-dyn plans with the learned dynamics; the true obstacles with the "
-                "fitted body are oracle-true with body=fitted"
+                f"body={config.body}: oracle-learned-dyn plans with the learned dynamics; the true obstacles with "
+                f"that body are oracle-true with body={config.body}"
             )
         self.variant, self.config, self.sim = variant, config, sim
         self.name = variant.value
@@ -292,7 +292,8 @@ class OraclePilot(PlannerPilot):
     """A planning pilot handed the true obstacles (privileged): the oracles of the grid. One that
     plans with the rigid body plans a dynamic-tier episode with that episode's body, fault and CW
     terms (``plan.true_body``; ``body="nominal"``: the design's body, no fault; ``body="fitted"``: the
-    body fitted to its own history, ``plan.fitted_body``, which reads no record)."""
+    body fitted to its own history, ``plan.fitted_body``, which reads no record; ``body="inferred"``:
+    that fit under a learned prior, ``plan.inferred_body``)."""
 
     privileged = True
 
@@ -311,7 +312,7 @@ class OraclePilot(PlannerPilot):
                 "(their exact motion) or obstacle_motion=frozen (held where they are at each replan)"
             )
         self._true = TrueObstacles(scenario, "true" if motion == "static" else motion)
-        if not self.variant.learned_dynamics and self.config.body != "fitted":  # the episode's own body
+        if not self.variant.learned_dynamics and self.config.body not in HISTORY_BODIES:  # the episode's own body
             if scenario.dynamics is None:
                 self.dynamics = self._rigid
             else:

@@ -62,5 +62,9 @@ def test_seeds_flown_with_another_obstacle_motion_do_not_pool():
     # the oracle of the design's body is another pilot
     with pytest.raises(ValueError, match="with body true, seed 3 with nominal"):
         pool_seeds([report(3, {"body": "nominal"}), report(4, {})])
+    # nor does a body fitted to another history
+    with pytest.raises(ValueError, match="fit_frames 10"):
+        pool_seeds([report(3, {"body": "fitted", "fit_frames": 40}), report(4, {"body": "fitted", "fit_frames": 10})])
+    pool_seeds([report(3, {"body": "inferred"}), report(4, {"body": "inferred", "fit_frames": 40})])
     assert planner_config("cpu", probe="thrust_probe").probe == ""  # the run's own probe has one spelling
     pool_seeds([report(3, {}), report(4, {})])
