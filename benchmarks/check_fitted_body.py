@@ -8,14 +8,13 @@ is shown the frames before t (at most ``frames`` of them, the actions between th
 the recorded thrusts out for 25 frames; its body rate and velocity there are set against the
 recorded ones (mean absolute error over the 3 axes), split by whether the episode has a faulty
 thruster. References: the design's body (no history: the fit's prior) and the body rate held
-constant. ``--inferred`` scores the fit under RUN/body's learned prior at each ``--frames`` too
-(``orbitmodel body``; ``--set body=inferred``). Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
+constant. ``--inferred`` scores the fit under RUN/body's learned prior at each ``--frames`` up to the
+history it was trained on too (``orbitmodel body``; ``--set body=inferred``). Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
 """
 
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 from pathlib import Path
 
@@ -89,9 +88,10 @@ def main() -> None:
             {
                 "frames": f,
                 "ridge": "inferred",
-                **scores(InferredBodyDynamics(inference, dataclasses.replace(learned, frames=f), sim), flown, f),
+                **scores(InferredBodyDynamics(inference, learned, sim, frames=f), flown, f),
             }
             for f in args.frames
+            if f <= learned.frames  # the histories it was trained on
         ]
     print(f"{len(held)} validation episodes of {args.dataset}; errors {AHEAD} frames ahead (rad/s, m/s)")
     print("frames  ridge   | fault: rate  velocity  (windows) | no fault: rate  velocity  (windows)")

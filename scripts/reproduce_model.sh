@@ -158,7 +158,7 @@ if [ "${TIER:-static}" = dynamic ]; then
   # flown recipe (preset cpu), flown as the static grid flies it.
   DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
-  IMAGINED=()
+  IMAGINED=() BODY=()
   [ "${QUICK:-0}" = 1 ] && IMAGINED=(--frames 8 --test-frames 4 --epochs 1)
   # the tier's probe trains on a cache of its calm windows (--max-body-rate needs one)
   [ "${QUICK:-0}" = 1 ] && PROBE=(--max-steps 3 --cache-windows 64 --batch-size 16)

@@ -23,7 +23,10 @@ def body(
     dataset: Annotated[str, typer.Argument(help="the run's orbitdata dataset (its train split)")],
     steps: Annotated[int, typer.Option(min=1, help="Adam steps")] = _C.steps,
     frames: Annotated[
-        int, typer.Option(min=1, help="the most history frames a cut shows (the flights' too)")
+        int,
+        typer.Option(
+            min=1, help="the most history frames a cut shows; flights read at most this many (--set fit_frames)"
+        ),
     ] = _C.frames,
     seed: Annotated[int, typer.Option(min=0)] = _C.seed,
     overwrite: Annotated[bool, typer.Option(help="replace the inference already there")] = False,

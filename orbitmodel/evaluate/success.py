@@ -37,9 +37,8 @@ def report_totals(report: dict) -> tuple[int, int]:
 
 
 FAILURES = ("collision", "timeout", "out_of_fuel")  # the dynamic tier's grids also count TUMBLING
-# Planner settings recorded only when not their default (plan.config.recorded), with that default:
-# seeds flown with different ones are different ways of flying.
-# what a record without the key flew (PlannerConfig's defaults for the fit's knobs)
+# Planner settings recorded only when not their default (plan.config.recorded), with that default
+# (the fit's knobs: PlannerConfig's): seeds flown with different ones are different ways of flying.
 PLANNER_WAYS = {
     "probe": "the run's own",
     "obstacle_motion": "static",

@@ -140,6 +140,8 @@ class PlannerConfig:
                 f"body={self.body!r}: use true (the episode's body and fault), nominal (the design's), fitted "
                 "(fitted to the pilot's own history) or inferred (the fit under the prior RUN/body learned)"
             )
+        if self.body == "inferred" and self.fit_ridge != PlannerConfig.fit_ridge:
+            raise ValueError("fit_ridge: body=inferred flies the ridge its prior was trained with; drop fit_ridge")
         if self.fit_frames < 1 or self.fit_ridge <= 0:
             raise ValueError(
                 f"fit_frames={self.fit_frames} and fit_ridge={self.fit_ridge}: give at least 1 frame and a positive ridge"

@@ -144,7 +144,10 @@ def body_from_history(run: Path | None, sim: SimConfig, config: PlannerConfig, t
     if config.body == "fitted":
         return FittedBodyDynamics(sim, config.rigid_substeps, timings, config.fit_frames, config.fit_ridge)
     if run is None:
-        raise RunError("body=inferred reads the prior a run learned (RUN/body): give the pilot a RUN")
+        raise RunError(
+            "body=inferred reads the prior a run learned (RUN/body): name the run, "
+            "`orbitmodel eval closed-loop RUN --pilot oracle-true --set body=inferred ...`"
+        )
     try:
         inference, learned = load_inference(run)
     except FileNotFoundError as err:

@@ -20,6 +20,7 @@ from orbitmodel.plan.inferred_body import (
     Cuts,
     InferenceConfig,
     InferredBodyDynamics,
+    flown_episodes,
     load_inference,
     save_inference,
     train_inference,
@@ -83,6 +84,22 @@ def test_from_two_frames_it_knows_more_than_the_fit_and_from_forty_it_finds_the_
     assert torch.allclose(found[live], B[live], atol=0.1 * float(prior[:8].abs().max()))
 
 
+def test_a_flight_shows_the_network_what_training_showed_it(trained):
+    """The inputs a flight's history gives the network are the ones the training cut before the
+    same frame with the same history gives it (fuel at a whole percent, where both priors agree)."""
+    model, config, _ = trained
+    states, actions, _, _ = one_off_episode(np.random.default_rng(3))
+    states[:, 15] = 0.5
+    cuts = Cuts([(states, actions)], SIM, config)
+    t, n = 30, 12
+    inputs, _, _ = cuts.at(torch.tensor([t]), torch.tensor([n]))
+    flight = InferredBodyDynamics(model, config, SIM, frames=n)
+    for j in range(t - n, t + 1):
+        flight.observe({"state": states[j]}, actions[j - 1] if j > t - n else None)
+    with torch.no_grad():
+        torch.testing.assert_close(flight.response(), model(*inputs)[0], rtol=1e-4, atol=1e-6)
+
+
 def test_the_planner_flies_the_inferred_body_from_its_run_and_says_how_to_make_one(probed_run, trained, tmp_path):
     config = planner_config("cpu", body="inferred", horizon=10, samples=4)
     with pytest.raises(RunError, match="orbitmodel body"):
@@ -123,5 +140,6 @@ def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(probed_run,
     assert (run / "body" / "inference.pt").is_file() and "held-out prediction error" in done.output
     card = json.loads((run / "body" / "inference.json").read_text())
     assert card["held_out_episodes"] == 1 and card["config"]["steps"] == 2
+    assert card["training_episodes"] == len(flown_episodes(str(tiny_dataset_master))) - 1
     again = cli.invoke(app, args)
     assert again.exit_code == 2 and "--overwrite" in again.output and "Traceback" not in again.output
