@@ -21,7 +21,7 @@ def register(app: typer.Typer) -> None:
 def body(
     run: Annotated[Path, typer.Argument(help="a run trained on the dynamic tier (its held-out episodes are scored)")],
     dataset: Annotated[str, typer.Argument(help="the run's orbitdata dataset (its train split)")],
-    steps: Annotated[int, typer.Option(min=1, help="Adam steps")] = _C.steps,
+    steps: Annotated[int, typer.Option(min=1, help="AdamW steps")] = _C.steps,
     frames: Annotated[
         int,
         typer.Option(

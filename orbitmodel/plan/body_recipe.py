@@ -16,11 +16,11 @@ class InferenceConfig:
         frames: the most history frames it is shown (the fit's ``fit_frames``); each training cut
             draws a length from 0 to this.
         ahead: frames after the cut whose changes it must predict from their thrusts.
-        ridge: the ridge of the least-squares fit it corrects.
+        ridge: the ridge of the least-squares fit whose solution it reads (and flies with).
         max_rate: rad/s; only cuts where the body turns at most this fast are trained on (the
             planner's probe's limit, ``cpu-step5-dynamic``).
         width: hidden units of its two layers.
-        steps, batch, lr: Adam steps, cuts per step and learning rate.
+        steps, batch, lr: AdamW steps, cuts per step and learning rate (cosine decay).
         seed: the generator of the cuts and the initial weights.
     """
 
