@@ -177,7 +177,7 @@ if [ "${TIER:-static}" = dynamic ]; then
   done
   refit "$WMS"
   # the prior over the tier's bodies that --set body=inferred fits under (RUN/body, docs/planner.md)
-  [ -f "$WMS/body/inference.pt" ] || step body-dynamic "$BIN/orbitmodel" body "$WMS" "$DATA" "${BODY[@]}"
+  [ -f "$WMS/body/model.safetensors" ] || step body-dynamic "$BIN/orbitmodel" body "$WMS" "$DATA" "${BODY[@]}"
   DPD="$OUT/dp-dyn" RESUME=()
   [ -d "$DPD/checkpoints" ] && RESUME=(--resume)
   [ -f "$DPD/model.safetensors" ] || step train-diffusion-dynamic "$BIN/orbitmodel" train-policy "$DATA" --preset cpu \

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from safetensors.torch import load_file, save_file
 from torch import nn
 
 from orbitdata.sim.config import SimConfig
@@ -37,7 +38,7 @@ from orbitmodel.plan.fitted_body import FittedBodyDynamics, frame_changes, nomin
 from orbitmodel.plan.timing import Timings
 
 FOLDER = "body"  # RUN/body: the trained inference
-WEIGHTS, CARD = "inference.pt", "inference.json"
+WEIGHTS, CARD = "model.safetensors", "config.json"  # as every sub-run (``orbitmodel push`` publishes them)
 N_FEATURES = 45 + 54 + 54 + 2  # upper Gram, cross moments, ridge solution's offset, log length, fuel
 
 
@@ -235,7 +236,7 @@ def train_inference(train: Cuts, held: Cuts, config: InferenceConfig, log=print)
 def save_inference(run: Path, model: BodyInference, config: InferenceConfig, card: dict) -> Path:
     folder = Path(run) / FOLDER
     folder.mkdir(parents=True, exist_ok=True)
-    torch.save(model.state_dict(), folder / WEIGHTS)
+    save_file({k: v.contiguous() for k, v in model.state_dict().items()}, folder / WEIGHTS)
     (folder / CARD).write_text(json.dumps({"config": asdict(config), **card}, indent=1) + "\n")
     return folder
 
@@ -250,7 +251,7 @@ def load_inference(run: Path) -> tuple[BodyInference, InferenceConfig]:
     card = json.loads((folder / CARD).read_text())
     config = InferenceConfig(**card["config"])
     model = BodyInference(config.width)
-    model.load_state_dict(torch.load(folder / WEIGHTS, weights_only=True))
+    model.load_state_dict(load_file(folder / WEIGHTS))
     return model.eval(), config
 
 

@@ -27,7 +27,9 @@ from orbitmodel.runs import (
     stage_of,
 )
 
-SUB_RUNS = ("probe", "probe-state", "depth")  # a Stage I run's sub-run folders
+# a Stage I run's sub-run folders: the probes, the refitted and the imagined depth heads, the
+# inferred body's prior (orbitmodel body)
+SUB_RUNS = ("probe", "probe-state", "depth", "depth-imagined", "body")
 SUB_RUN_FILES = (CONFIG, WEIGHTS, METRICS, TRAINING, "eval.json")
 EVAL = "eval"
 GRID = "eval/grid"  # grid results (eval closed-loop / orbitdata fly --json) shown on the card

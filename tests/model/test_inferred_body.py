@@ -25,6 +25,7 @@ from orbitmodel.plan.inferred_body import (
     save_inference,
     train_inference,
 )
+from orbitmodel.publish.files import run_files
 from orbitmodel.runs import RunError
 
 SIM = SimConfig(render=False)
@@ -119,6 +120,8 @@ def test_the_planner_flies_the_inferred_body_from_its_run_and_says_how_to_make_o
     assert short.dynamics.body.frames == 2
     with pytest.raises(RunError, match="fit_frames=41"):
         build_pilot("planner", run, planner_config("cpu", body="inferred", fit_frames=41))
+    published = {f.rel for f in run_files(run)}
+    assert {"body/model.safetensors", "body/config.json"} <= published  # orbitmodel push takes the prior along
     again, same = load_inference(run)
     assert same == learned and all(
         torch.equal(a, b) for a, b in zip(again.state_dict().values(), model.state_dict().values())
@@ -137,8 +140,8 @@ def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(probed_run,
     (run / "config.json").write_text(json.dumps(record))
     done = cli.invoke(app, args)
     assert done.exit_code == 0, done.output
-    assert (run / "body" / "inference.pt").is_file() and "held-out prediction error" in done.output
-    card = json.loads((run / "body" / "inference.json").read_text())
+    assert (run / "body" / "model.safetensors").is_file() and "held-out prediction error" in done.output
+    card = json.loads((run / "body" / "config.json").read_text())
     assert card["held_out_episodes"] == 1 and card["config"]["steps"] == 2
     assert card["training_episodes"] == len(flown_episodes(str(tiny_dataset_master))) - 1
     again = cli.invoke(app, args)
