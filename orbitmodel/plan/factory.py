@@ -152,12 +152,10 @@ def body_from_history(run: Path | None, sim: SimConfig, config: PlannerConfig, t
         inference, learned = load_inference(run)
     except FileNotFoundError as err:
         raise RunError(str(err)) from None
-    if config.fit_frames > learned.frames:
-        raise RunError(
-            f"fit_frames={config.fit_frames}: {run}/body was trained on histories of at most {learned.frames} "
-            f"frames; pass --set fit_frames={learned.frames} or fewer"
-        )
-    return InferredBodyDynamics(inference, learned, sim, config.rigid_substeps, timings, config.fit_frames)
+    try:
+        return InferredBodyDynamics(inference, learned, sim, config.rigid_substeps, timings, config.fit_frames)
+    except ValueError as err:  # the history is longer than the prior was trained on
+        raise RunError(f"{run}/body: {err}") from None
 
 
 def pilot_factory(variant: Variant | str):

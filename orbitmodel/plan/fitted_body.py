@@ -49,15 +49,29 @@ def frame_changes(states: torch.Tensor) -> torch.Tensor:
     return torch.cat([u, states[1:, W] - states[:-1, W]], -1)
 
 
+def moments(states: torch.Tensor, actions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The regression's sums over states (n+1, 16) and the n actions (n, 8) between them, in
+    float64: X^T X (9, 9) and X^T Y (9, 6), X = [a_k, 1] and Y the frame changes (zeros for n = 0)."""
+    if len(actions) == 0:
+        return torch.zeros(9, 9, dtype=torch.float64), torch.zeros(9, 6, dtype=torch.float64)
+    X = torch.cat([actions, actions.new_ones(len(actions), 1)], -1).double()  # (n, 9)
+    Y = frame_changes(states.double())  # (n, 6)
+    return X.T @ X, X.T @ Y
+
+
+def ridge_solve(gram: torch.Tensor, cross: torch.Tensor, prior: torch.Tensor, ridge: float) -> torch.Tensor:
+    """B (..., 9, 6) from the sums X^T X (..., 9, 9) and X^T Y (..., 9, 6), pulled towards ``prior``
+    (..., 9, 6) with weight ``ridge`` on every entry; solved in float64."""
+    eye = torch.eye(9, dtype=torch.float64)
+    return torch.linalg.solve(gram.double() + ridge * eye, cross.double() + ridge * prior.double()).float()
+
+
 def fit_response(states: torch.Tensor, actions: torch.Tensor, prior: torch.Tensor, ridge: float) -> torch.Tensor:
     """B (9, 6) fitted to states (n+1, 16) and the n actions (n, 8) between them, pulled towards
     ``prior`` (9, 6) with weight ``ridge`` on every entry (n = 0: the prior)."""
     if len(actions) == 0:
         return prior.clone()
-    X = torch.cat([actions, actions.new_ones(len(actions), 1)], -1).double()  # (n, 9)
-    Y = frame_changes(states.double())  # (n, 6)
-    gram = X.T @ X + ridge * torch.eye(X.shape[1], dtype=X.dtype)
-    return torch.linalg.solve(gram, X.T @ Y + ridge * prior.double()).float()
+    return ridge_solve(*moments(states, actions), prior, ridge)
 
 
 class FittedBodyDynamics(RigidBodyDynamics):
@@ -96,19 +110,20 @@ class FittedBodyDynamics(RigidBodyDynamics):
             self.reset()
         self._states.append(torch.as_tensor(obs["state"], dtype=torch.float32))
 
-    def response(self) -> torch.Tensor:
-        """B (9, 6) fitted to the history (the nominal body's before any frame)."""
+    def history(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """The frames the response is fitted to: states (n+1, 16), the n actions (n, 8) between
+        them, and the design's response (9, 6) at the last frame's fuel."""
         if not self._states:
             raise RuntimeError("observe() a frame before rollout()")
         states = torch.stack(list(self._states))
         prior = nominal_response(self.sim, float(states[-1, FUEL]), self.W)
         taken = len(self._actions)
-        return fit_response(
-            states[len(states) - 1 - taken :],
-            torch.stack(list(self._actions)) if taken else states.new_zeros(0, 8),
-            prior,
-            self.ridge,
-        )
+        actions = torch.stack(list(self._actions)) if taken else states.new_zeros(0, 8)
+        return states[len(states) - 1 - taken :], actions, prior
+
+    def response(self) -> torch.Tensor:
+        """B (9, 6) fitted to the history (the nominal body's before any frame)."""
+        return fit_response(*self.history(), self.ridge)
 
     def responses(self, members: list["FittedBodyDynamics"], sizes: list[int]) -> torch.Tensor:
         """(sum(sizes), 9, 6): each member's fitted response, for each of its candidates."""

@@ -34,7 +34,7 @@ from torch import nn
 from orbitdata.sim.config import SimConfig
 from orbitmodel.kinematics import FUEL, W
 from orbitmodel.plan.body_recipe import InferenceConfig
-from orbitmodel.plan.fitted_body import FittedBodyDynamics, frame_changes, nominal_response
+from orbitmodel.plan.fitted_body import FittedBodyDynamics, frame_changes, moments, nominal_response, ridge_solve
 from orbitmodel.plan.timing import Timings
 
 FOLDER = "body"  # RUN/body: the trained inference
@@ -81,10 +81,8 @@ class BodyInference(nn.Module):
 def statistics(X: torch.Tensor, Y: torch.Tensor, n: torch.Tensor, prior: torch.Tensor, ridge: float):
     """Sums X^T X (N, 9, 9) and X^T Y (N, 9, 6) over n (N,) frames -> their means and the ridge
     solution pulled towards ``prior`` (N, 9, 6) (``fitted_body.fit_response``, batched)."""
-    eye = torch.eye(9, dtype=torch.float64)
-    B = torch.linalg.solve(X.double() + ridge * eye, Y.double() + ridge * prior.double()).float()
     d = n.clamp(min=1)[:, None, None]
-    return X / d, Y / d, B
+    return X / d, Y / d, ridge_solve(X, Y, prior, ridge)
 
 
 class InferredBodyDynamics(FittedBodyDynamics):
@@ -103,27 +101,20 @@ class InferredBodyDynamics(FittedBodyDynamics):
     ):
         frames = config.frames if frames is None else int(frames)
         if not 1 <= frames <= config.frames:
-            raise ValueError(f"fit_frames={frames}: the inferred body was trained on 1 to {config.frames} frames")
+            raise ValueError(
+                f"fit_frames={frames}: the prior was trained on histories of 1 to {config.frames} frames; "
+                f"pass --set fit_frames={config.frames} or fewer"
+            )
         super().__init__(sim, substeps, timings, frames, config.ridge)
         self.inference = inference.eval()
 
     @torch.inference_mode()
     def response(self) -> torch.Tensor:
-        if not self._states:
-            raise RuntimeError("observe() a frame before rollout()")
-        states = torch.stack(list(self._states))
-        fuel = float(states[-1, FUEL])
-        prior = nominal_response(self.sim, fuel, self.W)
-        n = len(self._actions)
-        if n:
-            X = torch.cat([torch.stack(list(self._actions)), torch.ones(n, 1)], -1).double()
-            Y = frame_changes(states[len(states) - 1 - n :].double())
-            gram, cross = X.T @ X, X.T @ Y
-        else:
-            gram, cross = torch.zeros(9, 9), torch.zeros(9, 6)
-        count = torch.tensor([float(n)])
+        states, actions, prior = self.history()
+        gram, cross = moments(states, actions)
+        count = torch.tensor([float(len(actions))])
         g, c, B = statistics(gram[None].float(), cross[None].float(), count, prior[None], self.ridge)
-        return self.inference(g, c, B, prior[None], count, torch.tensor([fuel]))[0]
+        return self.inference(g, c, B, prior[None], count, states[-1:, FUEL][:, 0])[0]
 
 
 class Cuts:
