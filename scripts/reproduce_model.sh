@@ -153,8 +153,10 @@ if [ "${TIER:-static}" = dynamic ]; then
   # the planner both ways (planner-imagined, planner-tracker; planner.json is WAY's, the way chosen
   # on the validation seeds), both ways again with the body fitted to the pilot's history in place
   # of the probe's states (planner-fitted-*) and under the prior learned from the tier's episodes
-  # (planner-inferred-tracker), the oracles (oracle-fitted and oracle-inferred: the true debris and
-  # the fitted or inferred body), the expert, and the Diffusion Policy trained on the tier's expert episodes with the
+  # (planner-inferred-tracker), and with the world model's own dynamics corrected by their misses over
+  # the pilot's history (planner-corrected-tracker), the oracles (oracle-fitted and oracle-inferred: the
+  # true debris and the fitted or inferred body; oracle-learned-dyn-corrected: the true debris and the
+  # corrected dynamics), the expert, and the Diffusion Policy trained on the tier's expert episodes with the
   # flown recipe (preset cpu), flown as the static grid flies it.
   DATA="$OUT/orbit_dynamic64" WMS="$OUT/wm-dyn" GDIR_ROOT="$OUT/dynamic/grid"
   WAY=${WAY:-tracker}
@@ -205,7 +207,11 @@ if [ "${TIER:-static}" = dynamic ]; then
     spawn fly_model planner-inferred-tracker planner --set obstacle_motion=tracker --set body=inferred
     step "dynamic-seed$seed-fitted-2" join
     spawn fly_model oracle-inferred oracle-true --set obstacle_motion=true --set body=inferred
+    # the world model's own dynamics corrected by their misses over the pilot's history (--set body=corrected)
+    spawn fly_model planner-corrected-tracker planner --set obstacle_motion=tracker --set body=corrected
     step "dynamic-seed$seed-inferred" join
+    spawn fly_model oracle-learned-dyn-corrected oracle-learned-dyn --set obstacle_motion=true --set body=corrected
+    step "dynamic-seed$seed-corrected" join
     step "dynamic-seed$seed-expert" fly_data expert
     step "dynamic-seed$seed-diffusion" fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DPD" --preset cpu \
       "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}"
@@ -214,8 +220,8 @@ if [ "${TIER:-static}" = dynamic ]; then
   mkdir -p "$GDIR_ROOT/test"
   POOLED=()
   for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
-    planner-inferred-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn oracle-fitted oracle-inferred \
-    expert diffusion; do
+    planner-inferred-tracker planner-corrected-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn \
+    oracle-learned-dyn-corrected oracle-fitted oracle-inferred expert diffusion; do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
     POOLED+=("$GDIR_ROOT/test/$pilot.json")
   done

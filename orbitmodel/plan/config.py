@@ -26,7 +26,7 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # How the planner expects the obstacles to move over a plan's horizon: "static", "tracker" and
 # "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
-BODIES = ("true", "nominal", "fitted", "inferred")  # the body a rigid-body pilot plans a dynamic-tier episode with
+BODIES = ("true", "nominal", "fitted", "inferred", "corrected")  # the body a pilot plans a dynamic-tier episode with
 HISTORY_BODIES = ("fitted", "inferred")  # the bodies a pilot infers from its own history (no record read)
 
 
@@ -84,9 +84,13 @@ class PlannerConfig:
             "inferred": the fit under a prior a network learned from the tier's training episodes
             (``plan.inferred_body``; ``orbitmodel body RUN DATASET`` trains it into RUN/body, whose
             ridge it flies with). It needs a run, so only pilots flown with one.
-        fit_frames: frames of history the body is fitted to (``body="fitted"``, or "inferred": at most
-            the frames its prior was trained on).
-        fit_ridge: how hard the fitted body is pulled towards the design's (``body="fitted"``).
+            "corrected" (the pilots planning with the world model: planner, oracle-learned-dyn): the
+            world model's own dynamics, each frame's velocity and rate increments corrected by the
+            thrust response of their misses over the last ``fit_frames`` frames (``plan.corrected_body``).
+        fit_frames: frames of history the body is fitted to (``body="fitted"``, "corrected", or
+            "inferred": at most the frames its prior was trained on).
+        fit_ridge: how hard the fitted body is pulled towards the design's (``body="fitted"``), or the
+            correction towards none (``body="corrected"``).
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -138,7 +142,8 @@ class PlannerConfig:
         if self.body not in BODIES:
             raise ValueError(
                 f"body={self.body!r}: use true (the episode's body and fault), nominal (the design's), fitted "
-                "(fitted to the pilot's own history) or inferred (the fit under the prior RUN/body learned)"
+                "(fitted to the pilot's own history), inferred (the fit under the prior RUN/body learned) or "
+                "corrected (the world model's dynamics corrected by their misses over the pilot's history)"
             )
         if self.body == "inferred" and self.fit_ridge != PlannerConfig.fit_ridge:
             raise ValueError("fit_ridge: body=inferred flies the ridge its prior was trained with; drop fit_ridge")
@@ -156,7 +161,7 @@ class PlannerConfig:
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
     own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
-    flies, ``body`` when "true" (the default) and the fit's knobs when no body is fitted (an
+    flies, ``body`` when "true" (the default) and the fit's knobs when nothing is fitted (an
     inferred body keeps ``fit_frames``; its ridge is the inference's), so that
     the flights of the defaults all record the same settings."""
     out = dataclasses.asdict(config)
@@ -168,7 +173,7 @@ def recorded(config: PlannerConfig) -> dict:
         del out["tracker"]
     if config.body == "true":
         del out["body"]
-    if config.body != "fitted":
+    if config.body not in ("fitted", "corrected"):
         del out["fit_ridge"]
         if config.body != "inferred":
             del out["fit_frames"]

@@ -289,11 +289,29 @@ class LearnedDynamics:
                 z_future = lead.model.rollout(z_ctx, planned, lead.history)  # (G K, H / s, D)
             with lead.timings("probe"):
                 start = joined([state0s[i].float().expand(K, -1) for i, K in zip(rows, sizes)])  # (G K, 16)
-                states = lead.probe.per_frame(z_future, start, z_ctx[:, -1], s, planned[:, -steps:])  # (G K, H, 16)
+                group = [members[i] for i in rows]
+                states = lead.read_states(
+                    group, sizes, z_future, start, z_ctx[:, -1], planned[:, -steps:]
+                )  # (G K, H, 16)
             for i, part, z_part in zip(rows, states.split(sizes), z_future.split(sizes)):
                 out[i] = part
                 members[i].imagined_latents = z_part  # (K, H / s, D): what ``plan.imagined`` reads
         return out
+
+    def read_states(
+        self,
+        members: list["LearnedDynamics"],
+        sizes: list[int],
+        z_future: torch.Tensor,
+        start: torch.Tensor,
+        z_last: torch.Tensor,
+        planned: torch.Tensor,
+    ) -> torch.Tensor:
+        """The states (G K, H, 16) of ``members``' candidates (``sizes[i]`` each) from their imagined
+        latents z_future (G K, H / s, D), observed states ``start`` (G K, 16), last context latents
+        z_last (G K, D) and planned steps (G K, H / s, 8 s): the probe's (a subclass may correct them,
+        ``plan.corrected_body``)."""
+        return self.probe.per_frame(z_future, start, z_last, self.step, planned)
 
     def _thrusts_alone(self, state0s: list[torch.Tensor], actions: list[torch.Tensor]) -> list[torch.Tensor]:
         """``rollout_many`` with a probe that reads no latent: one probe call on every episode's

@@ -14,6 +14,7 @@ import numpy as np
 from orbitdata.sim.config import SimConfig
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import HISTORY_BODIES, PlannerConfig, planner_config
+from orbitmodel.plan.corrected_body import CorrectedLearnedDynamics
 from orbitmodel.plan.depth_refit import refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.fitted_body import FittedBodyDynamics, FittedBodyLearnedDynamics
@@ -107,6 +108,16 @@ def build_pilot(
             imagine = config.obstacle_motion == "imagined"
             dynamics = FittedBodyLearnedDynamics(
                 model, probe, body, imagine, timings=timings, history=config.history or None, frames=frames
+            )
+        elif config.body == "corrected":  # the world model's dynamics, corrected by their misses over the history
+            dynamics = CorrectedLearnedDynamics(
+                model,
+                probe,
+                config.fit_frames,
+                config.fit_ridge,
+                timings=timings,
+                history=config.history or None,
+                frames=frames,
             )
         else:
             dynamics = LearnedDynamics(model, probe, timings, history=config.history or None, frames=frames)

@@ -124,6 +124,11 @@ class PlannerPilot(Pilot):
                 f"body={config.body}: only the rigid-body oracles handed the scenario plan with a chosen body "
                 "(oracle-true); drop the body setting"
             )
+        if config.body == "corrected" and not variant.learned_dynamics:
+            raise ValueError(
+                f"body=corrected corrects the world model's dynamics; pilot {variant.value} plans with the "
+                "rigid-body model: fly planner or oracle-learned-dyn with it"
+            )
         if config.body in HISTORY_BODIES and variant == Variant.ORACLE_LEARNED_DYN:
             raise ValueError(
                 f"body={config.body}: oracle-learned-dyn plans with the learned dynamics; the true obstacles with "

@@ -1,0 +1,112 @@
+"""The world model's dynamics corrected by their misses over the pilot's history (``body=corrected``):
+on a craft whose thrusts act through a response the probe does not know, the correction recovers
+that response exactly, each episode its own, and the corrected rollout predicts what the uncorrected
+one misses."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from orbitmodel.model.world_model import WorldModel
+from orbitmodel.plan.config import planner_config, recorded
+from orbitmodel.plan.corrected_body import CorrectedLearnedDynamics
+from orbitmodel.plan.dynamics import LearnedDynamics
+from orbitmodel.plan.factory import build_pilot
+from orbitmodel.probe.integrator import D_V, D_W, INCREMENT_DIM, integrate
+from orbitmodel.probe.model import PhysicsProbe, load_probe
+
+FRAMES, AHEAD = 40, 10
+
+
+@pytest.fixture(scope="module")
+def parts(probed_run):
+    """The tiny run's world model and an untrained probe of its probe's shape: it predicts zero
+    increments whatever the latents (coasting), so a craft driven by ``[a, 1] @ C`` is exactly what
+    it misses."""
+    model = WorldModel.from_pretrained(probed_run)
+    config, _ = load_probe(probed_run, "latent")
+    return model, PhysicsProbe(config).eval()
+
+
+def start_state() -> torch.Tensor:
+    state = torch.zeros(16)
+    state[6], state[10] = 1.0, 1.0  # rot6d: the identity's first two columns
+    state[15] = 1.0  # a full tank
+    return state
+
+
+def driven(C: torch.Tensor, state: torch.Tensor, actions: torch.Tensor, dt: float) -> torch.Tensor:
+    """The states (n, 16) after each of ``actions`` (n, 8): coasting, plus [a, 1] @ C per frame."""
+    inc = torch.zeros(1, len(actions), INCREMENT_DIM)
+    inc[0, :, D_V.start : D_W.stop] = torch.cat([actions, torch.ones(len(actions), 1)], -1) @ C
+    return integrate(state[None], inc, dt, coasting=True)[0]
+
+
+def flown(dynamics, C, rng, frames=FRAMES + 5) -> torch.Tensor:
+    """``dynamics`` after observing ``frames`` frames of the craft ``C`` drives under random
+    thrusts (random latents: this probe reads none); the last state observed."""
+    state, previous = start_state(), None
+    D = dynamics.model.config.latent_dim
+    for frame in range(frames):
+        if frame:
+            previous = rng.uniform(0, 0.3, 8).astype(np.float32)
+            state = driven(C, state, torch.from_numpy(previous)[None], dynamics.probe.config.dt)[0]
+        dynamics.push(torch.as_tensor(rng.normal(size=D), dtype=torch.float32), previous, {"state": state.numpy()})
+    return state
+
+
+def craft(seed: int) -> torch.Tensor:
+    """A response (9, 6): per thruster and a constant (a stuck thruster), velocity and rate changes per frame."""
+    return torch.as_tensor(np.random.default_rng(seed).normal(0, 0.05, (9, 6)), dtype=torch.float32)
+
+
+def test_the_correction_recovers_the_response_the_probe_misses_and_the_rollout_then_predicts_it(parts):
+    model, probe = parts
+    C = craft(1)
+    rng = np.random.default_rng(0)
+    dynamics = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, ridge=1e-9)
+    assert torch.equal(dynamics.correction(), torch.zeros(9, 6))  # nothing seen: the world model's own
+    state = flown(dynamics, C, rng)
+    torch.testing.assert_close(dynamics.correction(), C, atol=2e-4, rtol=1e-3)
+    plans = torch.as_tensor(rng.uniform(0, 0.3, (3, AHEAD, 8)), dtype=torch.float32)
+    truth = torch.stack([driven(C, state, p, probe.config.dt) for p in plans])
+    corrected = dynamics.rollout(state, plans)
+    torch.testing.assert_close(corrected, truth, atol=2e-3, rtol=1e-3)
+    plain = LearnedDynamics(model, probe)
+    plain.push(torch.zeros(model.config.latent_dim), None)
+    missed = (plain.rollout(state, plans) - truth).abs().amax()
+    assert missed > 50 * (corrected - truth).abs().amax()
+
+
+def test_each_episode_of_a_batch_is_corrected_by_its_own_history_and_a_gap_starts_it_again(parts):
+    model, probe = parts
+    lead = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, ridge=1e-9)
+    crafts = [craft(2), craft(3)]
+    members, starts = [lead.fork(), lead.fork()], []
+    for i, (member, C) in enumerate(zip(members, crafts)):
+        starts.append(flown(member, C, np.random.default_rng(10 + i)))
+    plans = [torch.as_tensor(np.random.default_rng(20).uniform(0, 0.3, (2, AHEAD, 8)), dtype=torch.float32)] * 2
+    together = CorrectedLearnedDynamics.rollout_many(members, starts, plans)
+    for member, C, state, plan, states in zip(members, crafts, starts, plans, together):
+        truth = torch.stack([driven(C, state, p, probe.config.dt) for p in plan])
+        torch.testing.assert_close(states, truth, atol=2e-3, rtol=1e-3)
+        torch.testing.assert_close(states, member.rollout(state, plan))
+    members[0].push(torch.zeros(model.config.latent_dim), None, {"state": starts[0].numpy()})  # a gap
+    assert torch.equal(members[0].correction(), torch.zeros(9, 6))
+    assert not torch.equal(members[1].correction(), torch.zeros(9, 6))
+
+
+def test_the_pilots_that_plan_with_the_world_model_fly_it_and_the_others_are_told(probed_run):
+    config = planner_config("cpu", body="corrected", fit_frames=20, horizon=10, samples=4)
+    pilot, _ = build_pilot("planner", probed_run, config)
+    assert isinstance(pilot.dynamics, CorrectedLearnedDynamics) and pilot.dynamics.fit_frames == 20
+    oracle, _ = build_pilot(
+        "oracle-learned-dyn", probed_run, planner_config("cpu", obstacle_motion="true", body="corrected")
+    )
+    assert isinstance(oracle.dynamics, CorrectedLearnedDynamics)
+    assert recorded(config)["body"] == "corrected"
+    assert (recorded(config)["fit_frames"], recorded(config)["fit_ridge"]) == (20, 1e-5)
+    with pytest.raises(ValueError, match="fly planner or oracle-learned-dyn"):
+        build_pilot("oracle-true", None, planner_config("cpu", obstacle_motion="true", body="corrected"))
