@@ -7,9 +7,10 @@ Flies the dynamic tier's grid (3, 7 and 10 pieces of debris at 1 and 3 m/s, ``--
 setting, grid ``--seed``: a validation seed) with ``--set body=corrected``, keeping every frame
 the pilots are shown (state, latent) and the thrusts they then command: ``plan.pilot.plan_batch``,
 through which every flight plans, is wrapped to keep them. Then, at every 5th frame t where the body
-turns at most 3 rad/s, each model is shown the frames before t (at most 40, the flown history)
-and rolls the thrusts flown after t out: the run's world model and probe (``LearnedDynamics``)
-and the same corrected (``CorrectedLearnedDynamics``). Their body rate 1, 5, 10 and 25 frames
+turns at most 3 rad/s, each model is shown the frames before t (at most 40: the correction is
+then fitted to the 31 steps of 5 frames that end in them, where a flying pilot fits the 40 steps
+that end in its last 40 frames) and rolls the thrusts flown after t out: the run's world model
+and probe (``LearnedDynamics``) and the same corrected (``CorrectedLearnedDynamics``). Their body rate 1, 5, 10 and 25 frames
 ahead is set against the flown one (mean absolute error over the 3 axes), beside holding the rate.
 ``benchmarks/check_fitted_body.py --learned`` scores the same models on the expert's held-out
 episodes. Prints figures; asserts nothing.

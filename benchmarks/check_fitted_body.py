@@ -11,7 +11,8 @@ thruster. References: the design's body (no history: the fit's prior) and the bo
 constant. ``--inferred`` scores the fit under RUN/body's learned prior at each ``--frames`` up to the
 history it was trained on too (``orbitmodel body``; ``--set body=inferred``). ``--learned`` scores the
 run's world model and probe (the planner's dynamics, the history it flies with, shown the encoded
-frames) and the same corrected by their misses over each ``--frames`` (``--set body=corrected``). Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
+frames) and the same corrected by their misses in the ``--frames`` it is shown (``--set body=corrected``;
+a step's misses need the world model's context before it, so 40 frames hold 31 steps of 5 frames). Prints figures; asserts nothing. The flights with the fit are ``--set body=fitted``.
 """
 
 from __future__ import annotations

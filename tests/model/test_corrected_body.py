@@ -110,3 +110,33 @@ def test_the_pilots_that_plan_with_the_world_model_fly_it_and_the_others_are_tol
     assert (recorded(config)["fit_frames"], recorded(config)["fit_ridge"]) == (20, 1e-5)
     with pytest.raises(ValueError, match="fly planner or oracle-learned-dyn"):
         build_pilot("oracle-true", None, planner_config("cpu", obstacle_motion="true", body="corrected"))
+
+
+def test_each_step_is_imagined_from_the_context_latents_before_it_and_the_thrusts_flown_through_it(parts):
+    model, probe = parts
+
+    class Watched:  # the world model, keeping what each rollout is handed
+        def __init__(self):
+            self.calls = []
+
+        def __getattr__(self, name):
+            return getattr(model, name)
+
+        def rollout(self, z, actions, history):
+            self.calls.append((z.clone(), actions.clone(), history))
+            return model.rollout(z, actions, history)
+
+    dynamics = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES)
+    watched = dynamics.model = Watched()
+    s, m, D = dynamics.step, dynamics.history, model.config.latent_dim
+    latents = [torch.full((D,), float(j)) for j in range(m * s + 2)]
+    thrusts = [np.full(8, j / 100, np.float32) for j in range(m * s + 2)]  # thrusts[j] led to frame j
+    for j, z in enumerate(latents):
+        dynamics.push(z, thrusts[j] if j else None, {"state": start_state().numpy()})
+    assert len(watched.calls) == 2  # one step ended at each frame from m s on
+    for t, (z, actions, history) in zip((m * s, m * s + 1), watched.calls):
+        first = t - m * s
+        torch.testing.assert_close(z[0], torch.stack(latents[first:t:s]))  # frames t - m s .. t - s
+        flown = torch.from_numpy(np.stack(thrusts[first + 1 : t + 1]))  # the thrusts into frames after the first
+        torch.testing.assert_close(actions[0], flown.reshape(m, 8 * s))
+        assert history == m
