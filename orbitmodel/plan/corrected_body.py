@@ -20,7 +20,6 @@ corrected (a hand-built fit on the learned model's errors, not a learned inferen
 
 from __future__ import annotations
 
-import copy
 from collections import deque
 
 import numpy as np
@@ -58,11 +57,6 @@ class CorrectedLearnedDynamics(LearnedDynamics):
         self._seen: deque[tuple[torch.Tensor, torch.Tensor]] = deque(maxlen=reach)  # (z (D,), state (16,))
         self._taken: deque[torch.Tensor] = deque(maxlen=reach - 1)  # (8,) the thrusts into each frame
         self._sums: deque[tuple[torch.Tensor, torch.Tensor]] = deque(maxlen=self.fit_frames)  # per step: X^T X, X^T Y
-
-    def fork(self) -> "CorrectedLearnedDynamics":
-        twin = copy.copy(self)
-        twin.reset()
-        return twin
 
     def push(self, z: torch.Tensor, previous_action: np.ndarray | None, obs: dict | None = None) -> None:
         if obs is None:
