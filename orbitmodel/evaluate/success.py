@@ -46,6 +46,7 @@ PLANNER_WAYS = {
     "body": "true",
     "fit_frames": 40,
     "fit_ridge": 1e-5,
+    "fit_steps": 1,
 }
 
 

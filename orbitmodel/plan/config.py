@@ -91,6 +91,8 @@ class PlannerConfig:
             "inferred": at most the frames its prior was trained on).
         fit_ridge: how hard the fitted body is pulled towards the design's (``body="fitted"``), or the
             correction towards none (``body="corrected"``).
+        fit_steps: ``body="corrected"``: the imagined steps fitted, each with a correction of its
+            own (1: the first step's misses correct every step).
     """
 
     mppi: MPPIConfig = field(default_factory=MPPIConfig)
@@ -115,6 +117,7 @@ class PlannerConfig:
     body: str = "true"
     fit_frames: int = 40
     fit_ridge: float = 1e-5
+    fit_steps: int = 1
 
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
@@ -147,6 +150,12 @@ class PlannerConfig:
             )
         if self.body == "inferred" and self.fit_ridge != PlannerConfig.fit_ridge:
             raise ValueError("fit_ridge: body=inferred flies the ridge its prior was trained with; drop fit_ridge")
+        if self.fit_steps < 1:
+            raise ValueError(f"fit_steps={self.fit_steps}: give at least 1 imagined step")
+        if self.fit_steps != 1 and self.body != "corrected":
+            raise ValueError(
+                f"fit_steps={self.fit_steps} sets body=corrected's fit; add --set body=corrected or drop it"
+            )
         if self.fit_frames < 1 or self.fit_ridge <= 0:
             raise ValueError(
                 f"fit_frames={self.fit_frames} and fit_ridge={self.fit_ridge}: give at least 1 frame and a positive ridge"
@@ -162,7 +171,8 @@ def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
     own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
     flies, ``body`` when "true" (the default) and the fit's knobs when nothing is fitted (an
-    inferred body keeps ``fit_frames``; its ridge is the inference's), so that
+    inferred body keeps ``fit_frames``; its ridge is the inference's; ``fit_steps`` is
+    the corrected body's only), so that
     the flights of the defaults all record the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
@@ -173,6 +183,8 @@ def recorded(config: PlannerConfig) -> dict:
         del out["tracker"]
     if config.body == "true":
         del out["body"]
+    if config.body != "corrected":
+        del out["fit_steps"]
     if config.body not in ("fitted", "corrected"):
         del out["fit_ridge"]
         if config.body != "inferred":

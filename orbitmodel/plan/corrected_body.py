@@ -16,6 +16,11 @@ world model's own dynamics). A candidate's rollout adds ``[a, 1] @ C`` to every 
 increments before they are integrated. Thrust patterns the history never excited keep the world
 model's response. The latents are the world model's; only the states the cost reads are
 corrected (a hand-built fit on the learned model's errors, not a learned inference).
+
+With ``fit_steps`` L > 1 each frame imagines L steps, from the context that ends L steps back and
+the thrusts flown since, and fits one correction per imagined step, C_1 .. C_L, for misses that
+depend on how far a step lies from the last real latent. A rollout's j-th step is corrected by
+C_j (C_L beyond the L-th).
 """
 
 from __future__ import annotations
@@ -37,12 +42,13 @@ class CorrectedLearnedDynamics(LearnedDynamics):
     response of their misses over the last ``fit_frames`` frames (module docstring). Needs a probe
     that predicts every frame (``substeps`` = the world model's ``frame_step``) and reads latents."""
 
-    def __init__(self, model, probe, fit_frames: int = 40, ridge: float = 1e-5, **kwargs):
-        if fit_frames < 1 or ridge <= 0:
+    def __init__(self, model, probe, fit_frames: int = 40, ridge: float = 1e-5, fit_steps: int = 1, **kwargs):
+        if fit_frames < 1 or ridge <= 0 or fit_steps < 1:
             raise ValueError(
-                f"fit_frames={fit_frames} and fit_ridge={ridge}: give at least 1 frame and a positive ridge"
+                f"fit_frames={fit_frames}, fit_ridge={ridge} and fit_steps={fit_steps}: give at least 1 frame, "
+                "a positive ridge and at least 1 step"
             )
-        self.fit_frames, self.ridge = int(fit_frames), float(ridge)
+        self.fit_frames, self.ridge, self.fit_steps = int(fit_frames), float(ridge), int(fit_steps)
         super().__init__(model, probe, **kwargs)
         config = getattr(probe, "config", None)
         if config is None or config.substeps != self.step or not self.reads_latent:
@@ -53,10 +59,13 @@ class CorrectedLearnedDynamics(LearnedDynamics):
 
     def reset(self) -> None:
         super().reset()
-        reach = self.history * self.step + 1  # frames from the oldest context latent to a step's end
+        reach = (self.history + self.fit_steps - 1) * self.step + 1  # oldest context latent .. the L-th step's end
         self._seen: deque[tuple[torch.Tensor, torch.Tensor]] = deque(maxlen=reach)  # (z (D,), state (16,))
         self._taken: deque[torch.Tensor] = deque(maxlen=reach - 1)  # (8,) the thrusts into each frame
-        self._sums: deque[tuple[torch.Tensor, torch.Tensor]] = deque(maxlen=self.fit_frames)  # per step: X^T X, X^T Y
+        # per imagined step j: the regression sums X^T X, X^T Y of its last fit_frames fits
+        self._sums: list[deque[tuple[torch.Tensor, torch.Tensor]]] = [
+            deque(maxlen=self.fit_frames) for _ in range(self.fit_steps)
+        ]
 
     def push(self, z: torch.Tensor, previous_action: np.ndarray | None, obs: dict | None = None) -> None:
         if obs is None:
@@ -65,35 +74,50 @@ class CorrectedLearnedDynamics(LearnedDynamics):
         if previous_action is not None and self._seen:
             self._taken.append(torch.as_tensor(previous_action, dtype=torch.float32))
         self._seen.append((z, torch.as_tensor(obs["state"], dtype=torch.float32)))
-        if len(self._seen) == self._seen.maxlen:
-            self._sums.append(self.step_misses())
+        n = (len(self._seen) - 1) // self.step - self.history + 1  # imagined steps the history holds
+        if n >= 1:
+            for sums, step in zip(self._sums, self.step_misses(n)):
+                sums.append(step)
 
     @torch.inference_mode()
-    def step_misses(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """The regression sums (float64) X^T X (9, 9) and X^T Y (9, 6) of the step that ended at the
-        newest frame: X = [a, 1] per frame, Y the recorded minus the probe's dv and dw."""
+    def step_misses(self, n: int = 1) -> list[tuple[torch.Tensor, torch.Tensor]]:
+        """Per imagined step j = 1..n of the rollout that ends at the newest frame (its context
+        the m latents n steps back, its thrusts the flown ones), the regression sums (float64)
+        X^T X (9, 9) and X^T Y (9, 6): X = [a, 1] per frame of the step, Y the recorded minus the
+        probe's dv and dw."""
         s, m = self.step, self.history
-        z = torch.stack([pair[0] for pair in self._seen])  # (m s + 1, D)
-        states = torch.stack([pair[1] for pair in list(self._seen)[-s - 1 :]])  # (s + 1, 16): frames t - s .. t
-        taken = torch.stack(list(self._taken))  # (m s, 8)
-        z_ctx = z[: m * s : s][None]  # (1, m, D): frames t - m s .. t - s, every s-th
-        planned = taken.reshape(1, m, 8 * s)  # the m-1 actions inside the context, then the step's
+        seen = list(self._seen)[-((m + n - 1) * s + 1) :]  # frames t - (m+n-1) s .. t
+        z = torch.stack([pair[0] for pair in seen])
+        states = torch.stack([pair[1] for pair in seen[-n * s - 1 :]])  # (n s + 1, 16): frames t - n s .. t
+        taken = torch.stack(list(self._taken)[-(m + n - 1) * s :])  # ((m+n-1) s, 8) the thrusts into them
+        z_ctx = z[: m * s : s][None]  # (1, m, D): frames t - (m+n-1) s .. t - n s, every s-th
+        planned = taken.reshape(1, m + n - 1, 8 * s)  # the m-1 actions inside the context, then the n steps'
         with self.timings("correct"):
-            z_next = self.model.rollout(z_ctx, planned, m)  # (1, 1, D)
-            probe = self.probe.step_increments(z_next, z_ctx[:, -1], planned[:, -1:])[0, :, CORRECTED]  # (s, 6)
+            z_next = self.model.rollout(z_ctx, planned, m)  # (1, n, D)
+            probe = self.probe.step_increments(z_next, z_ctx[:, -1], planned[:, -n:])[0, :, CORRECTED]  # (n s, 6)
             config = self.probe.config
-            recorded = increments_of(states[None], config.dt, config.coasting)[0, :, CORRECTED]  # (s, 6)
-        thrust = taken[-s:]
-        X = torch.cat([thrust, thrust.new_ones(s, 1)], -1).double()  # (s, 9)
-        return X.T @ X, X.T @ (recorded - probe).double()
+            recorded = increments_of(states[None], config.dt, config.coasting)[0, :, CORRECTED]  # (n s, 6)
+        thrust = taken[-n * s :]
+        X = torch.cat([thrust, thrust.new_ones(n * s, 1)], -1).double()  # (n s, 9)
+        Y = (recorded - probe).double()
+        return [(X[j : j + s].T @ X[j : j + s], X[j : j + s].T @ Y[j : j + s]) for j in range(0, n * s, s)]
+
+    def corrections(self) -> list[torch.Tensor]:
+        """Per imagined step, C (9, 6): the thrust response of the probe's misses (a step not
+        fitted yet takes the one before it's; zeros before the first full step). Each is the
+        solve's own tensor: its memory layout sets the reduction order of the rollout's matmul."""
+        out, last = [], torch.zeros(9, 6)
+        for sums in self._sums:
+            if sums:
+                gram = torch.stack([g for g, _ in sums]).sum(0)
+                cross = torch.stack([c for _, c in sums]).sum(0)
+                last = ridge_solve(gram, cross, torch.zeros(9, 6), self.ridge)
+            out.append(last)
+        return out
 
     def correction(self) -> torch.Tensor:
-        """C (9, 6): the thrust response of the probe's misses (zeros before the first full step)."""
-        if not self._sums:
-            return torch.zeros(9, 6)
-        gram = torch.stack([g for g, _ in self._sums]).sum(0)
-        cross = torch.stack([c for _, c in self._sums]).sum(0)
-        return ridge_solve(gram, cross, torch.zeros(9, 6), self.ridge)
+        """C (fit_steps, 9, 6): :meth:`corrections` stacked."""
+        return torch.stack(self.corrections())
 
     def read_states(self, members, sizes, z_future, start, z_last, planned) -> torch.Tensor:
         """The probe's increments with each member's correction added, integrated from ``start``."""
@@ -101,7 +125,12 @@ class CorrectedLearnedDynamics(LearnedDynamics):
         inc = self.probe.step_increments(z_future, z_last, planned)  # (G K, H, 10)
         thrust = planned.reshape(len(planned), inc.shape[1], -1)  # (G K, H, 8) each frame's thrusts
         X = torch.cat([thrust, thrust.new_ones(*thrust.shape[:-1], 1)], -1)  # (G K, H, 9)
-        C = joined([m.correction()[None].expand(k, -1, -1) for m, k in zip(members, sizes)])  # (G K, 9, 6)
         inc = inc.clone()
-        inc[..., CORRECTED] += X @ C
+        if self.fit_steps == 1:  # one correction for every frame
+            C = joined([m.corrections()[0][None].expand(k, -1, -1) for m, k in zip(members, sizes)])  # (G K, 9, 6)
+            inc[..., CORRECTED] += X @ C
+        else:
+            which = (torch.arange(inc.shape[1]) // self.step).clamp(max=self.fit_steps - 1)  # each frame's step
+            C = joined([m.correction()[which][None].expand(k, -1, -1, -1) for m, k in zip(members, sizes)])
+            inc[..., CORRECTED] += torch.einsum("khi,khio->kho", X, C)  # C (G K, H, 9, 6)
         return integrate(start, inc, config.dt, config.coasting)

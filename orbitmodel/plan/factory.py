@@ -115,6 +115,7 @@ def build_pilot(
                 probe,
                 config.fit_frames,
                 config.fit_ridge,
+                config.fit_steps,
                 timings=timings,
                 history=config.history or None,
                 frames=frames,

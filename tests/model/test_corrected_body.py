@@ -11,7 +11,7 @@ import torch
 
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import planner_config, recorded
-from orbitmodel.plan.corrected_body import CorrectedLearnedDynamics
+from orbitmodel.plan.corrected_body import CORRECTED, CorrectedLearnedDynamics
 from orbitmodel.plan.dynamics import LearnedDynamics
 from orbitmodel.plan.factory import build_pilot
 from orbitmodel.probe.integrator import D_V, D_W, INCREMENT_DIM, integrate
@@ -67,9 +67,9 @@ def test_the_correction_recovers_the_response_the_probe_misses_and_the_rollout_t
     C = craft(1)
     rng = np.random.default_rng(0)
     dynamics = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, ridge=1e-9)
-    assert torch.equal(dynamics.correction(), torch.zeros(9, 6))  # nothing seen: the world model's own
+    assert torch.equal(dynamics.correction(), torch.zeros(1, 9, 6))  # nothing seen: the world model's own
     state = flown(dynamics, C, rng)
-    torch.testing.assert_close(dynamics.correction(), C, atol=2e-4, rtol=1e-3)
+    torch.testing.assert_close(dynamics.correction()[0], C, atol=2e-4, rtol=1e-3)
     plans = torch.as_tensor(rng.uniform(0, 0.3, (3, AHEAD, 8)), dtype=torch.float32)
     truth = torch.stack([driven(C, state, p, probe.config.dt) for p in plans])
     corrected = dynamics.rollout(state, plans)
@@ -94,8 +94,47 @@ def test_each_episode_of_a_batch_is_corrected_by_its_own_history_and_a_gap_start
         torch.testing.assert_close(states, truth, atol=2e-3, rtol=1e-3)
         torch.testing.assert_close(states, member.rollout(state, plan))
     members[0].push(torch.zeros(model.config.latent_dim), None, {"state": starts[0].numpy()})  # a gap
-    assert torch.equal(members[0].correction(), torch.zeros(9, 6))
-    assert not torch.equal(members[1].correction(), torch.zeros(9, 6))
+    assert torch.equal(members[0].correction(), torch.zeros(1, 9, 6))
+    assert not torch.equal(members[1].correction(), torch.zeros(1, 9, 6))
+
+
+class StepBiased(PhysicsProbe):
+    """A probe whose increments drift with the imagined step: ``bias[j]`` (6,) is added to the
+    velocity and rate increments of every frame of the j-th step it reads (the last for later ones)."""
+
+    bias = torch.zeros(1, 6)
+
+    def step_increments(self, z_future, z_last=None, actions=None):
+        inc = super().step_increments(z_future, z_last, actions).clone()
+        s = inc.shape[1] // z_future.shape[1]
+        for j in range(z_future.shape[1]):
+            inc[:, j * s : (j + 1) * s, CORRECTED] += self.bias[min(j, len(self.bias) - 1)]
+        return inc
+
+
+def test_a_correction_per_imagined_step_undoes_misses_that_grow_with_the_step(parts):
+    model, plain_probe = parts
+    probe = StepBiased(plain_probe.config).eval()
+    probe.load_state_dict(plain_probe.state_dict())
+    steps = 3
+    probe.bias = torch.as_tensor(np.random.default_rng(4).normal(0, 0.02, (steps, 6)), dtype=torch.float32)
+    C = craft(5)
+    dynamics = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, ridge=1e-9, fit_steps=steps)
+    s = dynamics.step
+    state = flown(dynamics, C, np.random.default_rng(6), frames=FRAMES + (dynamics.history + steps) * s)
+    fitted = dynamics.correction()  # (steps, 9, 6): step j's bias row absorbs the probe's drift there
+    for j in range(steps):
+        want = C.clone()
+        want[-1] -= probe.bias[j]
+        torch.testing.assert_close(fitted[j], want, atol=2e-4, rtol=1e-3)
+    rng = np.random.default_rng(7)
+    plans = torch.as_tensor(rng.uniform(0, 0.3, (3, (steps + 1) * s, 8)), dtype=torch.float32)  # past the last fit
+    truth = torch.stack([driven(C, state, p, probe.config.dt) for p in plans])
+    corrected = dynamics.rollout(state, plans)
+    torch.testing.assert_close(corrected, truth, atol=2e-3, rtol=1e-3)
+    first_only = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, ridge=1e-9)
+    flown(first_only, C, np.random.default_rng(6), frames=FRAMES + (dynamics.history + steps) * s)
+    assert (first_only.rollout(state, plans) - truth).abs().amax() > 20 * (corrected - truth).abs().amax()
 
 
 def test_the_pilots_that_plan_with_the_world_model_fly_it_and_the_others_are_told(probed_run):
@@ -107,7 +146,15 @@ def test_the_pilots_that_plan_with_the_world_model_fly_it_and_the_others_are_tol
     )
     assert isinstance(oracle.dynamics, CorrectedLearnedDynamics)
     assert recorded(config)["body"] == "corrected"
-    assert (recorded(config)["fit_frames"], recorded(config)["fit_ridge"]) == (20, 1e-5)
+    assert (recorded(config)["fit_frames"], recorded(config)["fit_ridge"], recorded(config)["fit_steps"]) == (
+        20,
+        1e-5,
+        1,
+    )
+    stepped, _ = build_pilot("planner", probed_run, planner_config("cpu", body="corrected", fit_steps=3, horizon=10))
+    assert stepped.dynamics.fit_steps == 3
+    with pytest.raises(ValueError, match="add --set body=corrected"):
+        planner_config("cpu", body="fitted", fit_steps=3)
     with pytest.raises(ValueError, match="fly planner or oracle-learned-dyn"):
         build_pilot("oracle-true", None, planner_config("cpu", obstacle_motion="true", body="corrected"))
 
