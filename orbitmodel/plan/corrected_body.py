@@ -17,10 +17,10 @@ increments before they are integrated. Thrust patterns the history never excited
 model's response. The latents are the world model's; only the states the cost reads are
 corrected (a hand-built fit on the learned model's errors, not a learned inference).
 
-With ``fit_steps`` L > 1 each frame imagines L steps, from the context that ends L steps back and
-the thrusts flown since, and fits one correction per imagined step, C_1 .. C_L, for misses that
-depend on how far a step lies from the last real latent. A rollout's j-th step is corrected by
-C_j (C_L beyond the L-th).
+With ``fit_steps`` L > 1 the step that ended at each frame is also imagined as the j-th step
+(j = 2..L) from the context that ends j steps back and the thrusts flown since, and each j gets a
+correction of its own, C_1 .. C_L, fitted like C: for misses that depend on how far a step lies
+from the last real latent. A rollout's j-th step is corrected by C_j (C_L beyond the L-th).
 """
 
 from __future__ import annotations
@@ -81,26 +81,35 @@ class CorrectedLearnedDynamics(LearnedDynamics):
 
     @torch.inference_mode()
     def step_misses(self, n: int = 1) -> list[tuple[torch.Tensor, torch.Tensor]]:
-        """Per imagined step j = 1..n of the rollout that ends at the newest frame (its context
-        the m latents n steps back, its thrusts the flown ones), the regression sums (float64)
-        X^T X (9, 9) and X^T Y (9, 6): X = [a, 1] per frame of the step, Y the recorded minus the
-        probe's dv and dw."""
+        """Per imagined step j = 1..n, the regression sums (float64) X^T X (9, 9) and X^T Y (9, 6) of
+        the step that ended at the newest frame t, imagined as the j-th step from the context that
+        ends j steps back and the thrusts flown since: X = [a, 1] per frame of that step, Y the
+        recorded minus the probe's dv and dw. Every step's fit ends at the newest frame."""
         s, m = self.step, self.history
         seen = list(self._seen)[-((m + n - 1) * s + 1) :]  # frames t - (m+n-1) s .. t
         z = torch.stack([pair[0] for pair in seen])
-        states = torch.stack([pair[1] for pair in seen[-n * s - 1 :]])  # (n s + 1, 16): frames t - n s .. t
+        states = torch.stack([pair[1] for pair in seen[-s - 1 :]])  # (s + 1, 16): frames t - s .. t
         taken = torch.stack(list(self._taken)[-(m + n - 1) * s :])  # ((m+n-1) s, 8) the thrusts into them
-        z_ctx = z[: m * s : s][None]  # (1, m, D): frames t - (m+n-1) s .. t - n s, every s-th
-        planned = taken.reshape(1, m + n - 1, 8 * s)  # the m-1 actions inside the context, then the n steps'
+        if n == 1:  # one context, the m latents every s-th frame from t - m s
+            z_ctx = z[: m * s : s][None]  # (1, m, D)
+            planned = taken.reshape(1, m, 8 * s)  # the m-1 actions inside the context, then the step's
+        else:  # row j-1: the context that ends j steps back, its thrusts to t, zeros after (never read)
+            last = (m + n - 1) * s  # index of frame t
+            z_ctx = torch.stack([z[last - (m + j - 1) * s : last - j * s + 1 : s] for j in range(1, n + 1)])
+            planned = taken.new_zeros(n, m - 1 + n, 8 * s)
+            for j in range(1, n + 1):
+                flown = taken[last - (m + j - 1) * s :]  # (m-1+j) s thrusts
+                planned[j - 1, : m - 1 + j] = flown.reshape(m - 1 + j, 8 * s)
         with self.timings("correct"):
-            z_next = self.model.rollout(z_ctx, planned, m)  # (1, n, D)
-            probe = self.probe.step_increments(z_next, z_ctx[:, -1], planned[:, -n:])[0, :, CORRECTED]  # (n s, 6)
+            z_next = self.model.rollout(z_ctx, planned, m)  # (n, n, D): imagining is causal in the thrusts
+            probe = self.probe.step_increments(z_next, z_ctx[:, -1], planned[:, -n:])[..., CORRECTED]  # (n, n s, 6)
+            probe = torch.stack([probe[j, j * s : (j + 1) * s] for j in range(n)])  # (n, s, 6): each row's step to t
             config = self.probe.config
-            recorded = increments_of(states[None], config.dt, config.coasting)[0, :, CORRECTED]  # (n s, 6)
-        thrust = taken[-n * s :]
-        X = torch.cat([thrust, thrust.new_ones(n * s, 1)], -1).double()  # (n s, 9)
-        Y = (recorded - probe).double()
-        return [(X[j : j + s].T @ X[j : j + s], X[j : j + s].T @ Y[j : j + s]) for j in range(0, n * s, s)]
+            recorded = increments_of(states[None], config.dt, config.coasting)[0, :, CORRECTED]  # (s, 6)
+        thrust = taken[-s:]
+        X = torch.cat([thrust, thrust.new_ones(s, 1)], -1).double()  # (s, 9)
+        gram = X.T @ X
+        return [(gram, X.T @ (recorded - probe[j]).double()) for j in range(n)]
 
     def corrections(self) -> list[torch.Tensor]:
         """Per imagined step, C (9, 6): the thrust response of the probe's misses (a step not
