@@ -187,3 +187,35 @@ def test_each_step_is_imagined_from_the_context_latents_before_it_and_the_thrust
         flown = torch.from_numpy(np.stack(thrusts[first + 1 : t + 1]))  # the thrusts into frames after the first
         torch.testing.assert_close(actions[0], flown.reshape(m, 8 * s))
         assert history == m
+
+
+def test_every_imagined_step_is_fitted_to_the_newest_step_from_its_own_context_once(parts):
+    model, probe = parts
+    calls = []
+
+    class Watched:
+        def __getattr__(self, name):
+            return getattr(model, name)
+
+        def rollout(self, z, actions, history):
+            calls.append((z.clone(), actions.clone()))
+            return model.rollout(z, actions, history)
+
+    dynamics = CorrectedLearnedDynamics(model, probe, fit_frames=FRAMES, fit_steps=2)
+    dynamics.model = Watched()
+    s, m, D = dynamics.step, dynamics.history, model.config.latent_dim
+    frames = (m + 1) * s + 3
+    latents = [torch.full((D,), float(j)) for j in range(frames)]
+    thrusts = [np.full(8, j / 100, np.float32) for j in range(frames)]  # thrusts[j] led to frame j
+    for j, z in enumerate(latents):
+        dynamics.push(z, thrusts[j] if j else None, {"state": start_state().numpy()})
+    # the first step is fitted at every frame from m s on, the second from (m + 1) s on: once each
+    assert [len(sums) for sums in dynamics._sums] == [frames - m * s, frames - (m + 1) * s]
+    z, actions = calls[-1]
+    t = frames - 1
+    assert z.shape[0] == 2  # one row per imagined step, each ending at frame t
+    for row, j in enumerate((1, 2)):
+        first = t - (m + j - 1) * s
+        torch.testing.assert_close(z[row], torch.stack(latents[first : t - j * s + 1 : s]))
+        flown = torch.from_numpy(np.stack(thrusts[first + 1 : t + 1])).reshape(m - 1 + j, 8 * s)
+        torch.testing.assert_close(actions[row, : m - 1 + j], flown)
