@@ -90,16 +90,13 @@ class CorrectedLearnedDynamics(LearnedDynamics):
         z = torch.stack([pair[0] for pair in seen])
         states = torch.stack([pair[1] for pair in seen[-s - 1 :]])  # (s + 1, 16): frames t - s .. t
         taken = torch.stack(list(self._taken)[-(m + n - 1) * s :])  # ((m+n-1) s, 8) the thrusts into them
-        if n == 1:  # one context, the m latents every s-th frame from t - m s
-            z_ctx = z[: m * s : s][None]  # (1, m, D)
-            planned = taken.reshape(1, m, 8 * s)  # the m-1 actions inside the context, then the step's
-        else:  # row j-1: the context that ends j steps back, its thrusts to t, zeros after (never read)
-            last = (m + n - 1) * s  # index of frame t
-            z_ctx = torch.stack([z[last - (m + j - 1) * s : last - j * s + 1 : s] for j in range(1, n + 1)])
-            planned = taken.new_zeros(n, m - 1 + n, 8 * s)
-            for j in range(1, n + 1):
-                flown = taken[last - (m + j - 1) * s :]  # (m-1+j) s thrusts
-                planned[j - 1, : m - 1 + j] = flown.reshape(m - 1 + j, 8 * s)
+        # row j-1: the context that ends j steps back, its thrusts to t, zeros after (never read)
+        last = (m + n - 1) * s  # index of frame t
+        z_ctx = torch.stack([z[last - (m + j - 1) * s : last - j * s + 1 : s] for j in range(1, n + 1)])
+        planned = taken.new_zeros(n, m - 1 + n, 8 * s)
+        for j in range(1, n + 1):
+            flown = taken[last - (m + j - 1) * s :]  # (m-1+j) s thrusts
+            planned[j - 1, : m - 1 + j] = flown.reshape(m - 1 + j, 8 * s)
         with self.timings("correct"):
             z_next = self.model.rollout(z_ctx, planned, m)  # (n, n, D): imagining is causal in the thrusts
             probe = self.probe.step_increments(z_next, z_ctx[:, -1], planned[:, -n:])[..., CORRECTED]  # (n, n s, 6)
