@@ -5,7 +5,9 @@ own in this process and with a pilot of its own (``pilot.fork()``: the per-episo
 the planner's MPPI nominal, point memory and latent history, or the policy's chunk queue). At
 every control step one ``act_batch`` call serves all the live episodes, so the world model (or
 the policy's denoiser) sees N times the batch. An episode that ends drops out; the next grid
-episode, in grid order, takes its slot. Every episode draws from its own seeded generators, so
+episode, in grid order, takes its slot at the next step on the pilot's ``board_every`` clock (the
+policy's chunk length: every episode then samples its chunks at the same steps, in one pass,
+instead of a few at each step). Every episode draws from its own seeded generators, so
 its flight does not depend on the batch it flew in apart from the float reduction order of the
 batched calls; with N = 1 it is exactly the unbatched flight (``orbitdata.fly.rollout.fly_episode``).
 
@@ -75,8 +77,10 @@ def fly_lockstep(
     """Fly ``episodes`` with up to ``batch`` at a time, calling ``landed`` as each one ends.
 
     ``pilot`` flies the first slot and its forks the others; a pilot without ``act_batch`` acts
-    for each episode in turn. ``image_quality`` as ``fly_episode``'s; ``keep_frames``: hand
-    ``landed`` each episode's rendered frames (for videos)."""
+    for each episode in turn. A freed slot takes the next episode at the next step that is a
+    multiple of the pilot's ``board_every`` (1 when it has none), so that episodes whose pilots
+    work on a period (the policy's chunks) keep in phase. ``image_quality`` as ``fly_episode``'s;
+    ``keep_frames``: hand ``landed`` each episode's rendered frames (for videos)."""
     n = min(batch, len(episodes))
     if n < 1:
         return
@@ -85,11 +89,14 @@ def fly_lockstep(
     pilots = [pilot] + [pilot.fork() for _ in range(n - 1)]
     envs: list[CubeSatEnv] = []
     act_batch = getattr(type(pilot), "act_batch", None)
+    every = max(1, int(getattr(pilot, "board_every", 1)))
     queue = iter(enumerate(episodes))
+    waiting = True  # episodes are left to board
     flights: list[tuple[int, Flight, list | None] | None] = [None] * n
 
     def board(slot: int) -> None:
         """The next grid episode takes ``slot`` (one that ends at once lands at once)."""
+        nonlocal waiting
         for index, (obstacles, speed, _, seed) in queue:
             frames: list[np.ndarray] | None = [] if keep_frames else None
             sink = (lambda t, rgb, *_: frames.append(rgb)) if keep_frames else None
@@ -101,15 +108,22 @@ def fly_lockstep(
                 return
             landed(index, flight.result(), pilots[slot], frames)
         flights[slot] = None
+        waiting = False
 
     try:
-        for slot in range(n):
-            envs.append(make_env())
-            board(slot)
+        envs.extend(make_env() for _ in range(n))
+        step = 0  # the batch's clock
         while True:
+            if step % every == 0:  # free slots board, in slot order: grid order
+                for slot in range(n):
+                    if flights[slot] is None and waiting:
+                        board(slot)
             live = [slot for slot in range(n) if flights[slot] is not None]
             if not live:
-                break
+                if not waiting:
+                    break
+                step += every - step % every  # nothing flies before the next boarding
+                continue
             views = [flights[slot][1].view() for slot in live]
             if act_batch is not None:
                 actions = act_batch([pilots[slot] for slot in live], views)
@@ -121,7 +135,8 @@ def fly_lockstep(
                 index, flight, frames = flights[slot]
                 if flight.done:
                     landed(index, flight.result(), pilots[slot], frames)
-                    board(slot)
+                    flights[slot] = None
+            step += 1
     finally:
         for env in envs:
             env.close()

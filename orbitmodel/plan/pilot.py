@@ -175,6 +175,12 @@ class PlannerPilot(Pilot):
         one call per model for all of them (``plan.batch``)."""
         return plan_batch(pilots, observations)
 
+    @property
+    def board_every(self) -> int:
+        """Steps between replans: lockstep flights start episodes on this clock, so that the
+        episodes in a batch replan at the same steps."""
+        return self.config.replan_every
+
     def fork(self) -> "PlannerPilot":
         """A pilot for another episode flown beside this one: the same models, depth source,
         settings and timings; its own MPPI nominal, point memory, latent history and generator."""

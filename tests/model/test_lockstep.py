@@ -129,6 +129,37 @@ def test_an_episode_that_ends_mid_batch_keeps_its_own_frames():
     ] == frames
 
 
+def test_the_policy_boards_episodes_on_its_chunk_clock(policy_run, monkeypatch):
+    """Episodes that end mid-chunk (after 28, 53 and 40 frames, beside longer ones) free their slot
+    until the next chunk step, so every denoising pass serves every live episode (staggered
+    starts would split each pass into a few episodes per step); each episode flies as alone."""
+    from orbitmodel.baselines.diffusion import pilot as policy_pilot
+
+    req = dataclasses.replace(
+        request(policy_run, batch=3), obstacles=(5,), speeds=(2.0,), episodes=6, seed=2, max_steps=60
+    )
+    alone = records(req)
+    assert [e["frames"] for e in alone] == [28, 53, 60, 60, 60, 40]  # ends mid-chunk (chunks of 8)
+    events = []
+    act_batch, sample_chunks = policy_pilot.DiffusionPilot.act_batch, policy_pilot.sample_chunks
+    monkeypatch.setattr(
+        policy_pilot.DiffusionPilot,
+        "act_batch",
+        staticmethod(
+            lambda pilots, observations: events.append(["live", len(pilots)]) or act_batch(pilots, observations)
+        ),
+    )
+    monkeypatch.setattr(
+        policy_pilot, "sample_chunks", lambda pilots: events.append(["due", len(pilots)]) or sample_chunks(pilots)
+    )
+    batched = records(dataclasses.replace(req, batch=3))
+    assert [e["outcome"] for e in batched] == [e["outcome"] for e in alone]
+    assert [e["frames"] for e in batched] == [e["frames"] for e in alone]
+    passes = [(live[1], due[1]) for live, due in zip(events, events[1:]) if live[0] == "live" and due[0] == "due"]
+    assert passes and all(due == live for live, due in passes)
+    assert {live for live, _ in passes} == {1, 2, 3}  # slots freed and boarded as the grid went on
+
+
 def test_a_grid_on_ray_is_the_local_grid(probed_run, monkeypatch):
     """Chunks of one batch each (four Ray tasks on a local Ray instance): the same records as the
     local flight with the same batch size, episode for episode."""

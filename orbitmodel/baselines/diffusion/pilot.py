@@ -102,6 +102,12 @@ class DiffusionPilot(Pilot):
         chunks = dict(zip(due, sample_chunks([pilots[i] for i in due]))) if due else {}
         return [p._execute(t, chunks.get(i)) for i, (p, t) in enumerate(zip(pilots, steps))]
 
+    @property
+    def board_every(self) -> int:
+        """Steps between chunks: lockstep flights start episodes on this clock, so that every
+        episode in a batch samples its chunks at the same steps, in one denoising pass."""
+        return self.action_steps
+
     def fork(self) -> "DiffusionPilot":
         """A pilot for another episode flown beside this one: the same policy and sampling, its
         own observation history, chunks and generator."""
