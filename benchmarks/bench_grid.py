@@ -1,7 +1,7 @@
 """Grid throughput: the unbatched flight against lockstep batches (``eval closed-loop --batch N``).
 
     python benchmarks/bench_grid.py [--run RUN] [--policy RUN] [--batches 4,8,16] [--episodes 10]
-        [--seed 2] [--max-steps 300] [--work DIR] [--no-policy] [--one-process]
+        [--seed 2] [--max-steps 300] [--work DIR] [--no-policy | --no-planner] [--one-process]
 
 Flies the same 40 episodes (1 and 3 obstacles at 1 and 2 m/s, ``--episodes`` each, grid seed
 ``--seed``: a validation seed) with the planner (preset cpu) and with the Diffusion Policy
@@ -150,6 +150,7 @@ def main() -> None:
     ap.add_argument("--run", type=Path, help="a Stage I run with its probe (default: an untrained cpu-step5 run)")
     ap.add_argument("--policy", type=Path, help="a Diffusion Policy run (default: an untrained cpu policy run)")
     ap.add_argument("--no-policy", action="store_true", help="fly the planner only")
+    ap.add_argument("--no-planner", action="store_true", help="fly the policy only")
     ap.add_argument("--one-process", action="store_true", help="also fly each batch in one process on two threads")
     ap.add_argument("--batches", default="4,8,16", help="batch sizes N, comma-separated")
     ap.add_argument("--episodes", type=int, default=10, help="episodes per setting (4 settings)")
@@ -159,14 +160,17 @@ def main() -> None:
         "--work", type=Path, help="folder for the untrained runs and the flights (default: a temporary one)"
     )
     args = ap.parse_args()
+    if args.no_policy and args.no_planner:
+        ap.error("--no-policy and --no-planner leave nothing to fly: give one of them")
     args.batches = [int(n) for n in args.batches.split(",")]
     os.environ.setdefault("MUJOCO_GL", "egl")
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-grid-"))
     work.mkdir(parents=True, exist_ok=True)
     wm, dp = args.run, args.policy
-    if wm is None or (dp is None and not args.no_policy):
+    if (wm is None and not args.no_planner) or (dp is None and not args.no_policy):
         built_wm, built_dp = untrained_runs(work, policy=dp is None and not args.no_policy)
-        untrained = [what for what, given in (("cpu-step5 world model and probe", wm), ("cpu policy", dp)) if not given]
+        flown = (("cpu-step5 world model and probe", wm, args.no_planner), ("cpu policy", dp, args.no_policy))
+        untrained = [what for what, given, skipped in flown if not (given or skipped)]
         print(
             f"untrained {' and '.join(untrained)} (one training step, in {work}): throughput only, outcomes meaningless"
         )
@@ -174,7 +178,8 @@ def main() -> None:
     print(
         f"{os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f} at the start); every flight one after another"
     )
-    compare("planner (preset cpu: K 32, H 50, history 2)", "planner", wm, args, work)
+    if not args.no_planner:
+        compare("planner (preset cpu: K 32, H 50, history 2)", "planner", wm, args, work)
     if not args.no_policy:
         compare("diffusion policy (flight preset cpu)", "diffusion", dp, args, work)
 

@@ -5,6 +5,8 @@ one misses."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -20,13 +22,20 @@ from orbitmodel.probe.model import PhysicsProbe, load_probe
 FRAMES, AHEAD = 40, 10
 
 
-@pytest.fixture(scope="module")
-def parts(probed_run):
-    """The tiny run's world model and an untrained probe of its probe's shape: it predicts zero
-    increments whatever the latents (coasting), so a craft driven by ``[a, 1] @ C`` is exactly what
-    it misses."""
+@pytest.fixture(scope="module", params=[1, 5], ids=["step1", "step5"])
+def parts(request, probed_run):
+    """A world model and an untrained probe of its run's probe's shape: it predicts zero increments
+    whatever the latents (coasting), so a craft driven by ``[a, 1] @ C`` is exactly what it misses.
+    The tiny run's model steps 1 frame per prediction; the flown recipe's 5, so the second is the
+    tiny sizes stepping 5 frames (untrained: these tests read its rollouts, not their quality), with
+    a probe that predicts every frame: frames and imagined steps then differ."""
     model = WorldModel.from_pretrained(probed_run)
     config, _ = load_probe(probed_run, "latent")
+    if request.param > 1:
+        torch.manual_seed(0)
+        model = WorldModel(replace(model.config, frame_step=request.param)).eval()
+        config = replace(config, substeps=request.param, action_dim=config.action_dim and 8 * request.param)
+    assert model.config.frame_step == config.substeps == request.param
     return model, PhysicsProbe(config).eval()
 
 
