@@ -40,15 +40,16 @@ def run(*command: str, **kwargs) -> None:
     subprocess.run([str(c) for c in command], check=True, stdout=subprocess.DEVNULL, **kwargs)
 
 
-def untrained_runs(work: Path, policy: bool) -> tuple[Path, Path | None]:
-    """A small 64 px dataset, a cpu-step5 run and probe after one step each, and a cpu policy after one."""
+def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path | None, Path | None]:
+    """A small 64 px dataset, a cpu-step5 run and probe after one step each (``planner``), and a cpu
+    policy after one (``policy``)."""
     data, wm, dp = work / "orbit64", work / "wm-cpu-step5", work / "dp-cpu"
     quiet = {"stderr": subprocess.DEVNULL}
     if not (data / "meta" / "info.json").is_file():
         run(BIN / "orbitdata", "generate", data, "--episodes", "8", "--image-size", "64", "--workers", "1", **quiet)
-    if not (wm / "model.safetensors").is_file():
+    if planner and not (wm / "model.safetensors").is_file():
         run(BIN / "orbitmodel", "train", data, "--preset", "cpu-step5", "--out", wm, "--max-steps", "1", **quiet)
-    if not (wm / "probe" / "model.safetensors").is_file():
+    if planner and not (wm / "probe" / "model.safetensors").is_file():
         run(
             BIN / "orbitmodel",
             "probe",
@@ -79,7 +80,7 @@ def untrained_runs(work: Path, policy: bool) -> tuple[Path, Path | None]:
             "--overwrite",
             **quiet,
         )
-    return wm, dp if policy else None
+    return wm if planner else None, dp if policy else None
 
 
 def fly(run_dir: Path, out: Path, args, parts: list[tuple[str, int]], batch: int) -> tuple[float, float, dict]:
@@ -168,7 +169,9 @@ def main() -> None:
     work.mkdir(parents=True, exist_ok=True)
     wm, dp = args.run, args.policy
     if (wm is None and not args.no_planner) or (dp is None and not args.no_policy):
-        built_wm, built_dp = untrained_runs(work, policy=dp is None and not args.no_policy)
+        built_wm, built_dp = untrained_runs(
+            work, policy=dp is None and not args.no_policy, planner=wm is None and not args.no_planner
+        )
         flown = (("cpu-step5 world model and probe", wm, args.no_planner), ("cpu policy", dp, args.no_policy))
         untrained = [what for what, given, skipped in flown if not (given or skipped)]
         print(

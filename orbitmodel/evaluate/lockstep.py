@@ -91,7 +91,7 @@ def fly_lockstep(
     act_batch = getattr(type(pilot), "act_batch", None)
     every = max(1, int(getattr(pilot, "board_every", 1)))
     queue = iter(enumerate(episodes))
-    waiting = True  # episodes are left to board
+    waiting = True  # False once board has found the grid's episodes all boarded
     flights: list[tuple[int, Flight, list | None] | None] = [None] * n
 
     def board(slot: int) -> None:
@@ -107,8 +107,7 @@ def fly_lockstep(
                 flights[slot] = (index, flight, frames)
                 return
             landed(index, flight.result(), pilots[slot], frames)
-        flights[slot] = None
-        waiting = False
+        waiting = False  # the slot stays free
 
     try:
         envs.extend(make_env() for _ in range(n))

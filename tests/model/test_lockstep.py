@@ -1,6 +1,7 @@
 """Lockstep flights (``eval closed-loop --batch N``) and grids on Ray (``--executor ray``): a batch of
 one is the unbatched flight, a batch of N flies the same episodes, an episode that ends mid-batch
-keeps its own frames, and a Ray grid is the local grid."""
+keeps its own frames, the policy's episodes board on its chunk clock, and a Ray grid is the local
+grid."""
 
 from __future__ import annotations
 
@@ -138,7 +139,7 @@ def test_the_policy_boards_episodes_on_its_chunk_clock(policy_run, monkeypatch):
     req = dataclasses.replace(
         request(policy_run, batch=3), obstacles=(5,), speeds=(2.0,), episodes=6, seed=2, max_steps=60
     )
-    alone = records(req)
+    alone = records(dataclasses.replace(req, batch=1))
     assert [e["frames"] for e in alone] == [28, 53, 60, 60, 60, 40]  # ends mid-chunk (chunks of 8)
     events = []
     act_batch, sample_chunks = policy_pilot.DiffusionPilot.act_batch, policy_pilot.sample_chunks
