@@ -16,8 +16,8 @@ from orbitdata import schema as S
 MM_PER_M = 1000.0  # depth PNG unit: millimetres
 DEPTH_MAX_MM = 65535
 
-# The "up" filter suits depth (smooth surfaces, large empty areas): measured at 224 px it is
-# 4x faster than OpenCV's default adaptive filtering and gives smaller files. The name is what
+# The "up" filter suits depth (smooth surfaces, large empty areas): at 224 px it is
+# faster than OpenCV's default adaptive filtering and gives smaller files. The name is what
 # meta/info.json records; the encoder takes OpenCV's flag for it from this table.
 PNG_FILTER = "up"
 _CV2_PNG_FILTERS = {"up": cv2.IMWRITE_PNG_FILTER_UP}

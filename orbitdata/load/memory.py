@@ -1,8 +1,8 @@
 """Output buffers for decoded batches: shared memory in DataLoader workers, recycled otherwise.
 
 A batch of 64 windows of 20 frames at 224 px is 190 MB. Fresh memory costs page faults and
-zeroing of the order of decoding the JPEGs (measured on a 2-core VM: ~100 ms to first write
-190 MB of new memory, ~13 ms to write it again). So in the process that trains, a large
+zeroing of the order of decoding the JPEGs, several times what writing the same memory again
+costs. So in the process that trains, a large
 buffer goes back to a small pool once nothing references it any more (the batch and every
 view of it are gone) and a later batch of the same shape reuses it.
 

@@ -93,7 +93,7 @@ class CameraRenderer:
 
     def rebind(self, model: mujoco.MjModel, camera: str) -> None:
         """Render ``model`` from now on, keeping the GL context: making one that holds a texture costs
-        ~75 ms on llvmpipe, more than an episode's frames at 64 px. Needs :meth:`can_render`."""
+        more on llvmpipe than an episode's frames at 64 px. Needs :meth:`can_render`."""
         if not self.can_render(model):
             raise ValueError("the model's rendering assets differ from the ones this renderer's context holds")
         self._model = model

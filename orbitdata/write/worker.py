@@ -41,8 +41,7 @@ def _env(config: GenerationConfig) -> CubeSatEnv:
     env = _ENV_CACHE.get(key)
     if env is None:
         # One llvmpipe thread per worker: workers already use every core, and Mesa's
-        # rasteriser threads would only contend (measured: 1.0 vs 1.8 ms per 224 px frame
-        # on 2 busy cores). Mesa reads this when the first GL context is made.
+        # rasteriser threads would only contend and slow each frame down. Mesa reads this when the first GL context is made.
         os.environ.setdefault("LP_NUM_THREADS", "1")
         _ENV_CACHE.clear()
         env = _ENV_CACHE[key] = CubeSatEnv(config.sim, config.scenario)
