@@ -74,7 +74,7 @@ def extends(old: dict, new: dict) -> bool:
         loop = {**train.get("loop", {}), "max_steps": None}
         return {**config, "preset": {**preset, "train": {**train, "loop": loop}}}
 
-    return 0 < max_steps_of(old) < max_steps_of(new) and without_steps(old) == without_steps(new)
+    return 0 < max_steps_of(old) < max_steps_of(new) and same_config(without_steps(old), without_steps(new))
 
 
 class RunError(ValueError):
@@ -160,6 +160,22 @@ def run_config(stage: str, **parts) -> dict:
     return json.loads(json.dumps({"stage": stage, **parts}))
 
 
+def same_config(a: dict, b: dict) -> bool:
+    """Whether two run configs are one run's: equal, once every string that names an existing local
+    path is read as the folder it names (``toy``, ``./toy`` and ``/home/me/toy`` alike)."""
+
+    def resolved(value):
+        if isinstance(value, dict):
+            return {k: resolved(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [resolved(v) for v in value]
+        if isinstance(value, str) and value and os.path.exists(value):
+            return os.path.realpath(value)
+        return value
+
+    return a == b or resolved(a) == resolved(b)
+
+
 class RunDir:
     """One stage's folder (a Stage I run, a policy run, or a sub-run such as ``probe/``)."""
 
@@ -205,8 +221,11 @@ class RunDir:
             old = self.read_config()
             if upgrade is not None:
                 old = json.loads(json.dumps(upgrade(old)))
-            if old != config and not (extend and extends(old, config)):
-                changed = sorted(k for k in set(old) | set(config) if old.get(k) != config.get(k))
+            same = same_config(old, config)
+            if not same and not (extend and extends(old, config)):
+                changed = sorted(
+                    k for k in set(old) | set(config) if not same_config({k: old.get(k)}, {k: config.get(k)})
+                )
                 if extend:
                     raise RunError(
                         f"--extend: {self.path} may differ from this run in a larger --max-steps only "
@@ -214,13 +233,13 @@ class RunDir:
                     )
                 raise RunError(
                     f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
-                    "pass --overwrite to replace it, or choose another --out"
+                    "pass --overwrite to replace it, or train into another folder"
                 )
             if not resume:
                 raise RunError(
                     f"{self.path} already holds this run; pass --resume to continue it, or --overwrite to start again"
                 )
-            if extend and old == config and (self.path / WEIGHTS).exists():
+            if extend and same and (self.path / WEIGHTS).exists():
                 raise RunError(
                     f"--extend: {self.path} is already trained to its --max-steps {max_steps_of(config)}; "
                     "give a larger --max-steps to train it on"
@@ -229,7 +248,12 @@ class RunDir:
             raise RunError(f"--resume: {self.path} holds no run to resume; drop --resume to start one")
         elif self.path.exists() and any(p.name not in ("probe",) for p in self.path.iterdir()):
             raise RunError(f"{self.path} is not empty and not an orbitmodel run; choose another --out")
-        if extend and existing.exists() and (self.path / WEIGHTS).exists() and self.read_config() != config:
+        if (
+            extend
+            and existing.exists()
+            and (self.path / WEIGHTS).exists()
+            and not same_config(self.read_config(), config)
+        ):
             (self.path / WEIGHTS).unlink()  # the old end's weights (its last checkpoint keeps them): the run is
             # unfinished again until it reaches the new end
         self.path.mkdir(parents=True, exist_ok=True)

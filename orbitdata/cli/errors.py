@@ -34,12 +34,16 @@ def usage(message: str) -> None:
 
 
 @contextlib.contextmanager
-def usage_errors(*errors: type[Exception]):
-    """Inside: a library's verdict on flag values (a config's ValueError by default) is a usage error."""
+def usage_errors(*errors: type[Exception], flags: dict[str, str] | None = None):
+    """Inside: a library's verdict on flag values (a config's ValueError by default) is a usage error.
+    ``flags`` maps a config field to the flag that set it (``{"image_size": "--image-size"}``): a
+    verdict on that field then names the flag."""
     try:
         yield
     except errors or (ValueError,) as exc:
-        usage(str(exc))
+        message = str(exc)
+        field = next((f for f in flags or {} if message.startswith(f"{f} ")), None)
+        usage(f"{flags[field]}: {message}" if field else message)
 
 
 def friendly(func):

@@ -61,7 +61,7 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, min=0, help="Root seed of the grid."),
         json_out: Path = typer.Option(None, "--json", help="Write the table as JSON here."),
         video: Path = typer.Option(None, help="Write a video of each episode to this folder."),
-        video_format: VideoFormat = typer.Option(VideoFormat.mp4, help="Video format."),
+        video_format: VideoFormat = typer.Option(None, help="Video format (with --video).  [default: mp4]"),
         render: bool = typer.Option(
             None,
             "--render/--no-render",
@@ -98,13 +98,18 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
         from rich.table import Table
 
-        from orbitdata.fly.grid import check_grid, fly_grid, grid_report, pooled
+        from orbitdata.fly.grid import check_grid, check_report_path, fly_grid, grid_report, pooled
         from orbitdata.fly.registry import pilot_factory
         from orbitdata.scenario.config import STATIC
         from orbitdata.schema import outcomes
 
-        with usage_errors():
+        with usage_errors(flags={"image_size": "--image-size"} if image_size is not None else None):
             check_grid(obstacles, speeds, episodes)
+            check_report_path(json_out)
+            if video is not None and render is False:
+                raise ValueError(f"--video {video} records the camera: drop --no-render")
+            if video is None and video_format is not None:
+                raise ValueError(f"--video-format {video_format.value} without --video: give --video FOLDER too")
             cfg = load_config(config, tier)
             if image_size is not None:
                 import dataclasses
@@ -124,7 +129,7 @@ def register(app: typer.Typer) -> None:
         if video is not None:
             from orbitdata.viz.flight import FlightVideos
 
-            recorder = FlightVideos(video, f".{video_format.value}")
+            recorder = FlightVideos(video, f".{(video_format or VideoFormat.mp4).value}")
         total = len(obstacles) * len(speeds) * episodes
         console = Console(stderr=True)
         with Progress(

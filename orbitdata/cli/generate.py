@@ -71,7 +71,7 @@ def register(app: typer.Typer) -> None:
             min=0.0,
             max=1.0,
             show_default=str(DatasetConfig.test_fraction),
-            help="Share of each level in the test split, below 1.",
+            help="Share of each level in the test split: at least 0, below 1.",
         ),
         image_size: int = typer.Option(
             None,
@@ -101,7 +101,10 @@ def register(app: typer.Typer) -> None:
         from orbitdata.write.generate import UnusableOutput
         from orbitdata.write.generate import generate as run
 
-        with usage_errors():
+        given = {"image_size": image_size, "test_fraction": test_fraction, "episodes": episodes}
+        with usage_errors(flags={f: "--" + f.replace("_", "-") for f, v in given.items() if v is not None}):
+            if ray_address and executor.value != "ray":
+                raise ValueError(f"--ray-address {ray_address} is for Ray tasks: add --executor ray, or drop it")
             cfg = load_config(config, tier)
             flags = {
                 "episodes": episodes,

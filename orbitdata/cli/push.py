@@ -37,6 +37,11 @@ def register(app: typer.Typer) -> None:
         with usage_errors(ValueError, FileNotFoundError, NotADirectoryError):
             folder = dataset_folder(folder.expanduser())
             check_repo_id(repo_id)
+            if repo_id.count("/") != 1:
+                raise ValueError(
+                    f"{repo_id!r}: give the repo as NAMESPACE/NAME, e.g. user/orbit_planner "
+                    "(the form `load_windows` and `orbitmodel train` read it back by)"
+                )
             options = PushOptions(private=private, revision=revision, message=message, force=force)
 
         report = validate(folder, ValidateOptions(quick=True))

@@ -56,6 +56,11 @@ def register(app: typer.Typer) -> None:
 
         with usage_errors(FileNotFoundError, NotADirectoryError):
             folder = local_folder(folder.expanduser(), repo_ok=False)
+            if not any((folder / part).exists() for part in ("meta", "data", "episodes")):
+                raise FileNotFoundError(
+                    f"{folder} is not an orbitdata dataset (no meta/, data/ or episodes/): "
+                    "give the folder `orbitdata generate` wrote"
+                )
             if json_out is not None and not json_out.expanduser().parent.is_dir():
                 raise FileNotFoundError(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
         options = ValidateOptions(quick=quick, workers=workers, max_per_check=max_per_check)

@@ -85,17 +85,26 @@ def build_index(episodes: Episodes, config: WindowConfig, keep: np.ndarray | Non
     )
 
 
+class NoWindow(ValueError):
+    """Every selected episode is shorter than one window; ``longest`` is the longest one's frames."""
+
+    def __init__(self, message: str, longest: int):
+        super().__init__(message)
+        self.longest = longest
+
+
 def check_windows(lengths: np.ndarray, config: WindowConfig, where: str) -> None:
-    """Raise when episodes of these lengths give no window: every one is shorter than a window."""
+    """Raise :class:`NoWindow` when episodes of these lengths give no window: every one is shorter than a window."""
     lengths = np.asarray(lengths, dtype=np.int64)
     if (lengths >= config.min_frames).any():
         return
     longest = int(lengths.max()) if len(lengths) else 0
     fix = "use a shorter context/horizon" + ("" if config.pad else ", or pad=True to pad the horizon")
-    raise ValueError(
+    raise NoWindow(
         f"a window of {config.min_frames} real frames (context {config.context} + horizon {config.horizon}"
         f"{', horizon padded' if config.pad else ''}) is longer than every selected episode of {where} "
-        f"(longest: {longest} frames); {fix}"
+        f"(longest: {longest} frames); {fix}",
+        longest,
     )
 
 

@@ -70,6 +70,14 @@ def scan(root: Path) -> list[str]:
     return sorted(out)
 
 
+def drop_broken_links(layout: Layout, sink: Sink) -> None:
+    """Links to nothing are reported and left out of ``layout.present`` (a listed one is then missing)."""
+    broken = [rel for rel in layout.present if not (layout.root / rel).exists()]
+    for rel in broken:
+        sink.add(C.UNREADABLE, "a link to nothing: restore its target, or delete it", rel)
+    layout.present = [rel for rel in layout.present if rel not in set(broken)]
+
+
 def load_json(root: Path, rel: str, sink: Sink) -> dict | None:
     path = root / rel
     if not path.exists():

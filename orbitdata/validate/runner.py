@@ -44,6 +44,7 @@ from orbitdata.validate.checks_structure import (
     check_hash,
     check_presence,
     check_version,
+    drop_broken_links,
     load_card,
     load_json,
     open_footer,
@@ -139,6 +140,7 @@ def validate(
     sink = Sink(options.max_per_check)
     report = Report(str(root), "quick" if options.quick else "full", sink, workers=workers)
     layout = Layout(root, present=scan(root))
+    drop_broken_links(layout, sink)
     layout.info = load_json(root, S.INFO_PATH, sink)
     layout.stats = load_json(root, S.STATS_PATH, sink)
     layout.card = load_card(root, sink)

@@ -10,16 +10,19 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # help texts mean their brackets: [viz], [z, dz], [default: ...]
 )
 eval_app = typer.Typer(
-    help="Measure a trained run: latent rollouts, the physics probe, closed-loop flight.", no_args_is_help=True
+    help="Measure a trained run: latent rollouts, the physics probe, closed-loop flight.",
+    no_args_is_help=True,
+    rich_markup_mode=None,
 )
 app.add_typer(eval_app, name="eval")
 
 
 @app.command("presets")
 def presets() -> None:
-    """List the world-model presets (sizes, frame step, probe recipe) and the planner presets."""
+    """List the world-model presets (sizes, frame step, probe recipe), the planner presets and the policy flight presets."""
     from orbitmodel.baselines.diffusion.sampling import DEFAULT_FLIGHT, POLICY_FLIGHTS
     from orbitmodel.config import PRESETS
     from orbitmodel.model.world_model import WorldModel
@@ -76,8 +79,12 @@ _register()
 
 
 def main() -> None:
+    import os
+
     from orbitdata.cli.errors import run_app
 
+    # The loader's `datasets` prints a bar per split it indexes; the commands print their own progress.
+    os.environ.setdefault("HF_DATASETS_DISABLE_PROGRESS_BARS", "1")
     run_app(app)
 
 

@@ -100,6 +100,7 @@ def closed_loop(
 
     from orbitdata.cli.options import key_values
     from orbitdata.config import GenerationConfig
+    from orbitdata.fly.grid import check_report_path
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
 
     options = key_values(set_ or [], "--set", "samples=32")
@@ -120,6 +121,7 @@ def closed_loop(
         batch=batch,
         executor=executor.value,
     )
+    check_report_path(json_out)
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     report = loop.report(_fly_with_progress(loop, json_out))
     print_table(report, episodes)
@@ -205,6 +207,8 @@ def figure6(
     """Plot the paper's Figure 6: success per setting and on average, one bar per pilot."""
     from orbitmodel.evaluate.figure6 import plot_figure6, read_report
 
+    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
+        fail(f"--out {out}: give a .png, .pdf or .svg file")
     path = plot_figure6([read_report(p) for p in results], out, title)
     typer.echo(f"wrote {path}")
 
@@ -290,7 +294,7 @@ def factors(
         try:
             rows.append((path.stem, breakdown(read_report(path))))
         except ValueError as err:
-            fail(f"{path}: {err}")
+            fail(str(err) if str(err).startswith(str(path)) else f"{path}: {err}")
     typer.echo(factor_tables(rows), nl=False)
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)
@@ -305,9 +309,10 @@ def flips(
 ) -> None:
     """Count the episodes whose outcome differs between two flights of one grid (e.g. --threads 1
     and 2, or two machines): a planner whose figures hold flips few."""
+    from orbitmodel.evaluate.figure6 import read_json
     from orbitmodel.evaluate.success import outcome_flips
 
-    result = outcome_flips(json.loads(first.read_text()), json.loads(second.read_text()))
+    result = outcome_flips(read_json(first), read_json(second), (str(first), str(second)))
     typer.echo(
         f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
         f"{result['successes'][1]})"
@@ -323,4 +328,5 @@ def flips(
             f"  {f['obstacles']} obstacles, {f['speed']:g} m/s, episode {f['episode']}: {f['first']} -> {f['second']}"
         )
     if json_out is not None:
+        json_out.parent.mkdir(parents=True, exist_ok=True)
         json_out.write_text(json.dumps(result, indent=2) + "\n")

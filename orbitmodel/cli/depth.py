@@ -7,7 +7,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.data import EVAL_SPLITS
 from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig
 
 _D = DepthRefitConfig()
@@ -67,6 +68,8 @@ def depth(
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
     closed-loop` uses RUN/depth when it is there (`--set depth_head=stage1` for the Stage I head).
     """
+    if eval_split not in EVAL_SPLITS:
+        fail(f"--eval-split {eval_split}: choose one of {', '.join(EVAL_SPLITS)}")
     recipe = dict(epochs=epochs, lr=lr, near_weight=near_weight, near_m=near_m, seed=seed, eval_split=eval_split)
     if imagined:
         cfg = ImaginedDepthConfig(windows=frames or _I.windows, test_windows=test_frames or _I.test_windows, **recipe)

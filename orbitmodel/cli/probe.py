@@ -171,7 +171,8 @@ def probe(
         overwrite=overwrite,
         variant=variant.value,
     )
-    label = f"the {kind} probe" if variant.value == FLOWN else f"the {variant.value} probe"
+    label = "the state-only probe" if state_only else f"the probe {variant.value}"
+    label += " (the run's own)" if variant.value == FLOWN and not state_only else ""
     echo_trained(label, train_probe(req), probe_folder(run, kind, variant.value))
 
 

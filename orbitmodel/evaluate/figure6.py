@@ -20,19 +20,35 @@ def read_report(path: str | Path) -> dict:
     path = Path(path)
     if path.suffix == ".jsonl":
         return report_from_episodes(path)
+    report = read_json(path)
     try:
-        report = json.loads(path.read_text())
         settings = report["settings"]
         for s in settings:
             s["obstacles"], s["speed"], s["episodes"], s["success"]  # noqa: B018 (presence check)
         report["pilot"]
-    except FileNotFoundError:
-        raise
-    except (json.JSONDecodeError, KeyError, TypeError) as err:
-        raise ValueError(
-            f"{path} is not a grid result (orbitdata fly --json / orbitmodel eval closed-loop "
-            f"--json): {type(err).__name__} {err}"
-        ) from None
+    except KeyError as err:
+        raise ValueError(f"{path} is not a grid result (it has no {err} key): {GIVE}") from None
+    except TypeError:
+        raise ValueError(f"{path} is not a grid result (its settings are not a list of tables): {GIVE}") from None
+    return report
+
+
+GIVE = "give the --json table of orbitdata fly or orbitmodel eval closed-loop"
+
+
+def read_json(path: str | Path) -> dict:
+    """A JSON file that should hold a grid result, or a ValueError / FileNotFoundError naming it."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path} is a folder: {GIVE}, a file")
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist: {GIVE}")
+    try:
+        report = json.loads(path.read_text())
+    except json.JSONDecodeError as err:
+        raise ValueError(f"{path} is not JSON ({err}): {GIVE}") from None
+    if not isinstance(report, dict):
+        raise ValueError(f"{path} is not a grid result (not a JSON object): {GIVE}")
     return report
 
 

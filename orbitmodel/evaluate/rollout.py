@@ -27,6 +27,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import load_windows
+from orbitdata.load.index import NoWindow
 from orbitmodel.data import load_model_windows, read_dataset_meta, split_selection
 from orbitmodel.model.world_model import WorldModel, effective_rank
 from orbitmodel.plan.config import MAX_RANGE
@@ -85,9 +86,24 @@ def evaluate_rollout(run: str | Path, dataset: str, cfg: RolloutEvalConfig = Rol
     stats_mean = _depth_mean(dataset)
     step = model.config.frame_step  # context and horizon count the model's steps of `step` frames
     split, episodes = split_selection(cfg.split, model.run.validation)
-    windows = load_model_windows(
-        dataset, step, split=split, episodes=episodes, context=cfg.context, horizon=cfg.horizon, columns=list(COLUMNS)
-    )
+    try:
+        windows = load_model_windows(
+            dataset,
+            step,
+            split=split,
+            episodes=episodes,
+            context=cfg.context,
+            horizon=cfg.horizon,
+            columns=list(COLUMNS),
+        )
+    except NoWindow as err:  # say it in the flag's steps, with the largest horizon that fits
+        most = err.longest // step - cfg.context
+        raise ValueError(
+            f"--horizon {cfg.horizon}: {cfg.context} context and {cfg.horizon} horizon steps of {step} "
+            f"frame{'s' * (step > 1)} are longer than every episode of the {cfg.split} split of {dataset} "
+            f"(longest: {err.longest} frames); "
+            + (f"give --horizon {most} or less" if most >= 1 else "no horizon fits this split")
+        ) from None
     chosen = _select(
         len(windows),
         cfg.windows,

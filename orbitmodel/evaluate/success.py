@@ -182,7 +182,7 @@ def pool_seeds(reports: list[dict]) -> dict:
     }
 
 
-def outcome_flips(a: dict, b: dict) -> dict:
+def outcome_flips(a: dict, b: dict, names: tuple[str, str] = ("the first report", "the second report")) -> dict:
     """Episodes of two flights of one grid (the same pilot and seeds, e.g. on 1 and 2 torch threads,
     or on two machines) whose outcome differs: the robustness of a figure to a tiny perturbation.
     Episodes are matched by seed; both reports need their ``episodes``. Beside the flips, how much
@@ -193,10 +193,10 @@ def outcome_flips(a: dict, b: dict) -> dict:
     def by_seed(report: dict, name: str) -> dict[int, dict]:
         episodes = report.get("episodes")
         if not episodes:
-            raise ValueError(f"{name} holds no episodes: compare the --json tables of eval closed-loop")
+            raise ValueError(f"{name} holds no episodes: give the --json tables of eval closed-loop, which list them")
         return {int(e["seed"]): e for e in episodes}
 
-    ea, eb = by_seed(a, "the first report"), by_seed(b, "the second report")
+    ea, eb = by_seed(a, names[0]), by_seed(b, names[1])
     common = sorted(set(ea) & set(eb))
     if not common:
         raise ValueError("the two reports share no episode seed: fly the same grid (--seed, settings) twice")

@@ -228,7 +228,8 @@ def planner_config(preset: str | None = None, **options) -> PlannerConfig:
                 (value.lower() in ("1", "true", "yes")) if kind is bool and isinstance(value, str) else kind(value)
             )
         except ValueError:
-            raise ValueError(f"planner option {key}={value!r}: give a {kind.__name__}") from None
+            what = {int: "a whole number", float: "a number"}.get(kind, f"a {kind.__name__}")
+            raise ValueError(f"planner option {key}={value!r}: give {what}") from None
     return dataclasses.replace(
         base,
         mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),

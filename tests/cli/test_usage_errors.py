@@ -114,3 +114,32 @@ def test_a_folder_that_is_no_dataset_exits_2(tmp_path, command):
     res = runner.invoke(app, [a.format(tmp=tmp_path) for a in command])
     assert res.exit_code == 2, res.output
     assert len(res.output.strip().splitlines()) == 1 and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize(
+    "args, line",
+    [
+        (["--json", "{tmp}"], "error: --json {tmp} is a folder: give a file in it"),
+        (["--json", "{tmp}/file/grid.json"], "error: --json {tmp}/file/grid.json: {tmp}/file is a file, not a folder"),
+        (["--no-render", "--video", "{tmp}/v"], "error: --video {tmp}/v records the camera: drop --no-render"),
+        (["--video-format", "gif"], "error: --video-format gif without --video"),
+        (["--image-size", "50"], "error: --image-size: image_size must be a multiple of 16"),
+    ],
+)
+def test_fly_refuses_what_it_could_not_finish_before_flying(tmp_path, capsys, args, line):
+    """A grid whose table could not be written, or whose video could not be made, is refused before
+    its first episode, so no flight is lost at the end."""
+    (tmp_path / "file").write_text("x")
+    argv = ["fly", "--pilot", "risky", "--obstacles", "1", "--speeds", "1", "--episodes", "1"]
+    code, out, err = run([*argv, *(a.format(tmp=tmp_path) for a in args)], capsys)
+    assert code == 2 and out == "", err
+    assert len(err.strip().splitlines()) == 1 and err.startswith(line.format(tmp=tmp_path)), err
+    assert not (tmp_path / "v").exists()
+
+
+def test_generate_names_the_flag_of_a_config_verdict(tmp_path, capsys):
+    code, _, err = run(["generate", str(tmp_path / "g"), "--episodes", "2", "--image-size", "50"], capsys)
+    assert code == 2 and err.startswith("error: --image-size: image_size must be a multiple of 16"), err
+    code, _, err = run(["generate", str(tmp_path / "g"), "--ray-address", "10.0.0.1:6379"], capsys)
+    assert code == 2 and err.startswith("error: --ray-address 10.0.0.1:6379 is for Ray tasks: add --executor ray"), err
+    assert not (tmp_path / "g").exists()

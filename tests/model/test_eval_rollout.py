@@ -66,3 +66,25 @@ def test_the_shuffled_baseline_never_gives_a_window_its_own_actions(n):
         d = derangement(n, seed)
         assert sorted(d.tolist()) == list(range(n)) and not np.any(d == np.arange(n))
         assert np.array_equal(d, derangement(n, seed))  # same seed, same pairing
+
+
+def test_a_horizon_longer_than_every_episode_names_the_largest_that_fits(tiny_run, tiny_dataset_master, tmp_path):
+    args = ["eval", "rollout", str(tiny_run), str(tiny_dataset_master), "--windows", "2", "--out", str(tmp_path)]
+    res = runner.invoke(app, [*args, "--horizon", "200"])
+    assert res.exit_code == 2, res.output
+    line = res.output.strip().splitlines()[-1]
+    assert line.startswith("error: --horizon 200: 8 context and 200 horizon steps") and "pad=True" not in line
+    from orbitdata import schema as S
+    from orbitdata.load.tables import load_episode_table
+    from orbitmodel.model.world_model import WorldModel
+
+    longest = max(load_episode_table(str(tiny_dataset_master), "test", {}).column(S.LENGTH).to_pylist())
+    step = WorldModel.from_pretrained(tiny_run).config.frame_step
+    largest = longest // step - 8
+    assert f"(longest: {longest} frames); give --horizon {largest} or less" in line, line
+    from orbitdata.load.index import NoWindow
+    from orbitmodel.data import load_model_windows
+
+    assert len(load_model_windows(str(tiny_dataset_master), step, split="test", context=8, horizon=largest)) >= 1
+    with pytest.raises(NoWindow):
+        load_model_windows(str(tiny_dataset_master), step, split="test", context=8, horizon=largest + 1)

@@ -180,9 +180,32 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     rigid = base + ["--pilot", "oracle-true"]
     assert "KEY=VALUE" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency"]))
     assert "unknown planner option 'urgncy'" in one_line_error(runner.invoke(app, rigid + ["--set", "urgncy=1"]))
-    assert "urgency='high': give a float" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency=high"]))
+    assert "urgency='high': give a number" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency=high"]))
     assert "true or false" in one_line_error(runner.invoke(app, rigid + ["--set", "image_codec=maybe"]))
     assert "presets are paper, cpu" in one_line_error(runner.invoke(app, rigid + ["--preset", "reference"]))
+    # a table that could not be written at the end is refused before the first episode flies
+    line = one_line_error(runner.invoke(app, rigid + ["--json", str(tmp_path)]))
+    assert line.startswith(f"error: --json {tmp_path} is a folder") and not list(tmp_path.glob("*.episodes.jsonl"))
+
+
+def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
+    """eval table, flips and figure6 name the file given and what to give instead."""
+    (tmp_path / "other.json").write_text('{"a": 1}')
+    (tmp_path / "broken.json").write_text("{")
+    for args, says in (
+        (["table", str(tmp_path)], "is a folder"),
+        (["table", str(tmp_path / "nope.json")], "does not exist"),
+        (["table", str(tmp_path / "other.json")], "is not a grid result (it has no 'settings' key)"),
+        (["table", str(tmp_path / "broken.json")], "is not JSON"),
+        (["factors", str(tmp_path / "other.json")], "is not a grid result"),
+        (["flips", str(tmp_path / "broken.json"), str(tmp_path / "other.json")], "is not JSON"),
+        (["flips", str(tmp_path / "other.json"), str(tmp_path / "nope.json")], "does not exist"),
+        (["flips", str(tmp_path / "other.json"), str(tmp_path / "other.json")], "holds no episodes"),
+        (["figure6", str(tmp_path / "other.json"), "--out", str(tmp_path / "f.txt")], "give a .png, .pdf or .svg"),
+    ):
+        line = one_line_error(runner.invoke(app, ["eval", *args]))
+        assert says in line and "give" in line, line
+        assert line.count(str(tmp_path)) == 1, line  # the file named once
 
 
 def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):

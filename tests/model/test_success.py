@@ -165,3 +165,21 @@ def test_a_dynamic_grids_tumbling_is_a_failure_and_a_static_grids_keys_stay(tmp_
     )
     cell = report_from_episodes(stream)["settings"][0]
     assert (cell["episodes"], cell["success"], cell["tumbling"]) == (2, 1, 1)
+
+
+def test_a_planner_setting_left_at_its_default_pools_with_one_not_recorded():
+    """Result files record the planner's fit knobs only when a body is fitted (``plan.config.recorded``);
+    pooling reads a missing knob as its default, so the defaults it assumes must be PlannerConfig's."""
+    from orbitmodel.evaluate.success import PLANNER_WAYS, pool_seeds
+    from orbitmodel.plan.config import PlannerConfig, recorded
+
+    default = PlannerConfig()
+    for key in ("obstacle_motion", "body", "fit_frames", "fit_ridge", "fit_steps"):
+        assert PLANNER_WAYS[key] == getattr(default, key), key
+    seeds = [{**grid("planner", [20, 19]), "seed": s} for s in (3, 4)]
+    plain = {**seeds[0], "planner": recorded(default)}
+    explicit = {**seeds[1], "planner": {**recorded(default), "body": "true", "fit_frames": 40, "fit_steps": 1}}
+    assert pool_seeds([plain, explicit])["seeds"] == [3, 4]
+    other = {**seeds[1], "planner": {**recorded(default), "body": "true", "fit_steps": 2}}
+    with pytest.raises(ValueError, match="fit_steps"):
+        pool_seeds([plain, other])

@@ -176,6 +176,23 @@ def test_run_folder_with_another_config_needs_overwrite(tiny_dataset_master, tra
     assert json.loads((run / "config.json").read_text())["preset"]["train"]["window"] == 4  # the flag, recorded
 
 
+def test_a_run_resumes_whatever_the_spelling_of_its_dataset_path(tmp_path, monkeypatch):
+    """`train toy --out r`, then `train ./toy --out r --resume` (or the absolute path): one run."""
+    from orbitmodel.runs import RunDir
+
+    (tmp_path / "toy").mkdir()
+    monkeypatch.chdir(tmp_path)
+    run = RunDir(tmp_path / "run")
+    config = {"stage": "world_model", "dataset": {"source": "toy", "image_size": 64}, "preset": {"name": "tiny"}}
+    run.start(config, resume=False, overwrite=False)
+    for spelling in ("./toy", str(tmp_path / "toy"), "toy/"):
+        run.start({**config, "dataset": {**config["dataset"], "source": spelling}}, resume=True, overwrite=False)
+    with pytest.raises(RunError, match=r"differs in: dataset\); pass --overwrite"):
+        run.start({**config, "dataset": {**config["dataset"], "source": "elsewhere"}}, resume=True, overwrite=False)
+    with pytest.raises(RunError, match=r"differs in: preset\)"):
+        run.start({**config, "preset": {"name": "cpu"}}, resume=True, overwrite=False)
+
+
 def test_a_corrupt_checkpoint_is_one_line(trained, tmp_path):
     import shutil
 

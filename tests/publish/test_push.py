@@ -187,7 +187,9 @@ def test_hub_problems_give_one_clear_line(hub_client, tiny_dataset_master, monke
     assert "Traceback" not in result.output
 
 
-@pytest.mark.parametrize("args", [["not a repo id"], ["a/b/c"], ["tester/orbit", "--revision", " "]])
+@pytest.mark.parametrize(
+    "args", [["not a repo id"], ["a/b/c"], ["orbit", "--dry-run"], ["tester/orbit", "--revision", " "]]
+)
 def test_usage_errors_exit_2(tiny_dataset_master, args):
     result = runner.invoke(app, ["push", str(tiny_dataset_master), *args])
     assert result.exit_code == 2, result.output

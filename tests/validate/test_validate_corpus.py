@@ -38,6 +38,10 @@ def _extra(root):
     (root / S.DATA_DIR / "notes.txt").write_text("scratch")
 
 
+def _broken_link(root):
+    (root / "junk").symlink_to(root / "nowhere")
+
+
 def _parts_leftover(root):
     (root / S.PARTS_DIR).mkdir()
     (root / S.PARTS_DIR / "unit-00000.steps.parquet").write_bytes(b"x")
@@ -309,6 +313,7 @@ CASES = [
     Case("leftover parts/", C.EXTRA, _parts_leftover, quick=True, only=True),
     Case("stats.json not JSON", C.UNREADABLE, _bad_json, quick=True),
     Case("card YAML broken", C.UNREADABLE, _bad_card_yaml, quick=True),
+    Case("a link to nothing", C.UNREADABLE, _broken_link, quick=True, only=True),
     Case("truncated shard", C.CORRUPT, _truncate, quick=True),
     Case("bad footer", C.CORRUPT, _bad_footer, quick=True),
     Case("bad data page", C.CORRUPT, _bad_page),

@@ -57,6 +57,13 @@ def test_cli_file_instead_of_folder_exits_2(tiny_dataset_master):
     assert result.exit_code == 2 and "not a dataset folder" in result.output
 
 
+def test_cli_folder_that_is_no_dataset_exits_2(tmp_path):
+    (tmp_path / "config.json").write_text("{}")  # a run folder, say
+    result = runner.invoke(app, ["validate", str(tmp_path)])
+    assert result.exit_code == 2 and "is not an orbitdata dataset" in result.output
+    assert len(result.output.strip().splitlines()) == 1
+
+
 def test_quick_mode_skips_row_checks(tiny_dataset):
     ep = X.longest_train_episode(tiny_dataset)
     X.edit_state(tiny_dataset, X.TRAIN, ep[S.ROW_START] + 5, lambda s: s.__setitem__(4, np.nan))
