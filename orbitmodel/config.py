@@ -520,6 +520,7 @@ PRESETS: dict[str, Callable[[], Preset]] = {
 
 
 def get_preset(name: str) -> Preset:
+    """A new copy of the world-model preset ``name`` (``orbitmodel presets`` lists them)."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     return PRESETS[name]()

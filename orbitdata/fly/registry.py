@@ -15,6 +15,7 @@ made, so ``orbitdata --help`` stays light.
 
 from __future__ import annotations
 
+import inspect
 from importlib import metadata
 from typing import TYPE_CHECKING, Callable
 
@@ -127,7 +128,12 @@ def make_pilot(name: str, config: FlightConfig | None = None, **options) -> Pilo
     from orbitdata.fly.pilot import Pilot
 
     factory = pilot_factory(name)
-    pilot = factory(config if config is not None else FlightConfig(), **options)
+    config = config if config is not None else FlightConfig()
+    try:
+        inspect.signature(factory).bind(config, **options)
+    except TypeError as exc:
+        raise TypeError(f"pilot {name!r}: {exc}") from None
+    pilot = factory(config, **options)
     if not isinstance(pilot, Pilot):
         raise TypeError(f"the factory of pilot {name!r} returned {type(pilot).__name__}, not an orbitdata.fly.Pilot")
     return pilot

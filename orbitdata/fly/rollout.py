@@ -91,6 +91,8 @@ class Flight:
         image_quality: int | None = None,
     ):
         options = {"scenario": scenario} if scenario is not None else {"n_obstacles": n_obstacles, "speed": speed}
+        if seed is None and scenario is None:
+            raise ValueError("an episode needs a seed (or scenario=..., an episode's Scenario)")
         if pilot.needs_images and not env.sim.render:
             raise ValueError(
                 f"pilot {pilot.name!r} needs camera images, but the env does not render: use SimConfig(render=True)"
@@ -128,6 +130,11 @@ class Flight:
     def step(self, action) -> None:
         """Execute ``action`` (8,) thrusts from the current frame; record the next frame."""
         action = np.asarray(action, dtype=np.float32)
+        if action.shape != self.actions.shape[1:]:
+            raise ValueError(
+                f"pilot {self.pilot.name!r} gave an action of shape {action.shape} at frame {self.t}: "
+                f"give {self.actions.shape[1]} thrusts in [0, 1]"
+            )
         self.actions[self.t] = action
         self.obs, _, _, _, self.info = self.env.step(action.astype(np.float64))
         self.t += 1

@@ -125,8 +125,8 @@ def load_windows(
         stride=stride,
         pad=pad,
         image_size=image_size,
-        columns=None if columns is None else tuple(columns),
-        context_only=tuple(context_only),
+        columns=columns,
+        context_only=context_only,
     )
     try:  # checks the schema version before anything is read
         read_info(source, load_dataset_kwargs.get("revision"), load_dataset_kwargs.get("token"))

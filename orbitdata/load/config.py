@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
+
+import numpy as np
 
 from orbitdata import schema as S
 
@@ -44,6 +47,14 @@ class WindowConfig:
     context_only: tuple[str, ...] = ()
 
     def __post_init__(self):
+        for name in ("context", "horizon", "stride", "image_size"):
+            value = getattr(self, name)
+            if not (value is None and name == "image_size") and (
+                isinstance(value, bool) or not isinstance(value, numbers.Integral)
+            ):
+                raise ValueError(f"{name}={value!r}: give a whole number")
+        if not isinstance(self.pad, (bool, np.bool_)):
+            raise ValueError(f"pad={self.pad!r}: give True or False")
         if self.context < 1:
             raise ValueError(f"context={self.context}: a window needs at least one context frame")
         if self.horizon < 0:

@@ -50,7 +50,14 @@ def episode_files(root: Path) -> list[Path]:
 
 def read_episodes(root: Path, columns: list[str] | None = None) -> pa.Table:
     """The episodes table of all splits, ordered by episode index."""
-    table = pa.concat_tables([pq.read_table(f, columns=columns) for f in episode_files(root)])
+    files = episode_files(root)
+    if columns is not None and files:
+        missing = sorted(set(columns) - set(pq.read_schema(files[0]).names))
+        if missing:
+            raise ValueError(
+                f"columns {missing} are not in the episodes table of {root}: give some of {pq.read_schema(files[0]).names}"
+            )
+    table = pa.concat_tables([pq.read_table(f, columns=columns) for f in files])
     return table.sort_by(S.EPISODE_INDEX) if S.EPISODE_INDEX in table.column_names else table
 
 

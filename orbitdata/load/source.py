@@ -66,6 +66,12 @@ def local_folder(source: str | Path, repo_ok: bool = True) -> Path | None:
             f"no dataset folder at {source}: this needs a local folder; download the Hub repo "
             f"first (`hf download {source} --repo-type dataset --local-dir DIR`)"
         )
+    repo, _, revision = str(source).partition("@")
+    if repo_ok and revision and is_repo_id(repo):
+        raise FileNotFoundError(
+            f"no dataset folder at {source}: a Hub revision goes apart, as revision={revision!r} "
+            f"(load_windows({repo!r}, revision={revision!r}))"
+        )
     raise FileNotFoundError(
         f"no dataset folder at {source}: give a folder made by `orbitdata generate`"
         + (f", or {REPO_ID_HINT}" if repo_ok else "")

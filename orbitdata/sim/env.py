@@ -40,6 +40,8 @@ the cube's centre, where the camera and thrusters are fixed.
 
 from __future__ import annotations
 
+import numbers
+
 import mujoco
 import numpy as np
 
@@ -102,6 +104,8 @@ class CubeSatEnv:
     # ---- lifecycle ------------------------------------------------------------------------
     def reset(self, seed: int | None = None, options: dict | None = None):
         """Start an episode. ``options``: ``scenario`` (a Scenario) or ``n_obstacles`` / ``speed``."""
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or seed < 0):
+            raise ValueError(f"seed={seed!r}: give a whole number >= 0")
         options = dict(options or {})
         scn = options.pop("scenario", None)
         if scn is None:

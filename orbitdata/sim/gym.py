@@ -46,7 +46,8 @@ Spec (the same world and episodes as :class:`orbitdata.sim.env.CubeSatEnv` and t
   (None: the simulator's frame limit less one); ``sim`` and ``scenario``: the full
   :class:`~orbitdata.sim.config.SimConfig` and :class:`~orbitdata.scenario.config.ScenarioConfig`
   (a dataset's are in its ``meta/info.json``; a ``scenario`` of another tier than ``tier`` is refused). ``reset(options=...)`` takes ``n_obstacles``,
-  ``speed`` or a whole ``scenario`` for one episode.
+  ``speed``, or an episode's whole ``scenario`` alone (``info["episode_seed"]`` is then the seed that
+  drew it).
 * **Vector envs**: ``gym.make_vec("CubeSat-v1", num_envs=N, vectorization_mode="async")`` works in
   a process that has rendered already: the renderer releases its OpenGL state before a fork
   (``orbitdata.sim.gl``).
@@ -73,6 +74,7 @@ except ImportError:  # the optional extra
 
 from orbitdata import schema as S
 from orbitdata.scenario.config import STATIC, TIERS, ScenarioConfig
+from orbitdata.scenario.spec import Scenario
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
 
@@ -172,9 +174,21 @@ class CubeSatGymEnv(gymnasium.Env):
         self._reset_before = True
         super().reset(seed=seed)  # seeds self.np_random, which draws the episodes of resets given no seed
         episode_seed = seed if seed is not None else int(self.np_random.integers(SEED_BOUND))
-        options = {"n_obstacles": self.n_obstacles, "speed": self.speed, **(options or {})}
+        given = dict(options or {})
+        options = {"n_obstacles": self.n_obstacles, "speed": self.speed, **given}
         if options.get("scenario") is not None:
-            options = {"scenario": options["scenario"]}
+            scenario = given.pop("scenario")
+            if not isinstance(scenario, Scenario):
+                raise ValueError(
+                    f"options['scenario'] is a {type(scenario).__name__}: give an episode's Scenario (such as "
+                    "env.unwrapped.env.scenario); a ScenarioConfig goes to gym.make(scenario=...)"
+                )
+            if given:
+                raise ValueError(
+                    f"options {sorted(given)} beside options['scenario']: the scenario fixes its episode; give it alone"
+                )
+            options = {"scenario": scenario}
+            episode_seed = scenario.seed  # the seed that drew it: reset(seed=...) flies it again
         else:
             options["n_obstacles"] = _whole(
                 "options['n_obstacles']", options["n_obstacles"], 0, "a whole number of obstacles >= 0", "to draw it"

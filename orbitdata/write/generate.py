@@ -59,13 +59,13 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
         if not overwrite:
             raise UnusableOutput(
                 f"{out} holds a dataset generated with a different config; "
-                "pass --overwrite to replace it, or choose another OUT"
+                "pass --overwrite (overwrite=True) to replace it, or choose another OUT"
             )
         clear_output(out)
     elif existing is None and out.exists() and any(out.iterdir()):
         if not overwrite:
             raise UnusableOutput(
-                f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite"
+                f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite (overwrite=True)"
             )
         clear_output(out)
     complete = (out / S.INFO_PATH).exists() and not parts.parts_dir(out).exists() and existing == mine
@@ -109,6 +109,12 @@ def generate(
     out = Path(out)
     if executor not in ("local", "ray"):
         raise ValueError(f"unknown executor {executor!r}; expected 'local' or 'ray'")
+    if not isinstance(config, GenerationConfig):
+        raise ValueError(
+            f"config is a {type(config).__name__}: give a GenerationConfig (GenerationConfig() for the paper's)"
+        )
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers={workers!r}: give 1 or more processes")
     if prepare_output(out, config, overwrite):
         return read_info(out)
     parts.remove_temporaries(parts.parts_dir(out))

@@ -61,7 +61,11 @@ class Predictor(nn.Module):
         """z (B, T, D) and cond (B, T, D), or ``mods`` = ``self.modulations(cond)`` sliced to the
         same T frames, -> features (B, T, D)."""
         T = z.shape[1]
-        assert T <= self.pos.shape[1], f"sequence of {T} frames exceeds max_seq_len {self.pos.shape[1]}"
+        if T > self.pos.shape[1]:
+            raise ValueError(
+                f"a sequence of {T} steps: the predictor takes at most {self.pos.shape[1]} (the preset's "
+                "max_seq_len); give shorter windows"
+            )
         x = self.drop(z + self.pos[:, :T])
         for i, block in enumerate(self.blocks):
             x = block(x, cond, None if mods is None else mods[i])

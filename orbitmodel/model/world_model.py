@@ -179,6 +179,7 @@ class WorldModel(NormalisedStates, nn.Module):
     def predict_depth(self, images: torch.Tensor, head: nn.Module | None = None) -> torch.Tensor:
         """images (B, T, 3, H, W) uint8 -> depth (B, T, 16, 16) in metres, by ``head`` (a refitted
         copy of the depth head, ``orbitmodel.plan.depth_refit``) or the model's own."""
+        self.check_images(images)
         B, T = images.shape[:2]
         _, patches = self.encoder(images_to_float(images.flatten(0, 1)))
         return self.depth_from_patches(patches, head).view(B, T, DEPTH_LOW_SIDE, DEPTH_LOW_SIDE)
@@ -227,10 +228,25 @@ class WorldModel(NormalisedStates, nn.Module):
 
     # ---- internals --------------------------------------------------------------------------
     def _encode(self, images: torch.Tensor, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        self.check_images(images)
         B, T = images.shape[:2]
         cls, patches = self.encoder(images_to_float(images.flatten(0, 1)))  # (B*T, width), (B*T, P, width)
         z = self.latent_from_cls(cls, states.flatten(0, 1))  # (B*T, D)
         return z.view(B, T, -1), patches
+
+    def check_images(self, images: torch.Tensor) -> None:
+        """Refuse images that are not (B, T, 3, S, S) at this model's size S, saying what to give."""
+        size, shape = self.config.image_size, tuple(images.shape)
+        want = f"give (batch, frames, 3, {size}, {size}), as load_windows returns them"
+        if len(shape) != 5:
+            raise ValueError(f"images of shape {shape}: {want}")
+        if shape[2] != 3 and shape[-1] == 3:
+            raise ValueError(f"images of shape {shape} are channels-last: {want} (images.permute(0, 1, 4, 2, 3))")
+        if shape[2:] != (3, size, size):
+            raise ValueError(
+                f"images of shape {shape}: this world model takes {size} px; "
+                f"load_windows(..., image_size={size}) resizes a dataset's"
+            )
 
     @staticmethod
     def _norm_action(actions: torch.Tensor) -> torch.Tensor:

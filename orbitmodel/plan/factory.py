@@ -84,7 +84,15 @@ def build_pilot(
     Raises RunError (a ValueError) for a run without weights or the probe ``config.probe`` names,
     or with another camera.
     """
+    if variant not in {v.value for v in Variant}:
+        raise ValueError(f"pilot {variant!r}: give one of {', '.join(v.value for v in Variant)}")
     variant = Variant(variant)
+    if not isinstance(config, PlannerConfig):
+        raise ValueError(
+            f"config is a {type(config).__name__}: give a PlannerConfig, such as planner_config({config!r})"
+            if isinstance(config, str)
+            else f"config is a {type(config).__name__}: give a PlannerConfig (planner_config(NAME))"
+        )
     timings = timings or Timings()
     run = None if run is None else resolve_run(run)  # once: the probe and the depth head read the same folder
     model = load_world_model(run, variant) if variant.needs_model else None

@@ -20,6 +20,13 @@ from orbitmodel.plan.timing import Timings
 @torch.inference_mode()
 def encode_frames(model, images: list[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
     """``images`` N x (H, W, 3) uint8 -> the ViT's (cls (N, width), patches (N, P, width)), one pass."""
+    size = model.config.image_size
+    shape = np.shape(images[0])
+    if shape != (size, size, 3):
+        raise ValueError(
+            f"the camera gives images of shape {shape}; this world model takes ({size}, {size}, 3): fly it in the "
+            "SimConfig that build_pilot returns with the pilot (pilot, sim = build_pilot(...); CubeSatEnv(sim))"
+        )
     if len(images) == 1:
         x = torch.from_numpy(np.ascontiguousarray(images[0])).permute(2, 0, 1)[None]  # (1, 3, H, W)
     else:

@@ -212,9 +212,14 @@ def load_probe(
         raise RunError(
             f"{folder / CONFIG} is not a probe config ({err}); train it again with `{command} --overwrite`"
         ) from None
+    if world_model is not None and not isinstance(world_model, str):
+        raise ValueError(
+            f"world_model is a {type(world_model).__name__}: give the world model's fingerprint (model.fingerprint)"
+        )
     if world_model is not None and kind == "latent" and raw.get("world_model") != world_model:
         raise RunError(
-            f"{folder} was trained on another world model than {run_dir} holds now; train it again "
+            f"{folder} was trained on world model {raw.get('world_model')}, not on the {world_model} given: give "
+            f"the fingerprint of {run_dir}'s own model, or, if its weights changed, train the probe again "
             f"with `{command} --overwrite`"
         )
     try:

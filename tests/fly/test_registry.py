@@ -97,6 +97,33 @@ def test_fly_grid_takes_a_factory_and_one_pilot_flies_every_episode(tmp_path):
         fly_grid(factory, [0], [1.0], 1, config=FLIGHT, render=False)
 
 
+def test_a_pilot_of_the_wrong_arguments_or_action_is_named():
+    from orbitdata.fly.rollout import fly_episode
+    from orbitdata.sim import CubeSatEnv
+
+    with pytest.raises(TypeError, match=r"pilot 'expert': got an unexpected keyword argument 'foo'"):
+        make_pilot("expert", foo=1)
+
+    class Short(Pilot):
+        name = "short"
+
+        def reset(self, task, **kwargs):
+            pass
+
+        def act(self, obs):
+            return np.zeros(7)
+
+    env = CubeSatEnv(TINY.sim.__class__(render=False, max_steps=3))
+    try:
+        with pytest.raises(ValueError, match=r"pilot 'short' gave an action of shape \(7,\) at frame 0: give 8"):
+            fly_episode(env, Short(), seed=0)
+        for seed in (None, 1.5):
+            with pytest.raises(ValueError, match="seed"):
+                fly_episode(env, Short(), seed=seed)
+    finally:
+        env.close()
+
+
 def test_only_a_privileged_pilot_gets_the_scenario():
     from orbitdata.fly.rollout import fly_episode
     from orbitdata.sim import CubeSatEnv

@@ -117,3 +117,13 @@ def test_a_corrupt_image_names_episode_frame_and_column_even_in_workers(tiny_dat
     # workers take 5 s each to be joined. Freed by reference count, they stop at once.
     traceback.clear_frames(err.value.__traceback__)
     del batches
+
+
+def test_a_repo_id_with_its_revision_and_an_unknown_episodes_column(tiny_dataset_master, cache):
+    from orbitdata.load.episodes import read_episodes
+
+    with pytest.raises(FileNotFoundError, match=r"revision='v1' \(load_windows\('owner/name', revision='v1'\)\)"):
+        load_windows("owner/name@v1", context=2, horizon=1, cache_dir=cache)
+    with pytest.raises(ValueError, match=r"columns \['nope'\] are not in the episodes table"):
+        read_episodes(tiny_dataset_master, ["nope"])
+    assert read_episodes(tiny_dataset_master, [S.EPISODE_INDEX]).column_names == [S.EPISODE_INDEX]

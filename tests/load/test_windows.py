@@ -206,6 +206,19 @@ def test_index_errors_and_config_validation(windows):
         (dict(stride=0), "stride"),
         (dict(image_size=0), "image_size"),
         (dict(columns="action"), "list of column"),
+        (dict(context=2.5), r"context=2.5: give a whole number"),
+        (dict(image_size=64.0), r"image_size=64.0: give a whole number"),
+        (dict(stride=True), r"stride=True: give a whole number"),
+        (dict(pad="no"), r"pad='no': give True or False"),
     ]:
         with pytest.raises(ValueError, match=match):
             WindowConfig(**bad)
+
+
+def test_load_windows_refuses_one_string_for_a_list_of_columns(tiny_dataset_master):
+    """Not a column named 'a', 'c', 't', ...: the string itself, with the fix."""
+    from orbitdata import load_windows
+
+    for key in ("columns", "context_only"):
+        with pytest.raises(ValueError, match=rf"{key}='action': pass a list of column names, not one string"):
+            load_windows(tiny_dataset_master, context=2, horizon=1, **{key: "action"})

@@ -239,3 +239,12 @@ def test_a_planner_config_out_of_range_is_refused_by_name(bad):
     (key,) = bad
     with pytest.raises(ValueError, match=key):
         PlannerConfig(**bad)
+
+
+def test_build_pilot_names_the_pilots_and_the_config_it_takes():
+    from orbitmodel.plan.factory import build_pilot
+
+    with pytest.raises(ValueError, match=r"pilot 'plan': give one of planner, oracle-true"):
+        build_pilot("plan")
+    with pytest.raises(ValueError, match=r"config is a str: give a PlannerConfig, such as planner_config\('cpu'\)"):
+        build_pilot("oracle-true", None, "cpu")

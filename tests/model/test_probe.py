@@ -380,3 +380,17 @@ def test_the_variants_change_only_what_they_name():
     assert variant_recipe(flown, "latent_probe-change-frames-inc") == flown.with_changes(inputs="latent+change")
     with pytest.raises(ValueError, match="choose one of"):
         variant_recipe(flown, "latent_probe")
+
+
+def test_a_probe_loads_only_for_the_world_model_it_read(probed_run):
+    """The fingerprint of the run's own model loads it; another is refused naming both; the model
+    object itself (a common slip) is refused saying what to give."""
+    from orbitmodel import PhysicsProbe, WorldModel
+    from orbitmodel.runs import RunError
+
+    model = WorldModel.from_pretrained(probed_run)
+    assert PhysicsProbe.from_pretrained(probed_run, world_model=model.fingerprint) is not None
+    with pytest.raises(RunError, match=r"was trained on world model \w+, not on the deadbeef given"):
+        PhysicsProbe.from_pretrained(probed_run, world_model="deadbeef")
+    with pytest.raises(ValueError, match=r"world_model is a WorldModel: give the world model's fingerprint"):
+        PhysicsProbe.from_pretrained(probed_run, world_model=model)

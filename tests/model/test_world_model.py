@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 
+import numpy as np
 import pytest
 import torch
 
@@ -246,3 +247,24 @@ def test_paper_preset_runs_a_forward_and_backward_pass_at_batch_2():
     assert all(g is not None and torch.isfinite(g).all() for g in grads)
     assert model.encoder.patch.weight.grad.abs().sum() > 0  # the loss reaches the ViT
     assert 12e6 < model.num_parameters() < 14e6  # upstream's ~12.8M
+
+
+def test_images_of_the_wrong_layout_or_size_are_refused_saying_what_to_give():
+    from orbitmodel.plan.frames import encode_frames
+
+    model = _model()
+    images, states, actions, depth = _batch(model)
+    S = model.config.image_size
+    for bad, says in (
+        (images.permute(0, 1, 3, 4, 2), r"are channels-last: give \(batch, frames, 3, 64, 64\)"),
+        (images[0], r"images of shape \(6, 3, 64, 64\): give \(batch, frames, 3, 64, 64\)"),
+        (torch.zeros(B, T, 3, 2 * S, 2 * S, dtype=torch.uint8), r"takes 64 px; load_windows\(\.\.\., image_size=64\)"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            model.encode(bad, states)
+    n, D = model.config.max_seq_len, model.config.latent_dim
+    with pytest.raises(ValueError, match=rf"a sequence of {n + 1} steps: the predictor takes at most {n}"):
+        model.predictor(torch.zeros(1, n + 1, D), torch.zeros(1, n + 1, D))
+    camera = np.zeros((224, 224, 3), np.uint8)  # a default SimConfig's, flown with a 64 px model
+    with pytest.raises(ValueError, match=r"fly it in the SimConfig that build_pilot returns"):
+        encode_frames(model, [camera])

@@ -45,3 +45,14 @@ def test_same_seed_same_bytes_in_process_and_across_processes():
         digests.append(h.hexdigest())
     assert digests[0] == digests[2] != digests[1]
     assert _run() == digests[0]
+
+
+def test_a_seed_that_is_not_a_whole_number_is_refused():
+    """A float seed would fly the seed below it and record the float: refused, naming it."""
+    import pytest
+
+    env = CubeSatEnv(SimConfig(render=False))
+    for seed in (1.5, -1, True, "3"):
+        with pytest.raises(ValueError, match=r"seed=.*: give a whole number >= 0"):
+            env.reset(seed=seed)
+    env.reset(seed=np.int64(3))  # numpy's whole numbers are whole numbers

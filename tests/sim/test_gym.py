@@ -62,6 +62,22 @@ def test_make_keywords_and_the_module_form():
     env.close()
 
 
+def test_a_given_scenario_flies_and_reports_the_seed_that_drew_it():
+    env = gym.make("CubeSat-v1", images=False)
+    env.reset(seed=3)
+    scenario = env.unwrapped.env.scenario
+    first = env.unwrapped.env.data.qpos.copy()
+    _, info = env.reset(options={"scenario": scenario})
+    assert info["episode_seed"] == scenario.seed == 3  # reset(seed=3) flies it again, as the info promises
+    assert np.array_equal(env.unwrapped.env.data.qpos, first)
+    for options, message in (
+        ({"scenario": scenario, "n_obstacles": 5}, r"options \['n_obstacles'\] beside options\['scenario'\]"),
+        ({"scenario": ScenarioConfig()}, "is a ScenarioConfig: give an episode's Scenario"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            env.reset(options=options)
+
+
 @pytest.mark.parametrize(
     "kwargs, message",
     [

@@ -201,3 +201,14 @@ def test_reshard_round_trip_reproduces_the_generated_bytes(tiny_dataset, tiny_da
     assert tree_digest(tiny_dataset) != tree_digest(tiny_dataset_master)
     finalize(tiny_dataset, max_shard_bytes=500_000_000, figure=overview_figure)
     assert tree_digest(tiny_dataset) == tree_digest(tiny_dataset_master)
+
+
+def test_generate_from_python_refuses_what_it_cannot_run(tmp_path):
+    for kwargs, says in (
+        (dict(config=None), "config is a NoneType: give a GenerationConfig"),
+        (dict(config=tiny_config(2), workers=0), "workers=0: give 1 or more processes"),
+        (dict(config=tiny_config(2), workers=-1), "workers=-1: give 1 or more processes"),
+    ):
+        with pytest.raises(ValueError, match=says):
+            generate(tmp_path / "out", **kwargs)
+    assert not (tmp_path / "out").exists()
