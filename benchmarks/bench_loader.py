@@ -64,7 +64,7 @@ def ensure_dataset(out: Path, episodes: int, size: int) -> Path:
     )
     if not (out / S.INFO_PATH).exists():
         print(f"generating {episodes} episodes at {size} px into {out} ...", flush=True)
-    generate(out, cfg, workers=0)
+    generate(out, cfg, workers=1)
     return out
 
 

@@ -80,11 +80,13 @@ def register(app: typer.Typer) -> None:
         noise_hold: int = typer.Option(
             1,
             min=1,
+            show_default=False,
             help="Redraw the thrust noise every N control steps (8: held per action chunk) [default: every step].",
         ),
         image_codec: bool = typer.Option(
             False,
             "--image-codec/--raw-images",
+            show_default=False,
             help="Hand the pilot its camera through the dataset's JPEG codec (the "
             "config's quality), as the dataset stores it [default: raw renders, unless the pilot asks "
             "for the codec, as a policy's flight preset does].",

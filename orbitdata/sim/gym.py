@@ -188,7 +188,7 @@ class CubeSatGymEnv(gymnasium.Env):
                     f"options {sorted(given)} beside options['scenario']: the scenario fixes its episode; give it alone"
                 )
             options = {"scenario": scenario}
-            episode_seed = scenario.seed  # the seed that drew it: reset(seed=...) flies it again
+            episode_seed = scenario.seed  # the seed that drew it
         else:
             options["n_obstacles"] = _whole(
                 "options['n_obstacles']", options["n_obstacles"], 0, "a whole number of obstacles >= 0", "to draw it"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import numbers
 import shutil
 import time
 from dataclasses import dataclass
@@ -113,7 +114,7 @@ def generate(
         raise ValueError(
             f"config is a {type(config).__name__}: give a GenerationConfig (GenerationConfig() for the paper's)"
         )
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+    if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 1:
         raise ValueError(f"workers={workers!r}: give 1 or more processes")
     if prepare_output(out, config, overwrite):
         return read_info(out)

@@ -207,8 +207,11 @@ def figure6(
     """Plot the paper's Figure 6: success per setting and on average, one bar per pilot."""
     from orbitmodel.evaluate.figure6 import plot_figure6, read_report
 
-    if out.suffix.lower() not in (".png", ".pdf", ".svg"):
-        fail(f"--out {out}: give a .png, .pdf or .svg file")
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    if out.suffix and out.suffix.lower().lstrip(".") not in kinds:
+        fail(f"--out {out}: give a file matplotlib writes ({', '.join('.' + k for k in sorted(kinds))})")
     path = plot_figure6([read_report(p) for p in results], out, title)
     typer.echo(f"wrote {path}")
 
