@@ -205,9 +205,9 @@ def figure6(
     title: Annotated[Optional[str], typer.Option(help="figure title")] = None,
 ) -> None:
     """Plot the paper's Figure 6: success per setting and on average, one bar per pilot."""
-    from orbitmodel.evaluate.figure6 import plot_figure6, read_report
-
     from matplotlib.backend_bases import FigureCanvasBase
+
+    from orbitmodel.evaluate.figure6 import plot_figure6, read_report
 
     kinds = FigureCanvasBase.get_supported_filetypes()
     if out.suffix and out.suffix.lower().lstrip(".") not in kinds:

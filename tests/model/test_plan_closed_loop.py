@@ -201,7 +201,10 @@ def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
         (["flips", str(tmp_path / "broken.json"), str(tmp_path / "other.json")], "is not JSON"),
         (["flips", str(tmp_path / "other.json"), str(tmp_path / "nope.json")], "does not exist"),
         (["flips", str(tmp_path / "other.json"), str(tmp_path / "other.json")], "holds no episodes"),
-        (["figure6", str(tmp_path / "other.json"), "--out", str(tmp_path / "f.txt")], "give a file matplotlib writes ("),
+        (
+            ["figure6", str(tmp_path / "other.json"), "--out", str(tmp_path / "f.txt")],
+            "give a file matplotlib writes (",
+        ),
     ):
         line = one_line_error(runner.invoke(app, ["eval", *args]))
         assert says in line and "give" in line, line
