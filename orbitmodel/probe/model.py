@@ -218,9 +218,9 @@ def load_probe(
         )
     if world_model is not None and kind == "latent" and raw.get("world_model") != world_model:
         raise RunError(
-            f"{folder} was trained on world model {raw.get('world_model')}, not on the {world_model} given: give "
-            f"the fingerprint of {run_dir}'s own model, or, if its weights changed, train the probe again "
-            f"with `{command} --overwrite`"
+            f"{folder} was trained on another world model ({raw.get('world_model')}) than the {world_model} "
+            f"given: if {run_dir} was trained again, train the probe again with `{command} --overwrite`; "
+            "else give its own model's fingerprint"
         )
     try:
         weights = load_weights(folder)
