@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import signal
 import sys
+import threading
 
 import typer
 
@@ -102,6 +104,8 @@ def run_app(app: typer.Typer, args: list[str] | None = None) -> None:
     ``error: <flag> ...``, and exits 2; ``--help`` prints the help; a command's ``typer.Exit``
     code is the exit code.
     """
+    main = threading.current_thread() is threading.main_thread()
+    before = signal.signal(signal.SIGTERM, _interrupt) if main else None  # `kill` stops it as Ctrl-C does
     command = typer.main.get_command(app)
     name = app.info.name if isinstance(app.info.name, str) else None  # None: from sys.argv, as click does
     try:
@@ -115,7 +119,14 @@ def run_app(app: typer.Typer, args: list[str] | None = None) -> None:
         _exit(" ".join(exc.format_message().split()), exc.exit_code)
     except typer.Abort:
         _exit("aborted", 1)
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, before)
     sys.exit(code if type(code) is int else 0)
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 def _exit(message: str, code: int) -> None:

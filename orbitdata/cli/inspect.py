@@ -172,12 +172,14 @@ def register(app: typer.Typer) -> None:
 
         Needs the plotting extra: pip install 'orbitdata[viz]'.
         """
+        from orbitdata.cli.options import check_report_path
         from orbitdata.load.episodes import EpisodeNotFound, index_range
         from orbitdata.load.source import dataset_folder
         from orbitdata.viz.show import check_format
 
         with usage_errors():
             check_format(out)
+            check_report_path(out, "--out")
             if not fps > 0:
                 raise ValueError(f"--fps {fps} must be positive")
         with usage_errors(FileNotFoundError, NotADirectoryError):

@@ -1,6 +1,10 @@
-"""Repeatable ``KEY=VALUE`` flags (``orbitdata fly --pilot-option``, ``orbitmodel eval closed-loop --set``)."""
+"""Flag helpers: repeatable ``KEY=VALUE`` flags (``orbitdata fly --pilot-option``, ``orbitmodel eval closed-loop
+--set``) and output paths checked before any work."""
 
 from __future__ import annotations
+
+import os
+from pathlib import Path
 
 from orbitdata.cli.errors import usage
 
@@ -16,3 +20,20 @@ def key_values(pairs: list[str], flag: str, example: str) -> dict[str, str]:
             usage(f"{flag} {pair!r} must be KEY=VALUE, e.g. {flag} {example}")
         options[key.strip()] = value
     return options
+
+
+def check_report_path(path: Path | None, flag: str = "--json") -> None:
+    """Refuse, before any work, an output path that could not be written at the end (a folder, a
+    file where a folder must be, a folder not writable)."""
+    if path is None:
+        return
+    path = Path(path).expanduser()
+    if path.is_dir():
+        raise ValueError(f"{flag} {path} is a folder: give a file's path, such as one in it")
+    folder = path.parent
+    while not folder.exists() and folder != folder.parent:  # the first folder that exists: the rest is made
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ValueError(f"{flag} {path}: {folder} is a file, not a folder; give another path")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")

@@ -50,11 +50,12 @@ def register(app: typer.Typer) -> None:
         and the episodes table, and hashes every file. Exit code: 0 clean, 1 problems found,
         2 usage error.
         """
+        from orbitdata.cli.options import check_report_path
         from orbitdata.load.source import local_folder
         from orbitdata.validate import ValidateOptions
         from orbitdata.validate import validate as run
 
-        with usage_errors(FileNotFoundError, NotADirectoryError):
+        with usage_errors(FileNotFoundError, NotADirectoryError, ValueError):
             folder = local_folder(folder.expanduser(), repo_ok=False)
             if not any((folder / part).exists() for part in ("meta", "data", "episodes")):
                 raise FileNotFoundError(
@@ -63,6 +64,7 @@ def register(app: typer.Typer) -> None:
                 )
             if json_out is not None and not json_out.expanduser().parent.is_dir():
                 raise FileNotFoundError(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
+            check_report_path(json_out)
         options = ValidateOptions(quick=quick, workers=workers, max_per_check=max_per_check)
         bar, update = _progress()
         if bar is not None:

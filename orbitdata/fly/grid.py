@@ -8,9 +8,7 @@ episodes as the expert. One pilot (made once by its factory) flies every episode
 from __future__ import annotations
 
 import dataclasses
-import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -71,22 +69,6 @@ def check_grid(obstacles: list[int], speeds: list[float], episodes: int) -> None
         raise ValueError(f"speeds must be finite and >= 0 m/s, got {speeds}")
     if episodes < 1:
         raise ValueError(f"episodes per setting must be >= 1, got {episodes}")
-
-
-def check_report_path(path: Path | None, flag: str = "--json") -> None:
-    """Refuse, before anything flies, a path the grid's table could not be written to at the end."""
-    if path is None:
-        return
-    path = Path(path).expanduser()
-    if path.is_dir():
-        raise ValueError(f"{flag} {path} is a folder: give a file in it, such as {path / 'grid.json'}")
-    folder = path.parent
-    while not folder.exists() and folder != folder.parent:  # the first folder that exists: the rest is made
-        folder = folder.parent
-    if not folder.is_dir():
-        raise ValueError(f"{flag} {path}: {folder} is a file, not a folder; give another path")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
 
 
 def fly_grid(

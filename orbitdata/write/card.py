@@ -124,8 +124,10 @@ def tier_note(config: GenerationConfig, episodes: pa.Table | None) -> str:
     eclipse = sum(e["eclipse"] for e in episodes.column(S.SENSING).to_pylist())
     rejected, kept = rejections(episodes)
     return (
-        "\n\n**The dynamic tier.** Unlike the paper's static scenes (the numbers above on rocks, and the"
-        " limitations below on sensing and orbital mechanics, are the static tier's), the debris drifts at"
+        "\n\n**The dynamic tier.** Unlike the paper's static scenes (the numbers above on rocks, the RRT*"
+        " expert, and the limitations below on sensing and orbital mechanics are the static tier's), the"
+        " expert is MPPI told the debris' motion, the body and the fault (the `planner` column then holds its"
+        " iterations and no path length), and the debris drifts at"
         f" {d.debris_speed[0]:g}-{d.debris_speed[1]:g} m/s and tumbles at {d.tumble_deg_s[0]:g}-{d.tumble_deg_s[1]:g}"
         f" deg/s, a share of {d.intercept_prob:g} of it aimed to cross the nominal flight; the Clohessy-Wiltshire"
         f" terms (n = {d.mean_motion:g} rad/s) act in {_share(cw, n)} episodes, one thruster is faulty in"

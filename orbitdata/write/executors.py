@@ -6,7 +6,10 @@ in any order, and the output does not depend on it.
 
 from __future__ import annotations
 
+import ctypes
 import multiprocessing
+import os
+import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Iterator
 
@@ -14,6 +17,21 @@ from orbitdata.write.plan import Unit
 from orbitdata.write.worker import UnitResult, run_unit_from_dict
 
 RAY_HINT = "the Ray executor needs the 'ray' extra: pip install 'orbitdata[ray]'"
+
+
+PR_SET_PDEATHSIG = 1  # prctl(2)
+
+
+def die_with_parent() -> None:
+    """In a worker: end when the process that started it ends, however it ends (Linux; a killed
+    generate otherwise leaves its workers computing for nobody)."""
+    try:
+        libc = ctypes.CDLL("libc.so.6", use_errno=True)
+    except OSError:  # not Linux
+        return
+    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() == 1:  # the parent ended before the call took effect
+        os._exit(1)
 
 
 def run_local(config: dict, units: list[Unit], workers: int) -> Iterator[UnitResult]:
@@ -24,7 +42,7 @@ def run_local(config: dict, units: list[Unit], workers: int) -> Iterator[UnitRes
         return
     # spawn, not fork: a forked GL/EGL context is undefined behaviour.
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=die_with_parent) as pool:
         pending = set()
         queue = list(units)
         # Keep a bounded number of units in flight so results stream back steadily.

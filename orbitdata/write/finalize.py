@@ -21,6 +21,7 @@ from orbitdata.write import parts
 from orbitdata.write.card import render_card
 from orbitdata.write.meta import build_info, write_json
 from orbitdata.write.parts import atomic_write
+from orbitdata.write.plan import plan_units
 from orbitdata.write.shard import write_shards
 
 
@@ -60,6 +61,14 @@ def finalize(
                 f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`"
             )
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
+        if parts.read_manifest(out) is not None:  # parts to compact: only a finished generation's
+            units = plan_units(config.dataset)
+            done = [u for u in units if parts.is_done(out, u.name)]
+            if len(done) < len(units):
+                raise NoDataset(
+                    f"{out} holds an unfinished generation ({sum(len(u.episodes) for u in done)} of "
+                    f"{config.dataset.episodes} episodes): run the same `orbitdata generate` command again to finish it"
+                )
     if max_shard_bytes is not None:
         config = config.replace(dataset={"max_shard_bytes": int(max_shard_bytes)})
     result = write_shards(out, config.dataset, config.tier)

@@ -20,8 +20,6 @@ from orbitdata.write.executors import run_local, run_ray
 from orbitdata.write.finalize import Figure, existing_config, finalize
 from orbitdata.write.plan import plan_units
 
-OWNED = (S.DATA_DIR, S.EPISODES_DIR, S.META_DIR, S.PARTS_DIR, S.CARD_PATH)
-
 
 class UnusableOutput(RuntimeError):
     """OUT cannot take this dataset: it is a file, holds another dataset (or other files) that this
@@ -58,9 +56,11 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
                 f"{out} holds a {theirs}-tier dataset; pass --tier {theirs} to resume it, or choose another OUT"
             )
         if not overwrite:
+            changes = config_changes(existing, mine)
+            shown = "; ".join(changes[:3]) + (f"; and {len(changes) - 3} more" if len(changes) > 3 else "")
             raise UnusableOutput(
-                f"{out} holds a dataset generated with a different config; "
-                "pass --overwrite (overwrite=True) to replace it, or choose another OUT"
+                f"{out} holds a dataset generated with another config ({shown}); give the same flags to resume "
+                "it, pass --overwrite to replace it, or choose another OUT"
             )
         clear_output(out)
     elif existing is None and out.exists() and any(out.iterdir()):
@@ -82,13 +82,33 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
 
 
 def clear_output(out: Path) -> None:
-    """Remove what orbitdata writes in OUT (and nothing else)."""
-    for name in OWNED:
-        path = out / name
-        if path.is_dir():
-            shutil.rmtree(path)
-        elif path.exists():
-            path.unlink()
+    """Remove what orbitdata writes in OUT (and nothing else: a file of the user's in data/,
+    episodes/ or meta/ stays, and so does its folder)."""
+    if (out / S.PARTS_DIR).is_dir():
+        shutil.rmtree(out / S.PARTS_DIR)  # generation scratch space, orbitdata's alone
+    for rel in (S.INFO_PATH, S.STATS_PATH, S.OVERVIEW_PATH, S.CARD_PATH):
+        if (out / rel).is_file():
+            (out / rel).unlink()
+    for folder in (S.DATA_DIR, S.EPISODES_DIR, S.META_DIR):
+        if not (out / folder).is_dir():
+            continue
+        for path in (out / folder).iterdir():
+            if S.SHARD_RE.match(f"{folder}/{path.name}") or path.name.startswith(".tmp-"):
+                path.unlink()
+        if not any((out / folder).iterdir()):
+            (out / folder).rmdir()
+
+
+def config_changes(theirs: dict, mine: dict, prefix: str = "") -> list[str]:
+    """The settings that differ between two stored configs, as ``key: theirs -> mine``."""
+    out = []
+    for key in sorted(set(theirs) | set(mine)):
+        a, b = theirs.get(key), mine.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += config_changes(a, b, f"{prefix}{key}.")
+        elif a != b:
+            out.append(f"{prefix}{key}: {a!r} -> {b!r}")
+    return out
 
 
 def generate(

@@ -98,9 +98,8 @@ def closed_loop(
     """
     import torch
 
-    from orbitdata.cli.options import key_values
+    from orbitdata.cli.options import check_report_path, key_values
     from orbitdata.config import GenerationConfig
-    from orbitdata.fly.grid import check_report_path
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
 
     options = key_values(set_ or [], "--set", "samples=32")

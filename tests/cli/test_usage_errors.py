@@ -119,10 +119,11 @@ def test_a_folder_that_is_no_dataset_exits_2(tmp_path, command):
 @pytest.mark.parametrize(
     "args, line",
     [
-        (["--json", "{tmp}"], "error: --json {tmp} is a folder: give a file in it"),
+        (["--json", "{tmp}"], "error: --json {tmp} is a folder: give a file's path"),
         (["--json", "{tmp}/file/grid.json"], "error: --json {tmp}/file/grid.json: {tmp}/file is a file, not a folder"),
         (["--no-render", "--video", "{tmp}/v"], "error: --video {tmp}/v records the camera: drop --no-render"),
         (["--video-format", "gif"], "error: --video-format gif without --video"),
+        (["--video", "{tmp}/file"], "error: --video {tmp}/file is a file: give a folder for the videos"),
         (["--image-size", "50"], "error: --image-size: image_size must be a multiple of 16"),
     ],
 )
@@ -143,3 +144,24 @@ def test_generate_names_the_flag_of_a_config_verdict(tmp_path, capsys):
     code, _, err = run(["generate", str(tmp_path / "g"), "--ray-address", "10.0.0.1:6379"], capsys)
     assert code == 2 and err.startswith("error: --ray-address 10.0.0.1:6379 is for Ray tasks: add --executor ray"), err
     assert not (tmp_path / "g").exists()
+
+
+@pytest.mark.parametrize(
+    "command, line",
+    [
+        (["validate", "{data}", "--quick", "--json", "{tmp}"], "error: --json {tmp} is a folder"),
+        (
+            ["show", "{data}", "--episode", "0", "--out", "{tmp}/file/x.png"],
+            "error: --out {tmp}/file/x.png: {tmp}/file",
+        ),
+    ],
+)
+def test_an_output_that_cannot_be_written_is_refused_before_the_work(
+    tiny_dataset_master, tmp_path, capsys, command, line
+):
+    """validate used to check every file, report "valid", then fail on its --json with exit 1 (problems)."""
+    (tmp_path / "file").write_text("x")
+    args = [a.format(data=tiny_dataset_master, tmp=tmp_path) for a in command]
+    code, out, err = run(args, capsys)
+    assert code == 2 and out == "", out
+    assert err.startswith(line.format(tmp=tmp_path)) and len(err.strip().splitlines()) == 1, err

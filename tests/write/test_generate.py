@@ -212,3 +212,45 @@ def test_generate_from_python_refuses_what_it_cannot_run(tmp_path):
         with pytest.raises(ValueError, match=says):
             generate(tmp_path / "out", **kwargs)
     assert not (tmp_path / "out").exists()
+
+
+def _children(pid: int) -> set[int]:
+    found = set()
+    for status in Path("/proc").glob("[0-9]*/status"):
+        try:
+            fields = dict(line.split(":\t", 1) for line in status.read_text().splitlines() if ":\t" in line)
+        except OSError:
+            continue
+        if fields.get("PPid", "").strip() == str(pid):
+            found.add(int(status.parent.name))
+    return found
+
+
+def _alive(pids: set[int]) -> set[int]:
+    return {p for p in pids if Path(f"/proc/{p}").exists() and "State:\tZ" not in Path(f"/proc/{p}/status").read_text()}
+
+
+@pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc to find the workers")
+@pytest.mark.parametrize("how", [signal.SIGTERM, signal.SIGKILL])
+def test_a_killed_generate_leaves_no_worker_behind(tmp_path, how):
+    """SIGTERM stops `generate` as Ctrl-C does; after SIGKILL its workers end with it."""
+    import time
+
+    command = [sys.executable, "-m", "orbitdata", "generate", str(tmp_path / "out"), "--episodes", "60"]
+    proc = subprocess.Popen([*command, "--image-size", "32", "--workers", "2"], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    workers: set[int] = set()
+    while time.monotonic() < deadline and not (tmp_path / "out" / "parts").is_dir():
+        time.sleep(0.2)
+    while time.monotonic() < deadline and len(workers) < 2:
+        workers |= {p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()}
+        time.sleep(0.2)
+    assert len(workers) >= 2, "the workers never started"
+    proc.send_signal(how)
+    proc.wait(timeout=60)
+    end = time.monotonic() + 30
+    while _alive(workers) and time.monotonic() < end:
+        time.sleep(0.2)
+    assert not _alive(workers), f"workers {sorted(_alive(workers))} outlived generate"
+    if how == signal.SIGTERM:
+        assert "interrupted; run the same command again" in proc.stderr.read()

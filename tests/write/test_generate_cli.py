@@ -1,5 +1,6 @@
 """`orbitdata generate` / `shard` flags and errors."""
 
+import json
 import os
 import subprocess
 from pathlib import Path
@@ -88,8 +89,24 @@ def test_out_that_is_a_file(tmp_path):
 def test_config_clash_needs_overwrite(tiny_dataset):
     args = ["generate", str(tiny_dataset), "--episodes", "3", "--image-size", "64", "--workers", "1"]
     res = runner.invoke(app, args)
-    assert res.exit_code == 2 and "different config" in res.output and "--overwrite" in res.output
+    assert res.exit_code == 2 and "another config (dataset.episodes: " in res.output and "--overwrite" in res.output
     assert (tiny_dataset / "meta" / "info.json").exists()  # nothing was touched
+
+
+def test_overwrite_replaces_the_dataset_and_keeps_the_users_files(tiny_dataset):
+    """--overwrite removes what orbitdata wrote there, not a file of the user's beside it."""
+    mine = [
+        tiny_dataset / "meta" / "notes.md",
+        tiny_dataset / "episodes" / "labels.csv",
+        tiny_dataset / "data" / "x.txt",
+    ]
+    for path in mine:
+        path.write_text("mine")
+    args = ["generate", str(tiny_dataset), "--episodes", "2", "--image-size", "32", "--workers", "1", "--overwrite"]
+    res = runner.invoke(app, args)
+    assert res.exit_code == 0, res.output
+    assert all(path.read_text() == "mine" for path in mine)
+    assert json.loads((tiny_dataset / "meta" / "info.json").read_text())["config"]["dataset"]["episodes"] == 2
 
 
 def test_non_dataset_folder_is_not_clobbered(tmp_path):
@@ -128,3 +145,17 @@ def test_a_single_episode_says_in_one_line_that_there_is_no_test_split(tmp_path)
     assert res.exit_code == 0, res.output
     notes = [line for line in res.output.splitlines() if "test split" in line]
     assert notes == ["note: no test split: one episode is all train; pass --episodes 2 or more for a test split"]
+
+
+def test_shard_refuses_an_unfinished_generation(tmp_path):
+    """Compacting the parts of an interrupted run would make a smaller dataset that the original
+    command then never finishes: shard says to finish it instead."""
+    from tiny import tiny_config
+
+    from orbitdata.write.generate import prepare_output
+
+    out = tmp_path / "cut"
+    prepare_output(out, tiny_config(4), overwrite=False)  # the manifest, as a run killed before its first part
+    res = runner.invoke(app, ["shard", str(out)])
+    assert res.exit_code == 2 and "unfinished generation (0 of 4 episodes)" in res.output, res.output
+    assert not (out / "meta" / "info.json").exists()
