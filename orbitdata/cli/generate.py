@@ -154,7 +154,8 @@ def register(app: typer.Typer) -> None:
                 figure=overview_figure,
             )
             bar.update(task, completed=cfg.dataset.episodes)
-        typer.echo(f"wrote {info.counts['episodes']} episodes ({info.counts['frames']} frames) to {out}")
+        n = info.counts["episodes"]
+        typer.echo(f"wrote {n} episode{'s' * (n != 1)} ({info.counts['frames']} frames) to {out}")
         if "test" not in info.counts["splits"] and cfg.dataset.test_fraction > 0:
             typer.echo(
                 "note: no test split: one episode is all train; pass --episodes 2 or more for a test split", err=True

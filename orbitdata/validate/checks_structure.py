@@ -164,9 +164,15 @@ def check_presence(layout: Layout, sink: Sink) -> None:
                 else "regenerate meta and the card with `orbitdata shard`"
             )
             sink.add(C.MISSING, f"required file is missing; {hint}", rel)
+    unlisted_shards = any(S.SHARD_RE.match(rel) for rel in present - listed)
     for rel in sorted(listed - present):
         if rel not in REQUIRED:
-            sink.add(C.MISSING, "listed in meta/info.json but missing; download or regenerate it", rel)
+            hint = (
+                "an interrupted re-shard? run `orbitdata shard` again"
+                if unlisted_shards and S.SHARD_RE.match(rel)
+                else "download or regenerate it"
+            )
+            sink.add(C.MISSING, f"listed in meta/info.json but missing; {hint}", rel)
     _check_shard_sets(layout, sink)
     allowed = listed | set(REQUIRED)
     for rel in sorted(present - allowed):
@@ -177,6 +183,8 @@ def check_presence(layout: Layout, sink: Sink) -> None:
             hint = "leftover of an interrupted write: delete it"
         elif layout.info is None:
             continue  # without info.json there is no list to compare with
+        elif S.SHARD_RE.match(rel):
+            hint = "a shard meta/info.json does not list (an interrupted re-shard leaves these): run `orbitdata shard` again"
         else:
             hint = "not in meta/info.json: delete it, or re-shard with `orbitdata shard` if it belongs"
         sink.add(C.EXTRA, hint, rel)

@@ -7,6 +7,7 @@ drawn by a callback, so the writer does not depend on the plotting code: the CLI
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 from typing import Callable
@@ -42,6 +43,13 @@ def existing_config(out: Path) -> dict | None:
     if (out / S.INFO_PATH).exists():
         return read_info(out).config
     return None
+
+
+def card_repo(out: Path) -> str | None:
+    """The repo id the card in ``out`` loads from (``generate --repo-id``), so re-sharding keeps it."""
+    card = out / S.CARD_PATH
+    found = re.search(r'load_dataset\("([^"]+)"', card.read_text()) if card.is_file() else None
+    return found.group(1) if found else None
 
 
 def finalize(
@@ -83,7 +91,8 @@ def finalize(
     if overview:
         files.append(overview)
     info = build_info(config, result.episodes, out, files)
-    card = render_card(info, config, sizes, repo=repo_id or out.name, overview=overview, episodes=result.episodes)
+    repo = repo_id or card_repo(out) or out.resolve().name
+    card = render_card(info, config, sizes, repo=repo, overview=overview, episodes=result.episodes)
     atomic_write(out / S.CARD_PATH, card.encode())
     info = build_info(config, result.episodes, out, files + [S.CARD_PATH])
     write_json(out, S.INFO_PATH, info.to_dict())  # last: its presence means the layout is complete

@@ -131,3 +131,16 @@ def test_not_a_dataset_reports_missing_meta(tmp_path):
 def test_missing_folder_raises(tmp_path):
     with pytest.raises(FileNotFoundError, match="no dataset folder at"):
         validate(tmp_path / "nope")
+
+
+def test_an_interrupted_reshard_is_named_as_such(tiny_dataset):
+    """A re-shard killed midway leaves shards meta/info.json does not list and lacks some it does:
+    validate says to run shard again, not to delete the only copy of the data."""
+    import shutil
+
+    listed = sorted((tiny_dataset / S.DATA_DIR).glob("train-*.parquet"))[0]
+    shutil.move(listed, tiny_dataset / S.DATA_DIR / "train-00000-of-00009.parquet")
+    report = validate(tiny_dataset, ValidateOptions(quick=True, workers=1))
+    hints = [f.message for check in (C.EXTRA, C.MISSING) for f in report.findings(check)]
+    assert any("an interrupted re-shard leaves these" in h for h in hints), hints
+    assert any("an interrupted re-shard? run `orbitdata shard` again" in h for h in hints), hints

@@ -159,3 +159,15 @@ def test_shard_refuses_an_unfinished_generation(tmp_path):
     res = runner.invoke(app, ["shard", str(out)])
     assert res.exit_code == 2 and "unfinished generation (0 of 4 episodes)" in res.output, res.output
     assert not (out / "meta" / "info.json").exists()
+
+
+def test_the_cards_repo_id_survives_a_reshard(tmp_path, monkeypatch):
+    out = tmp_path / "orbit"
+    args = ["generate", str(out), "--episodes", "2", "--image-size", "32", "--workers", "1", "--repo-id", "me/orbit"]
+    assert runner.invoke(app, args).exit_code == 0
+    assert runner.invoke(app, ["shard", str(out), "--max-shard-mb", "1"]).exit_code == 0
+    assert 'load_dataset("me/orbit", split="train")' in (out / "README.md").read_text()
+    monkeypatch.chdir(tmp_path / "orbit")
+    (tmp_path / "orbit" / "README.md").unlink()
+    assert runner.invoke(app, ["shard", "."]).exit_code == 0
+    assert 'load_dataset("orbit", split="train")' in (out / "README.md").read_text()  # not load_dataset("")
