@@ -11,7 +11,7 @@ import typer
 
 from orbitdata.cli.errors import friendly, usage_errors
 from orbitdata.cli.generate import TIER_HELP, Tier, load_config
-from orbitdata.cli.options import key_values
+from orbitdata.cli.options import key_values, wide_console
 from orbitdata.fly.registry import ENTRY_POINT_GROUP, list_pilots
 from orbitdata.sim.config import CameraConfig
 
@@ -169,7 +169,7 @@ def register(app: typer.Typer) -> None:
         for c in cells:
             counts = (str(getattr(c, o)) for o in names)
             table.add_row(str(c.obstacles), f"{c.speed:g}", *counts, f"{100 * c.success_rate:.0f}")
-        Console().print(table)
+        wide_console().print(table)
         successes, flown = pooled(cells)
         typer.echo(f"pooled: {successes}/{flown} success")
         if json_out is not None:

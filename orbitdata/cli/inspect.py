@@ -13,6 +13,7 @@ from rich.table import Table
 from rich.text import Text
 
 from orbitdata.cli.errors import fail, friendly, usage, usage_errors
+from orbitdata.cli.options import wide_console
 from orbitdata.schema import DYNAMIC_OUTCOMES, FPS, LEVELS, OUTCOMES, SPLITS
 
 SPARK = " ▁▂▃▄▅▆▇█"
@@ -124,7 +125,8 @@ def _params_table(s: dict) -> Table:
 def print_summary(s: dict, console: Console) -> None:
     console.print(f"[bold]{escape(s['source'])}[/bold]")
     console.print(
-        f"schema {s['schema_version']} · {s['codebase_version']} · {s['fps']} fps (dt {s['dt']} s) · "
+        f"{s.get('tier', 'static')} tier · schema {s['schema_version']} · {s['codebase_version']} · "
+        f"{s['fps']} fps (dt {s['dt']} s) · "
         f"{s['image_size']} px camera · root seed {s['root_seed']}"
     )
     console.print(f"{s['episodes']} episodes · {s['steps']} steps · {_bytes(s['sizes']['total'])}\n")
@@ -154,7 +156,7 @@ def register(app: typer.Typer) -> None:
         if as_json:
             typer.echo(json.dumps(summary, indent=2))
         else:
-            print_summary(summary, Console())
+            print_summary(summary, wide_console())
 
     @app.command()
     @friendly

@@ -37,3 +37,13 @@ def check_report_path(path: Path | None, flag: str = "--json") -> None:
         raise ValueError(f"{flag} {path}: {folder} is a file, not a folder; give another path")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
+
+
+def wide_console():
+    """A rich console for tables: the terminal's width, or 160 columns into a pipe or a file (rich's
+    80 would cut the tables' cells)."""
+    import sys
+
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=160)

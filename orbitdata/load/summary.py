@@ -131,6 +131,7 @@ def summarize(source: str | Path) -> dict:
         "source": where,
         "schema_version": info.schema_version,
         "codebase_version": info.codebase_version,
+        "tier": info.tier,
         "fps": info.fps,
         "dt": info.dt,
         "root_seed": info.root_seed,

@@ -51,9 +51,10 @@ def test_the_summary_agrees_with_the_episodes_table(tiny_dataset_master):
 
 
 def test_info_prints_tables(tiny_dataset_master):
-    res = runner.invoke(app, ["info", str(tiny_dataset_master)], env={"COLUMNS": "160"})
+    res = runner.invoke(app, ["info", str(tiny_dataset_master)])  # into a pipe: its tables are not cut at 80
     assert res.exit_code == 0, res.output
     for text in (
+        "static tier · schema",
         "Episodes per split, level and outcome",
         "Episode length",
         "Sizes",
