@@ -10,6 +10,7 @@ import ctypes
 import multiprocessing
 import os
 import signal
+import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Iterator
 
@@ -22,15 +23,15 @@ RAY_HINT = "the Ray executor needs the 'ray' extra: pip install 'orbitdata[ray]'
 PR_SET_PDEATHSIG = 1  # prctl(2)
 
 
-def die_with_parent() -> None:
-    """In a worker: end when the process that started it ends, however it ends (Linux; a killed
-    generate otherwise leaves its workers computing for nobody)."""
+def die_with_parent(parent: int) -> None:
+    """In a worker: end when ``parent``, the process that started it, ends, however it ends (Linux;
+    a killed generate otherwise leaves its workers computing for nobody)."""
     try:
-        libc = ctypes.CDLL("libc.so.6", use_errno=True)
-    except OSError:  # not Linux
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):  # not Linux
         return
-    libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
-    if os.getppid() == 1:  # the parent ended before the call took effect
+    if os.getppid() != parent:  # the parent ended before the call took effect
         os._exit(1)
 
 
@@ -42,7 +43,9 @@ def run_local(config: dict, units: list[Unit], workers: int) -> Iterator[UnitRes
         return
     # spawn, not fork: a forked GL/EGL context is undefined behaviour.
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=die_with_parent) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=ctx, initializer=die_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         pending = set()
         queue = list(units)
         # Keep a bounded number of units in flight so results stream back steadily.
@@ -63,7 +66,10 @@ def run_ray(config: dict, units: list[Unit], address: str | None, workers: int) 
     started_here = not ray.is_initialized()
     if started_here:
         kwargs = {"address": address} if address else {"num_cpus": workers}
+        on_term = signal.getsignal(signal.SIGTERM)
         ray.init(include_dashboard=False, log_to_driver=False, **kwargs)
+        if on_term is not None and threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, on_term)  # ray.init sets its own; keep the command's (cli.errors)
     try:
         task = ray.remote(num_cpus=1)(run_unit_from_dict)
         pending = [task.remote(config, unit) for unit in units]

@@ -7,6 +7,7 @@ drawn by a callback, so the writer does not depend on the plotting code: the CLI
 
 from __future__ import annotations
 
+import os
 import re
 import shutil
 from pathlib import Path
@@ -48,7 +49,11 @@ def existing_config(out: Path) -> dict | None:
 def card_repo(out: Path) -> str | None:
     """The repo id the card in ``out`` loads from (``generate --repo-id``), so re-sharding keeps it."""
     card = out / S.CARD_PATH
-    found = re.search(r'load_dataset\("([^"]+)"', card.read_text()) if card.is_file() else None
+    found = (
+        re.search(r'^steps = load_dataset\("([^"]+)", split="train"\)', card.read_text(), re.M)
+        if card.is_file()
+        else None
+    )
     return found.group(1) if found else None
 
 
@@ -69,7 +74,8 @@ def finalize(
                 f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`"
             )
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
-        if parts.read_manifest(out) is not None:  # parts to compact: only a finished generation's
+        if parts.read_manifest(out) is not None and not (out / S.INFO_PATH).exists():  # parts to compact: only
+            # a finished generation's (with info.json, written last, a finished one died removing its parts)
             units = plan_units(config.dataset)
             done = [u for u in units if parts.is_done(out, u.name)]
             if len(done) < len(units):
@@ -91,7 +97,7 @@ def finalize(
     if overview:
         files.append(overview)
     info = build_info(config, result.episodes, out, files)
-    repo = repo_id or card_repo(out) or out.resolve().name
+    repo = repo_id or card_repo(out) or Path(os.path.abspath(out)).name  # "." names its folder
     card = render_card(info, config, sizes, repo=repo, overview=overview, episodes=result.episodes)
     atomic_write(out / S.CARD_PATH, card.encode())
     info = build_info(config, result.episodes, out, files + [S.CARD_PATH])

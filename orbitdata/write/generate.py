@@ -82,10 +82,12 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
 
 
 def clear_output(out: Path) -> None:
-    """Remove what orbitdata writes in OUT (and nothing else: a file of the user's in data/,
-    episodes/ or meta/ stays, and so does its folder)."""
+    """Remove what orbitdata writes in OUT and nothing else: a file of the user's in meta/, or one
+    in data/ or episodes/ that is not Parquet, stays (the sharder owns those folders' Parquet files)."""
     if (out / S.PARTS_DIR).is_dir():
         shutil.rmtree(out / S.PARTS_DIR)  # generation scratch space, orbitdata's alone
+    for path in out.glob(".tmp-*"):  # an interrupted write of the card
+        path.unlink()
     for rel in (S.INFO_PATH, S.STATS_PATH, S.OVERVIEW_PATH, S.CARD_PATH):
         if (out / rel).is_file():
             (out / rel).unlink()

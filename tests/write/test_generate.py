@@ -226,8 +226,15 @@ def _children(pid: int) -> set[int]:
     return found
 
 
+def _read(path: str) -> str:
+    try:
+        return Path(path).read_text()
+    except OSError:  # the process ended meanwhile
+        return ""
+
+
 def _alive(pids: set[int]) -> set[int]:
-    return {p for p in pids if Path(f"/proc/{p}").exists() and "State:\tZ" not in Path(f"/proc/{p}/status").read_text()}
+    return {p for p in pids if _read(f"/proc/{p}/status") and "State:\tZ" not in _read(f"/proc/{p}/status")}
 
 
 @pytest.mark.skipif(not Path("/proc/self/status").exists(), reason="reads /proc to find the workers")
@@ -243,7 +250,7 @@ def test_a_killed_generate_leaves_no_worker_behind(tmp_path, how):
     while time.monotonic() < deadline and not (tmp_path / "out" / "parts").is_dir():
         time.sleep(0.2)
     while time.monotonic() < deadline and len(workers) < 2:
-        workers |= {p for p in _children(proc.pid) if "spawn_main" in Path(f"/proc/{p}/cmdline").read_text()}
+        workers |= {p for p in _children(proc.pid) if "spawn_main" in _read(f"/proc/{p}/cmdline")}
         time.sleep(0.2)
     assert len(workers) >= 2, "the workers never started"
     proc.send_signal(how)

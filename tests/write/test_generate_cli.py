@@ -165,8 +165,10 @@ def test_the_cards_repo_id_survives_a_reshard(tmp_path, monkeypatch):
     out = tmp_path / "orbit"
     args = ["generate", str(out), "--episodes", "2", "--image-size", "32", "--workers", "1", "--repo-id", "me/orbit"]
     assert runner.invoke(app, args).exit_code == 0
+    card = out / "README.md"
+    card.write_text('Compare with `load_dataset("other/benchmark")`.\n' + card.read_text())  # an edit of the user's
     assert runner.invoke(app, ["shard", str(out), "--max-shard-mb", "1"]).exit_code == 0
-    assert 'load_dataset("me/orbit", split="train")' in (out / "README.md").read_text()
+    assert 'load_dataset("me/orbit", split="train")' in card.read_text()
     monkeypatch.chdir(tmp_path / "orbit")
     (tmp_path / "orbit" / "README.md").unlink()
     assert runner.invoke(app, ["shard", "."]).exit_code == 0
