@@ -166,6 +166,9 @@ def register(app: typer.Typer) -> None:
     def shard(
         folder: Path = typer.Argument(..., help="A generated dataset folder (parts or shards)."),
         max_shard_mb: int = typer.Option(None, min=1, help="Max data shard size in MB [default: the dataset's]."),
+        repo_id: str = typer.Option(
+            None, help="Repo id to show in the card's loading snippet [default: the card's, else the folder's name]."
+        ),
     ):
         """Compact part files, or re-shard a dataset, into data/ and episodes/ shards with meta/ and the card."""
         from orbitdata import schema as S
@@ -177,7 +180,10 @@ def register(app: typer.Typer) -> None:
             folder = local_folder(folder, repo_ok=False)
         with usage_errors(NoDataset):
             info = finalize(
-                folder, max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB, figure=overview_figure
+                folder,
+                repo_id=repo_id,
+                max_shard_bytes=None if max_shard_mb is None else max_shard_mb * MB,
+                figure=overview_figure,
             )
         shards = [rel for rel in info.files if S.SHARD_RE.match(rel)]
         typer.echo(f"sharded {info.counts['episodes']} episodes into {len(shards)} files in {folder}")

@@ -44,6 +44,15 @@ def register(app: typer.Typer) -> None:
                 )
             options = PushOptions(private=private, revision=revision, message=message, force=force)
 
+        from orbitdata.write.meta import card_repo
+
+        shown = card_repo(folder)
+        if shown is not None and shown != repo_id:
+            typer.echo(
+                f"note: the card's loading snippet names {shown!r}; `orbitdata shard {folder} --repo-id {repo_id}` "
+                "rewrites it for this repo before the push",
+                err=True,
+            )
         report = validate(folder, ValidateOptions(quick=True))
         verdict = "valid" if report.ok else f"INVALID ({', '.join(report.failed())})"
         typer.echo(

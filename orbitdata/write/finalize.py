@@ -8,7 +8,6 @@ drawn by a callback, so the writer does not depend on the plotting code: the CLI
 from __future__ import annotations
 
 import os
-import re
 import shutil
 from pathlib import Path
 from typing import Callable
@@ -21,7 +20,7 @@ from orbitdata.info import Info
 from orbitdata.load.source import read_info
 from orbitdata.write import parts
 from orbitdata.write.card import render_card
-from orbitdata.write.meta import build_info, write_json
+from orbitdata.write.meta import build_info, card_repo, write_json
 from orbitdata.write.parts import atomic_write
 from orbitdata.write.plan import plan_units
 from orbitdata.write.shard import write_shards
@@ -44,17 +43,6 @@ def existing_config(out: Path) -> dict | None:
     if (out / S.INFO_PATH).exists():
         return read_info(out).config
     return None
-
-
-def card_repo(out: Path) -> str | None:
-    """The repo id the card in ``out`` loads from (``generate --repo-id``), so re-sharding keeps it."""
-    card = out / S.CARD_PATH
-    found = (
-        re.search(r'^steps = load_dataset\("([^"]+)", split="train"\)', card.read_text(), re.M)
-        if card.is_file()
-        else None
-    )
-    return found.group(1) if found else None
 
 
 def finalize(

@@ -1,8 +1,10 @@
-"""Build ``meta/info.json`` (an :class:`~orbitdata.info.Info`): what a dataset is and how it was made."""
+"""Build ``meta/info.json`` (an :class:`~orbitdata.info.Info`): what a dataset is and how it was made; and
+read back the repo id the card loads from."""
 
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -101,3 +103,14 @@ def build_info(config: GenerationConfig, episodes: pa.Table, out: Path, files: l
 
 def write_json(out: Path, rel: str, obj) -> None:
     atomic_write(out / rel, dumps(obj))
+
+
+def card_repo(out: Path) -> str | None:
+    """The repo id the card in ``out`` loads from (``generate --repo-id``), so re-sharding keeps it."""
+    card = out / S.CARD_PATH
+    found = (
+        re.search(r'^steps = load_dataset\("([^"]+)", split="train"\)', card.read_text(), re.M)
+        if card.is_file()
+        else None
+    )
+    return found.group(1) if found else None

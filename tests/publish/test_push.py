@@ -197,3 +197,10 @@ def test_usage_errors_exit_2(tiny_dataset_master, args):
 
 def test_missing_folder_exits_2(tmp_path):
     assert runner.invoke(app, ["push", str(tmp_path / "nope"), REPO]).exit_code == 2
+
+
+def test_a_dry_run_says_when_the_cards_snippet_names_another_repo(hub_client, tiny_dataset_master, monkeypatch):
+    monkeypatch.delenv("HF_TOKEN")
+    result = runner.invoke(app, ["push", str(tiny_dataset_master), "someone/elsewhere", "--dry-run"])
+    assert result.exit_code == 0, result.output
+    assert "`orbitdata shard" in result.output and "--repo-id someone/elsewhere` rewrites it" in result.output

@@ -169,6 +169,8 @@ def test_the_cards_repo_id_survives_a_reshard(tmp_path, monkeypatch):
     card.write_text('Compare with `load_dataset("other/benchmark")`.\n' + card.read_text())  # an edit of the user's
     assert runner.invoke(app, ["shard", str(out), "--max-shard-mb", "1"]).exit_code == 0
     assert 'load_dataset("me/orbit", split="train")' in card.read_text()
+    assert runner.invoke(app, ["shard", str(out), "--repo-id", "me/orbit-v2"]).exit_code == 0
+    assert 'load_dataset("me/orbit-v2", split="train")' in card.read_text()  # named for the push to come
     monkeypatch.chdir(tmp_path / "orbit")
     (tmp_path / "orbit" / "README.md").unlink()
     assert runner.invoke(app, ["shard", "."]).exit_code == 0
