@@ -11,6 +11,7 @@ import typer
 
 from orbitdata.cli.errors import friendly, usage, usage_errors
 from orbitdata.config import DatasetConfig
+from orbitdata.schema import INFO_PATH
 from orbitdata.sim.config import CameraConfig
 
 MB = 1_000_000
@@ -141,6 +142,11 @@ def register(app: typer.Typer) -> None:
                     highlight=False,
                 )
 
+        def stamp() -> int | None:  # meta/info.json is written last, once per finished generation
+            path = out / INFO_PATH
+            return path.stat().st_mtime_ns if path.is_file() else None
+
+        before = stamp()
         with bar, usage_errors(UnusableOutput):  # OUT is a file, holds something else, or is read-only
             info = run(
                 out,
@@ -154,8 +160,11 @@ def register(app: typer.Typer) -> None:
                 figure=overview_figure,
             )
             bar.update(task, completed=cfg.dataset.episodes)
-        n = info.counts["episodes"]
-        typer.echo(f"wrote {n} episode{'s' * (n != 1)} ({info.counts['frames']} frames) to {out}")
+        n, frames = info.counts["episodes"], info.counts["frames"]
+        if before is not None and stamp() == before:
+            typer.echo(f"{out} holds these {n} episode{'s' * (n != 1)} already ({frames} frames): nothing to do")
+        else:
+            typer.echo(f"wrote {n} episode{'s' * (n != 1)} ({frames} frames) to {out}")
         if "test" not in info.counts["splits"] and cfg.dataset.test_fraction > 0:
             typer.echo(
                 "note: no test split: one episode is all train; pass --episodes 2 or more for a test split", err=True

@@ -175,3 +175,12 @@ def test_the_cards_repo_id_survives_a_reshard(tmp_path, monkeypatch):
     (tmp_path / "orbit" / "README.md").unlink()
     assert runner.invoke(app, ["shard", "."]).exit_code == 0
     assert 'load_dataset("orbit", split="train")' in (out / "README.md").read_text()  # not load_dataset("")
+
+
+def test_generating_a_finished_dataset_again_says_there_is_nothing_to_do(tmp_path):
+    out = tmp_path / "orbit"
+    args = ["generate", str(out), "--episodes", "2", "--image-size", "32", "--workers", "1"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0 and "wrote 2 episodes" in first.output, first.output
+    again = runner.invoke(app, args)
+    assert again.exit_code == 0 and "holds these 2 episodes already" in again.output and "wrote" not in again.output
