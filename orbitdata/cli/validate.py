@@ -62,9 +62,9 @@ def register(app: typer.Typer) -> None:
                     f"{folder} is not an orbitdata dataset (no meta/, data/ or episodes/): "
                     "give the folder `orbitdata generate` wrote"
                 )
+            check_report_path(json_out)  # a folder, or a file where its folder should be
             if json_out is not None and not json_out.expanduser().parent.is_dir():
                 raise FileNotFoundError(f"--json {json_out}: folder {json_out.expanduser().parent} does not exist")
-            check_report_path(json_out)
         options = ValidateOptions(quick=quick, workers=workers, max_per_check=max_per_check)
         bar, update = _progress()
         if bar is not None:

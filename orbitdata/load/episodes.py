@@ -52,11 +52,10 @@ def read_episodes(root: Path, columns: list[str] | None = None) -> pa.Table:
     """The episodes table of all splits, ordered by episode index."""
     files = episode_files(root)
     if columns is not None and files:
-        missing = sorted(set(columns) - set(pq.read_schema(files[0]).names))
+        names = pq.read_schema(files[0]).names
+        missing = sorted(set(columns) - set(names))
         if missing:
-            raise ValueError(
-                f"columns {missing} are not in the episodes table of {root}: give some of {pq.read_schema(files[0]).names}"
-            )
+            raise ValueError(f"columns {missing} are not in the episodes table of {root}: give some of {names}")
     table = pa.concat_tables([pq.read_table(f, columns=columns) for f in files])
     return table.sort_by(S.EPISODE_INDEX) if S.EPISODE_INDEX in table.column_names else table
 
