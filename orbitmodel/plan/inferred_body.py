@@ -281,7 +281,16 @@ def fit_body(
     (its held-out validation episodes are scored, never trained on) and save it in RUN/body."""
     from orbitmodel.runs import read_run_config
 
+    from orbitdata import schema as S
+    from orbitdata.load import read_meta
+
     run = Path(run)
+    tier = read_meta(dataset)[0].tier
+    if tier != S.DYNAMIC_TIER:
+        raise ValueError(
+            f"{dataset} is a {tier}-tier dataset: its episodes share one body and no thruster fails, so there is no "
+            "body to infer; pass a dataset made with `orbitdata generate --tier dynamic` and a run trained on it"
+        )
     if (run / FOLDER / WEIGHTS).exists() and not overwrite:
         raise FileExistsError(f"{run / FOLDER} already holds an inferred body; pass --overwrite to train it again")
     held = set(read_run_config(run).validation.episodes)

@@ -128,11 +128,16 @@ def test_the_planner_flies_the_inferred_body_from_its_run_and_says_how_to_make_o
     )
 
 
-def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(probed_run, tiny_dataset_master, tmp_path):
+def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(
+    probed_run, tiny_dataset_master, dynamic_master, tmp_path
+):
     run = tmp_path / "run"
     shutil.copytree(probed_run, run)
     cli = CliRunner()
-    args = ["body", str(run), str(tiny_dataset_master), "--steps", "2"]
+    static = cli.invoke(app, ["body", str(run), str(tiny_dataset_master), "--steps", "2"])
+    assert static.exit_code == 2 and "static-tier dataset" in static.output and "--tier dynamic" in static.output
+    assert "Traceback" not in static.output and not (run / "body").exists()
+    args = ["body", str(run), str(dynamic_master), "--steps", "2"]
     bare = cli.invoke(app, args)  # the tiny run held no episodes out
     assert bare.exit_code == 2 and "no validation episodes" in bare.output and "Traceback" not in bare.output
     record = json.loads((run / "config.json").read_text())
@@ -143,6 +148,6 @@ def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(probed_run,
     assert (run / "body" / "model.safetensors").is_file() and "held-out prediction error" in done.output
     card = json.loads((run / "body" / "config.json").read_text())
     assert card["held_out_episodes"] == 1 and card["config"]["steps"] == 2
-    assert card["training_episodes"] == len(flown_episodes(str(tiny_dataset_master))) - 1
+    assert card["training_episodes"] == len(flown_episodes(str(dynamic_master))) - 1
     again = cli.invoke(app, args)
     assert again.exit_code == 2 and "--overwrite" in again.output and "Traceback" not in again.output
