@@ -32,6 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from orbitdata.cli.errors import run_script, script_help
+
 os.environ.setdefault("LP_NUM_THREADS", "1")  # one core, like one worker
 
 import numpy as np  # noqa: E402
@@ -128,7 +130,7 @@ def compare_tiers(tier: str, episodes: int, image_size: int, workers: int, repea
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--episodes", type=int, default=None, help="episodes per run (24; 40 with --tier)")
     ap.add_argument("--image-size", type=int, default=None, help="camera px (224; 64 with --tier)")
     ap.add_argument("--tier", choices=["dynamic"], default=None, help="compare this tier's generation to the static")
@@ -165,4 +167,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

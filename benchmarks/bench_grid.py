@@ -32,23 +32,28 @@ import tempfile
 import time
 from pathlib import Path
 
+from orbitdata.cli.errors import run_script, script_help
+
 BIN = Path(sys.executable).parent
 OBSTACLES, SPEEDS = "1,3", ("1", "2")
 
 
-def run(*command: str, **kwargs) -> None:
-    subprocess.run([str(c) for c in command], check=True, stdout=subprocess.DEVNULL, **kwargs)
+def run(*command) -> None:
+    """Run a CLI step; on failure stop with the command and the last line it printed on stderr."""
+    done = subprocess.run([str(c) for c in command], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if done.returncode:
+        why = [line for line in done.stderr.splitlines() if line.strip()]
+        raise SystemExit(f"error: `{' '.join(map(str, command))}` failed: {why[-1] if why else done.returncode}")
 
 
 def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path | None, Path | None]:
     """A small 64 px dataset, a cpu-step5 run and probe after one step each (``planner``), and a cpu
     policy after one (``policy``)."""
     data, wm, dp = work / "orbit64", work / "wm-cpu-step5", work / "dp-cpu"
-    quiet = {"stderr": subprocess.DEVNULL}
     if not (data / "meta" / "info.json").is_file():
-        run(BIN / "orbitdata", "generate", data, "--episodes", "8", "--image-size", "64", "--workers", "1", **quiet)
+        run(BIN / "orbitdata", "generate", data, "--episodes", "8", "--image-size", "64", "--workers", "1")
     if planner and not (wm / "model.safetensors").is_file():
-        run(BIN / "orbitmodel", "train", data, "--preset", "cpu-step5", "--out", wm, "--max-steps", "1", **quiet)
+        run(BIN / "orbitmodel", "train", data, "--preset", "cpu-step5", "--out", wm, "--max-steps", "1", "--overwrite")
     if planner and not (wm / "probe" / "model.safetensors").is_file():
         run(
             BIN / "orbitmodel",
@@ -62,7 +67,6 @@ def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path
             "--batch-size",
             "8",
             "--overwrite",
-            **quiet,
         )
     if policy and not (dp / "model.safetensors").is_file():
         run(
@@ -78,7 +82,6 @@ def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path
             "--batch-size",
             "8",
             "--overwrite",
-            **quiet,
         )
     return wm if planner else None, dp if policy else None
 
@@ -105,8 +108,10 @@ def fly(run_dir: Path, out: Path, args, parts: list[tuple[str, int]], batch: int
         p.returncode = os.waitstatus_to_exitcode(status)
         cpu += usage.ru_utime + usage.ru_stime
     wall = time.perf_counter() - start
-    if any(p.returncode for p in procs):
-        raise SystemExit(f"a flight of {run_dir} failed: rerun its command by hand to see why")
+    failed = [p for p in procs if p.returncode]
+    if failed:
+        command = " ".join(map(str, failed[0].args))
+        raise SystemExit(f"error: a flight of {run_dir} failed; rerun it by hand to see why: {command}")
     reports = [json.loads(p.read_text()) for p in jsons]
     episodes = sorted(
         (e for r in reports for e in r["episodes"]), key=lambda e: (e["episode"], e["obstacles"], e["speed"])
@@ -147,7 +152,7 @@ def compare(name: str, key: str, run_dir: Path, args, work: Path) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--run", type=Path, help="a Stage I run with its probe (default: an untrained cpu-step5 run)")
     ap.add_argument("--policy", type=Path, help="a Diffusion Policy run (default: an untrained cpu policy run)")
     ap.add_argument("--no-policy", action="store_true", help="fly the planner only")
@@ -163,7 +168,12 @@ def main() -> None:
     args = ap.parse_args()
     if args.no_policy and args.no_planner:
         ap.error("--no-policy and --no-planner leave nothing to fly: give one of them")
-    args.batches = [int(n) for n in args.batches.split(",")]
+    try:
+        args.batches = [int(n) for n in args.batches.split(",")]
+    except ValueError:
+        ap.error(f"--batches {args.batches}: give whole numbers, comma-separated (4,8,16)")
+    if min(args.batches) < 1:
+        ap.error(f"--batches {','.join(map(str, args.batches))}: each batch size must be 1 or more")
     os.environ.setdefault("MUJOCO_GL", "egl")
     work = args.work or Path(tempfile.mkdtemp(prefix="bench-grid-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -188,4 +198,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -38,6 +38,7 @@ os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from orbitdata import schema as S  # noqa: E402
+from orbitdata.cli.errors import run_script
 
 COLUMNS = [S.IMAGE, S.DEPTH_LOW, S.STATE, S.ACTION, S.COLLISION, S.SUCCESS]  # the world model's inputs/targets
 BOUND = "decode-only bound (cv2.imdecode)"
@@ -256,4 +257,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.fly import Pilot, Task, fly_episode, make_pilot
 from orbitdata.scenario import sample_scenario
 from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig
@@ -50,7 +51,7 @@ class TimedPilot(Pilot):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--episodes", type=int, default=50)
     args = ap.parse_args()
     for label, kw in (("5 obstacles, 2 m/s", {"n_obstacles": 5, "speed": 2.0}), ("dataset mix", {})):
@@ -80,4 +81,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -41,6 +41,7 @@ import warnings
 import numpy as np
 import torch
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.fly.pilot import Task
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitmodel.config import PRESETS, get_preset
@@ -261,7 +262,7 @@ def rollout_profile(args) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=script_help(__doc__))
     parser.add_argument("--planner", choices=list(PLANNER_PRESETS), default="paper", help="planner preset")
     parser.add_argument("--samples", type=int, default=None, help="MPPI samples K (default: the preset's)")
     parser.add_argument("--horizon", type=int, default=None, help="MPPI horizon H in frames (default: the preset's)")
@@ -327,4 +328,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

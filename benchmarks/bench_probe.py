@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
+from orbitdata.cli.errors import run_script, script_help
 from orbitmodel.probe.baselines import STATE_ACTION_DIM, StateDynamics
 from orbitmodel.probe.config import ProbeConfig
 from orbitmodel.probe.integrator import integrate
@@ -49,7 +50,7 @@ def timed(fn, repeats: int, warmup: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--k", type=int, default=256, help="rollouts (MPPI samples)")
     ap.add_argument("--horizon", type=int, default=50, help="steps of 0.04 s")
     ap.add_argument("--latent-dim", type=int, default=128)
@@ -99,4 +100,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -20,6 +20,7 @@ os.environ.setdefault("LP_NUM_THREADS", "1")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.sim import CameraConfig, CubeSatEnv, SimConfig  # noqa: E402
 
 
@@ -33,7 +34,7 @@ def _rate(fn, seconds: float) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--seconds", type=float, default=3.0, help="measuring time per figure")
     args = ap.parse_args()
     rng = np.random.default_rng(0)
@@ -94,4 +95,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -20,6 +20,8 @@ import subprocess
 import sys
 import tempfile
 
+from orbitdata.cli.errors import run_script
+
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
@@ -61,6 +63,10 @@ def main() -> None:
     ap.add_argument("--workers", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--one", type=int, help=argparse.SUPPRESS)  # internal: measure one config, print JSON
     args = ap.parse_args()
+    if not 1 <= args.warmup < args.steps:
+        ap.error(
+            f"--warmup {args.warmup} --steps {args.steps}: give 1 <= warmup < steps (the steps after the warm-up are timed)"
+        )
     if args.one is not None:
         print(json.dumps(measure(args.dataset, args.preset, args.steps, args.warmup, args.one)))
         return
@@ -85,8 +91,11 @@ def main() -> None:
             ],
             capture_output=True,
             text=True,
-            check=True,
         )
+        if out.returncode:  # the child's own one-line reason (a missing dataset, a bad preset)
+            lines = [line for line in out.stderr.splitlines() if line.strip()]
+            why = lines[-1].removeprefix("error: ") if lines else f"exit {out.returncode}"
+            raise SystemExit(f"error: workers {workers}: {why}")
         r = json.loads(out.stdout.strip().splitlines()[-1])
         print(
             f"  workers {workers}: {r['windows_per_s']:6.1f} windows/s ({r['frames_per_s']:6.0f} frames/s, "
@@ -97,4 +106,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from orbitdata.cli.errors import run_script
+
 CHILD = r"""
 import json, os, sys, threading, time
 from orbitdata.validate import ValidateOptions, validate
@@ -141,4 +143,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

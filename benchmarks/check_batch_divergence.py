@@ -20,6 +20,7 @@ import argparse
 import numpy as np
 import torch
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.cli.options import key_values
 from orbitdata.config import GenerationConfig
 from orbitdata.fly.rollout import fly_episode
@@ -29,7 +30,7 @@ from orbitmodel.evaluate.lockstep import fly_lockstep
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=script_help(__doc__))
     parser.add_argument("run", help="a trained run with its probe and depth refit")
     parser.add_argument("--config", default="configs/dynamic.toml", help="scenario and simulator settings (TOML)")
     parser.add_argument("--obstacles", type=int, default=3)
@@ -82,4 +83,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

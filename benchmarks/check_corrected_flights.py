@@ -2,7 +2,7 @@
 body's turn on the pilot's own flights?
 
     python benchmarks/check_corrected_flights.py RUN [--pilot oracle-learned-dyn] [--episodes 2] [--seed 0]
-        [--fit-steps 1 2 5 10] [--ridges 1e-5 1e-2] [--fit-frames 40] [--shown 40] [--json OUT]
+        [--fit-steps 1] [--ridges 1e-5] [--fit-frames 40] [--shown 40] [--json OUT]
 
 Flies the dynamic tier's grid (3, 7 and 10 pieces of debris at 1 and 3 m/s, ``--episodes`` per
 setting, grid ``--seed``: a validation seed) with ``--set body=corrected``, keeping every frame
@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitmodel.cli.app import app
 from orbitmodel.kinematics import W
 from orbitmodel.model.world_model import WorldModel
@@ -62,7 +63,9 @@ def fly(run: str, pilot: str, episodes: int, seed: int, out: Path) -> list[list[
         args = ["eval", "closed-loop", run, "--pilot", pilot, "--preset", "cpu", "--config", "configs/dynamic.toml"]
         args += ["--obstacles", "3,7,10", "--speeds", "1,3", "--episodes", str(episodes), "--seed", str(seed)]
         args += ["--threads", "1", "--set", f"obstacle_motion={motion}", "--set", "body=corrected", "--json", str(out)]
-        app(args, standalone_mode=False)
+        code = app(args, standalone_mode=False)  # an exit code, not an exception, when the flight fails
+        if code:
+            raise SystemExit(f"error: the flight `orbitmodel {' '.join(map(str, args))}` failed (exit {code})")
     finally:
         planning.plan_batch = shown
     return flown + list(frames.values())
@@ -97,7 +100,7 @@ def scores(dynamics, flown: list[list[tuple]], shown: int) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("run", help="a run trained on the dynamic tier")
     ap.add_argument("--pilot", default="oracle-learned-dyn", choices=["oracle-learned-dyn", "planner"])
     ap.add_argument("--episodes", type=int, default=2, help="episodes per setting")
@@ -110,11 +113,13 @@ def main() -> None:
     args = ap.parse_args()
     grid = (args.json or Path("corrected-flights.json")).with_suffix(".grid.json")
     kept = grid.with_suffix(".frames.pt")
-    if kept.exists():
-        flown = torch.load(kept, weights_only=False)
+    flight = {"run": str(Path(args.run).resolve()), "pilot": args.pilot, "episodes": args.episodes, "seed": args.seed}
+    cached = torch.load(kept, weights_only=False) if kept.exists() else None
+    if isinstance(cached, dict) and cached.get("flight") == flight and cached.get("frames"):
+        flown = cached["frames"]  # the same flight, kept from a previous call
     else:
         flown = fly(args.run, args.pilot, args.episodes, args.seed, grid)
-        torch.save(flown, kept)
+        torch.save({"flight": flight, "frames": flown}, kept)
     torch.set_num_threads(1)
     model = WorldModel.from_pretrained(args.run)
     probe = load_planner_probe(Path(args.run), model.fingerprint)
@@ -143,4 +148,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

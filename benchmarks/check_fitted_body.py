@@ -1,6 +1,6 @@
 """How well does a body fitted to the pilot's history predict the body's turn, and from how much history?
 
-    python benchmarks/check_fitted_body.py RUN DATASET [--frames 10 20 40 80] [--ridge 1e-5 1e-3] [--inferred] [--learned] [--json OUT]
+    python benchmarks/check_fitted_body.py RUN DATASET [--frames 10 20 40 80] [--ridge 1e-6 1e-5 1e-4 1e-3] [--inferred] [--learned] [--json OUT]
 
 On the run's validation episodes (the train-split episodes it held out), at every 10th frame t
 where the body turns at most 3 rad/s, :class:`~orbitmodel.plan.fitted_body.FittedBodyDynamics`
@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.load.episodes import load_episode
 from orbitdata.sim.config import SimConfig
 from orbitmodel.kinematics import V, W
@@ -95,7 +96,7 @@ def scores(dynamics, flown, frames: int, latents: list[torch.Tensor] | None = No
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("run", help="a run trained on the dynamic tier: its held-out validation episodes are scored")
     ap.add_argument("dataset", help="the dynamic-tier dataset the run was trained on")
     ap.add_argument("--frames", type=int, nargs="+", default=[10, 20, 40, 80])
@@ -167,4 +168,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -21,6 +21,7 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.load import load_windows
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
@@ -36,7 +37,7 @@ def observed(model, probe, window: dict, history: int, context: int = 8) -> Lear
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("run")
     ap.add_argument("dataset")
     ap.add_argument("--windows", type=int, default=24)
@@ -84,4 +85,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -21,6 +21,7 @@ import torch
 from check_learned_dynamics import observed  # the planner's dynamics shown a window's context (this folder)
 
 from orbitdata import schema as S
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.load import load_windows, read_meta
 from orbitmodel.data import split_selection
 from orbitmodel.kinematics import W
@@ -61,7 +62,7 @@ def with_fault(dataset: str, split: str, episodes: np.ndarray) -> torch.Tensor |
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("run")
     ap.add_argument("dataset")
     ap.add_argument("--split", default="val", choices=("val", "test"))
@@ -114,4 +115,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

@@ -20,6 +20,7 @@ from collections import Counter
 import mujoco
 import numpy as np
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.fly.registry import make_pilot
 from orbitdata.fly.rollout import fly_episode
 from orbitdata.scenario.config import ScenarioConfig
@@ -77,7 +78,7 @@ def fly_level(level: str, episodes: int) -> None:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("--episodes", type=int, default=1000, help="seeds 0..N-1 of the dynamic tier per level")
     ap.add_argument("--levels", default="risky,exploratory")
     args = ap.parse_args()
@@ -90,4 +91,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

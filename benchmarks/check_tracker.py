@@ -32,6 +32,7 @@ import numpy as np
 import torch
 
 from orbitdata import schema as S
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.load.episodes import load_episode
 from orbitdata.load.rows import read_rows
 from orbitdata.sim.config import SimConfig
@@ -149,7 +150,7 @@ def flown(memory, frames, motion, reach: float, asked) -> tuple[list[np.ndarray]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(description=script_help(__doc__))
     ap.add_argument("run", help="a run trained on the dynamic tier: its held-out validation episodes are scored")
     ap.add_argument("dataset", help="the dynamic-tier dataset the run was trained on")
     ap.add_argument("--episodes", type=int, default=None, help="score only the first N validation episodes")
@@ -215,4 +216,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

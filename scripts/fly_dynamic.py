@@ -22,6 +22,7 @@ from collections import Counter
 
 import numpy as np
 
+from orbitdata.cli.errors import run_script, script_help
 from orbitdata.fly import FlightConfig, fly_episode, make_pilot
 from orbitdata.fly.pilots.config import DynamicExpertConfig
 from orbitdata.fly.pilots.dynamic_expert import DynamicExpertPilot
@@ -122,7 +123,7 @@ def table(name: str, report: dict, failures: bool = False) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(description=script_help(__doc__))
     parser.add_argument("--pilots", default="expert,expert-snapshot,risky", help="comma-separated pilot names")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per setting")
     parser.add_argument("--seed", type=int, default=2, help="root seed of the grid (0, 1, 2: validation)")
@@ -164,4 +165,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main)

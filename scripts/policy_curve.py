@@ -21,6 +21,8 @@ import re
 import sys
 from pathlib import Path
 
+from orbitdata.cli.errors import run_script, script_help
+
 
 def read_points(folder: Path) -> list[dict]:
     from orbitmodel.evaluate.success import report_totals, wilson
@@ -57,7 +59,7 @@ def read_points(folder: Path) -> list[dict]:
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(description=script_help(__doc__))
     parser.add_argument("snapshots", type=Path, help="folder of step-N snapshot runs")
     parser.add_argument("--out", type=Path, required=True, help="PNG to write")
     parser.add_argument("--json", type=Path, help="write the points here too")
@@ -119,4 +121,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_script(main)

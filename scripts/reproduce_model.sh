@@ -37,6 +37,21 @@ N=${2:-20}
 cd "$(dirname "$0")/.."
 BIN=${BIN:-.venv/bin}
 POLICY=${POLICY:-1}
+refuse() { echo "reproduce_model.sh: $*" >&2; exit 2; }  # a usage error, before anything runs
+[[ "$N" =~ ^[1-9][0-9]*$ ]] || refuse "EPISODES_PER_SETTING=$N: give a whole number of episodes per setting, 1 or more"
+case "${TIER:-static}" in static | dynamic) ;; *) refuse "TIER=$TIER: give static or dynamic" ;; esac
+case "${WAY:-tracker}" in tracker | imagined) ;; *) refuse "WAY=$WAY: give tracker or imagined" ;; esac
+case "$POLICY" in 0 | 1) ;; *) refuse "POLICY=$POLICY: give 1 (train and fly the Diffusion Policy) or 0" ;; esac
+case "${QUICK:-0}" in 0 | 1) ;; *) refuse "QUICK=$QUICK: give 1 (toy sizes) or 0" ;; esac
+[[ "${BATCH:-1}" =~ ^[1-9][0-9]*$ ]] || refuse "BATCH=$BATCH: give a whole number of episodes, 1 or more"
+case "${EXECUTOR:-local}" in local | ray) ;; *) refuse "EXECUTOR=$EXECUTOR: give local or ray" ;; esac
+# A folder holds one chain's sizes: toy-size outputs (QUICK=1) are never taken up by the full chain, nor
+# the other way round, since every step skips what its output already holds.
+SIZES="$([ "${QUICK:-0}" = 1 ] && echo quick || echo full)"
+if [ -f "$OUT/chain-sizes" ] && [ "$(cat "$OUT/chain-sizes")" != "$SIZES" ]; then
+  refuse "$OUT holds a chain of $(cat "$OUT/chain-sizes") sizes; give another OUT for a $SIZES one"
+fi
+mkdir -p "$OUT" && echo "$SIZES" >"$OUT/chain-sizes"
 DATA="$OUT/orbit64"
 WMS="$OUT/wm-cpu-step5"
 WM="$OUT/wm-cpu"
@@ -182,8 +197,10 @@ if [ "${TIER:-static}" = dynamic ]; then
   [ -f "$WMS/body/model.safetensors" ] || step body-dynamic "$BIN/orbitmodel" body "$WMS" "$DATA" "${BODY[@]}"
   DPD="$OUT/dp-dyn" RESUME=()
   [ -d "$DPD/checkpoints" ] && RESUME=(--resume)
-  [ -f "$DPD/model.safetensors" ] || step train-diffusion-dynamic "$BIN/orbitmodel" train-policy "$DATA" --preset cpu \
-    --val-fraction 0.05 --out "$DPD" "${RESUME[@]}" "${STEPS[@]}"
+  if [ "$POLICY" = 1 ] && [ ! -f "$DPD/model.safetensors" ]; then
+    step train-diffusion-dynamic "$BIN/orbitmodel" train-policy "$DATA" --preset cpu \
+      --val-fraction 0.05 --out "$DPD" "${RESUME[@]}" "${STEPS[@]}"
+  fi
   [ -f "$WMS/depth-imagined/model.safetensors" ] || step imagined-dynamic "$BIN/orbitmodel" depth "$WMS" "$DATA" \
     --imagined --eval-split val "${IMAGINED[@]}"
   for seed in 0 1 2 3 4 5; do
@@ -213,15 +230,17 @@ if [ "${TIER:-static}" = dynamic ]; then
     spawn fly_model oracle-learned-dyn-corrected oracle-learned-dyn --set obstacle_motion=true --set body=corrected
     step "dynamic-seed$seed-corrected" join
     step "dynamic-seed$seed-expert" fly_data expert
-    step "dynamic-seed$seed-diffusion" fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DPD" --preset cpu \
-      "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}"
+    if [ "$POLICY" = 1 ]; then
+      step "dynamic-seed$seed-diffusion" fly "$GDIR/diffusion.json" "$BIN/orbitmodel" eval closed-loop "$DPD" --preset cpu \
+        "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}"
+    fi
     cp "$GDIR/planner-$WAY.json" "$GDIR/planner.json"
   done
   mkdir -p "$GDIR_ROOT/test"
   POOLED=()
   for pilot in planner planner-imagined planner-tracker planner-fitted-tracker planner-fitted-imagined \
     planner-inferred-tracker planner-corrected-tracker oracle-true oracle-frozen oracle-nominal oracle-learned-dyn \
-    oracle-learned-dyn-corrected oracle-fitted oracle-inferred expert diffusion; do
+    oracle-learned-dyn-corrected oracle-fitted oracle-inferred expert $([ "$POLICY" = 1 ] && echo diffusion); do
     "$BIN/orbitmodel" eval pool "$GDIR_ROOT"/seed{3,4,5}/"$pilot.json" --json "$GDIR_ROOT/test/$pilot.json"
     POOLED+=("$GDIR_ROOT/test/$pilot.json")
   done

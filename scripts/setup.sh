@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Set up orbitdata on a fresh Debian/Ubuntu machine: headless OpenGL, a venv, CPU PyTorch, the project.
 #   bash scripts/setup.sh            # runtime + test dependencies into ./.venv
-# Environment: PYTHON (default python3), VENV (default .venv),
-#   TORCH_INDEX_URL (e.g. https://download.pytorch.org/whl/cpu where the CPU wheel is not the default).
+# Environment: PYTHON (default python3, 3.11 or later), VENV (default .venv),
+#   TORCH_INDEX_URL (the index to take the CPU wheel from; by default the configured index, then
+#   https://download.pytorch.org/whl/cpu when that one lacks it).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
@@ -23,13 +24,30 @@ if [ ${#need[@]} -gt 0 ]; then
   fi
 fi
 
-[ -x "$VENV/bin/python" ] || "$PYTHON" -m venv "$VENV"
+usable() {  # a venv that a killed or failed setup did not leave half-made, on a Python this project takes
+  "$VENV/bin/python" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null &&
+    "$VENV/bin/python" -m pip --version >/dev/null 2>&1
+}
+if [ -e "$VENV" ] && ! usable; then
+  echo "remaking $VENV: it has no pip or a Python older than 3.11" >&2
+  "$PYTHON" -m venv --clear "$VENV"
+elif [ ! -e "$VENV" ]; then
+  "$PYTHON" -m venv "$VENV"
+fi
+if ! usable; then
+  echo "$PYTHON cannot make a venv with pip on Python 3.11 or later: install python3-venv (Debian/Ubuntu)" \
+    "or name another interpreter with PYTHON=" >&2
+  exit 1
+fi
 PIP=("$VENV/bin/python" -m pip --quiet --disable-pip-version-check)
-# CPU PyTorch first, so that nothing below can pull the multi-GB CUDA build.
+# CPU PyTorch first, by its local version (+cpu): no index can hand over the multi-GB CUDA build, and
+# nothing installed after it pulls another torch.
+TORCH=torch==2.13.0+cpu
 if [ -n "${TORCH_INDEX_URL:-}" ]; then
-  "${PIP[@]}" install torch==2.13.0 --index-url "$TORCH_INDEX_URL"
-else
-  "${PIP[@]}" install torch==2.13.0
+  "${PIP[@]}" install "$TORCH" --index-url "$TORCH_INDEX_URL"
+elif ! "${PIP[@]}" install "$TORCH" 2>/dev/null; then
+  echo "the configured index has no $TORCH: taking it from https://download.pytorch.org/whl/cpu" >&2
+  "${PIP[@]}" install "$TORCH" --index-url https://download.pytorch.org/whl/cpu
 fi
 "${PIP[@]}" install -e ".[test]"
 "$VENV/bin/python" -c "import torch; assert not torch.version.cuda, 'CUDA torch installed; use the CPU wheel'"

@@ -217,7 +217,17 @@ def test_fly_records_the_tier_and_its_rejections(tmp_path):
     report = json.loads(out.read_text())
     assert report["tier"] == "dynamic"
     rejections = report["rejections"]
-    assert rejections["debris"] == 2 * 3 and rejections["unsurvivable_draws"] >= 0
+    # Each episode's world drawn again from its recorded seed: the report counts its pieces and
+    # the draws rejected on the way to them, and their rate.
+    from orbitdata.config import GenerationConfig
+    from orbitdata.scenario.sampler import sample_scenario
+
+    scenario = GenerationConfig.for_tier("dynamic").scenario
+    worlds = [sample_scenario(e["seed"], scenario, 3, 3.0) for e in report["episodes"]]
+    rejected = sum(w.dynamics.unsurvivable_draws for w in worlds)
+    assert rejections["debris"] == sum(len(w.obstacles) for w in worlds) == 2 * 3
+    assert rejections["unsurvivable_draws"] == rejected
+    assert rejections["rate"] == pytest.approx(rejected / (rejected + 6))
     successes = report["settings"][0]["success"]
     assert f"pooled: {successes}/2 success" in res.output
     # The static tier's JSON has no tier and no rejections.

@@ -125,6 +125,24 @@ def run_app(app: typer.Typer, args: list[str] | None = None) -> None:
     sys.exit(code if type(code) is int else 0)
 
 
+def run_script(main) -> None:
+    """Run a benchmark's or script's argparse ``main()`` as a program: bad input (a missing folder, a
+    run or value it cannot take) prints one line, ``error: ...``, and exits 2, as the CLI does; its
+    own return value is the exit code."""
+    try:
+        code = main()
+    except KeyboardInterrupt:
+        _exit("interrupted", 130)
+    except USER_ERRORS as exc:
+        _exit(str(exc).splitlines()[0] if str(exc) else type(exc).__name__, 2)
+    sys.exit(code if type(code) is int else 0)
+
+
+def script_help(doc: str) -> str:
+    """A script's --help description: its docstring's first paragraph, on one line."""
+    return " ".join(doc.strip().split("\n\n")[0].split())
+
+
 def _interrupt(signum, frame) -> None:
     raise KeyboardInterrupt
 

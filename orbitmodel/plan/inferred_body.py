@@ -279,10 +279,9 @@ def fit_body(
 ) -> dict:
     """Train :class:`BodyInference` on ``dataset``'s train-split episodes that ``run`` trained on
     (its held-out validation episodes are scored, never trained on) and save it in RUN/body."""
-    from orbitmodel.runs import read_run_config
-
     from orbitdata import schema as S
     from orbitdata.load import read_meta
+    from orbitmodel.runs import read_run_config
 
     run = Path(run)
     tier = read_meta(dataset)[0].tier

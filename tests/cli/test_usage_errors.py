@@ -165,3 +165,35 @@ def test_an_output_that_cannot_be_written_is_refused_before_the_work(
     code, out, err = run(args, capsys)
     assert code == 2 and out == "", out
     assert err.startswith(line.format(tmp=tmp_path)) and len(err.strip().splitlines()) == 1, err
+
+
+@pytest.mark.parametrize(
+    "raised, code, line",
+    [
+        (FileNotFoundError("no dataset folder at /nope: give a folder made by `orbitdata generate`"), 2, "no dataset"),
+        (ValueError("--k 0: give 1 or more\nmore detail"), 2, "--k 0: give 1 or more"),
+        (KeyboardInterrupt(), 130, "interrupted"),
+    ],
+)
+def test_a_script_turns_bad_input_into_one_line(capsys, raised, code, line):
+    """Benchmarks and scripts run their argparse main through run_script: one line, no traceback."""
+    from orbitdata.cli.errors import run_script
+
+    def main():
+        raise raised
+
+    with pytest.raises(SystemExit) as exit_:
+        run_script(main)
+    err = capsys.readouterr().err
+    assert exit_.value.code == code and err.count("\n") == 1 and line in err and "Traceback" not in err
+
+
+def test_a_scripts_return_value_is_its_exit_code_and_its_help_its_first_paragraph():
+    from orbitdata.cli.errors import run_script, script_help
+
+    for returned, code in ((None, 0), (0, 0), (3, 3)):
+        with pytest.raises(SystemExit) as exit_:
+            run_script(lambda returned=returned: returned)
+        assert exit_.value.code == code
+    doc = "How often the pilots spin the body up, and why the\nfault matters.\n\n    python check_spin.py RUN\n"
+    assert script_help(doc) == "How often the pilots spin the body up, and why the fault matters."

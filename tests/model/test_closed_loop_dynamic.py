@@ -8,8 +8,9 @@ import dataclasses
 import pytest
 
 from orbitdata.config import GenerationConfig
+from orbitdata.scenario.sampler import sample_scenario
 from orbitdata.schema import outcomes
-from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
+from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, grid_seeds
 from orbitmodel.evaluate.success import pool_seeds
 from orbitmodel.plan.config import planner_config
 from orbitmodel.plan.pilot import Variant
@@ -38,7 +39,13 @@ def test_a_dynamic_grid_counts_the_tiers_outcomes_rejections_and_factors(request
     (setting,) = report["settings"]
     assert set(outcomes("dynamic")) <= set(setting)
     assert sum(setting[k] for k in outcomes("dynamic")) == setting["episodes"] == 2
-    assert report["rejections"]["debris"] == 2 * 3  # every episode's pieces are counted
+    # Every episode's pieces and the draws rejected on the way to them, as its world drawn again from its seed
+    config = request_dynamic.config.scenario
+    worlds = [sample_scenario(e.seed, config, 3, 1.0) for e in grid_seeds((3,), (1.0,), 2, 0)]
+    rejected = sum(w.dynamics.unsurvivable_draws for w in worlds)
+    assert report["rejections"]["debris"] == sum(len(w.obstacles) for w in worlds) == 2 * 3
+    assert report["rejections"]["unsurvivable_draws"] == rejected
+    assert report["rejections"]["rate"] == pytest.approx(rejected / (rejected + 6))
     for episode in result.episodes:
         assert episode["debris"] == 3
         assert episode["fault"] in ("none", "off", "scaled", "stuck")

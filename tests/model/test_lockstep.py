@@ -131,7 +131,7 @@ def test_an_episode_that_ends_mid_batch_keeps_its_own_frames():
 
 
 def test_the_policy_boards_episodes_on_its_chunk_clock(policy_run, monkeypatch):
-    """Episodes that end mid-chunk (after 28, 53 and 40 frames, beside longer ones) free their slot
+    """Episodes that end mid-chunk, beside ones that fly to the frame limit, free their slot
     until the next chunk step, so every denoising pass serves every live episode (staggered
     starts would split each pass into a few episodes per step); each episode flies as alone."""
     from orbitmodel.baselines.diffusion import pilot as policy_pilot
@@ -140,7 +140,10 @@ def test_the_policy_boards_episodes_on_its_chunk_clock(policy_run, monkeypatch):
         request(policy_run, batch=3), obstacles=(5,), speeds=(2.0,), episodes=6, seed=2, max_steps=60
     )
     alone = records(dataclasses.replace(req, batch=1))
-    assert [e["frames"] for e in alone] == [28, 53, 60, 60, 60, 40]  # ends mid-chunk (chunks of 8)
+    lengths = [e["frames"] for e in alone]  # what the test needs of this grid, not its exact lengths:
+    assert (
+        sum(f < 60 and f % 8 for f in lengths) >= 2 and 60 in lengths
+    )  # ends mid-chunk (chunks of 8) and at the limit
     events = []
     act_batch, sample_chunks = policy_pilot.DiffusionPilot.act_batch, policy_pilot.sample_chunks
     monkeypatch.setattr(

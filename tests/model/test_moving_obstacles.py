@@ -326,7 +326,8 @@ def test_the_settings_record_the_motion_and_the_tracker_only_when_not_static():
 
 
 def test_the_oracles_fly_moving_debris_true_or_frozen():
-    # On the way to the goal now, gone from it in a second: only the frozen oracle steers around it.
+    # On the way to the goal now, gone from it in a second: the frozen oracle plans against it where it
+    # stands, the true one against where it will be, so the same episode flies other thrusts.
     scenario = dataclasses.replace(moving_scenario((1.2, 0.0, 0.0), (0.0, 1.0, 0.0)), goal=(4.0, 0.0, 0.0))
     plans = {}
     for motion in ("true", "frozen"):

@@ -261,7 +261,7 @@ def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
     assert res.exit_code == 2 and "overlap" in res.output and "Traceback" not in res.output
 
 
-def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path):
+def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path, monkeypatch):
     """--frame-step 2: Stage I and the probe on steps of 2 frames, the planner imagining a 6-frame
     plan in 3 predictor calls; a horizon that is not a multiple of 2 is refused before flying."""
     from orbitmodel.config import get_preset
@@ -328,9 +328,15 @@ def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path)
         settings=planner_config("paper", samples=8, horizon=6),
         max_steps=6,
     )
+    from orbitmodel.model.predictor import Predictor
+
+    calls = []
+    forward = Predictor.forward
+    monkeypatch.setattr(Predictor, "forward", lambda self, *a, **k: calls.append(1) or forward(self, *a, **k))
     report = closed_loop_report(req, fly_closed_loop(req))
     (episode,) = report["episodes"]
     assert episode["replans"] == episode["frames"] - 1 and episode["nonfinite_actions"] == 0
+    assert len(calls) == 3 * episode["replans"]  # each plan: 6 frames imagined in 3 predictor calls
     bad = ClosedLoopRequest(
         variant=Variant.PLANNER,
         run=run,
@@ -353,5 +359,7 @@ def test_the_default_planner_preset_suits_the_machine(monkeypatch):
     settings, preset = pilot_settings(None)
     assert (preset, settings.mppi.samples, default_planner_preset()) == ("cpu", 32, "cpu")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    settings, preset = pilot_settings(None)
+    assert (preset, settings.mppi.samples) == ("paper", 256)
     settings, preset = pilot_settings(None, samples="64")
     assert (preset, settings.mppi.samples) == ("paper", 64)

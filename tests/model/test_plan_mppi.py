@@ -80,4 +80,4 @@ def test_noise_basis_shapes_the_perturbations():
     mppi = MPPI(MPPIConfig(samples=64, horizon=3), noise_basis=basis)
     noise = mppi.sample_noise(torch.Generator().manual_seed(0))
     assert noise.shape == (64, 3, 8)
-    assert noise[..., 2:].abs().max() == 0 and noise[1:, :, :2].abs().min() >= 0 and noise[1:, :, :2].std() > 0.05
+    assert noise[..., 2:].abs().max() == 0 and noise[1:, :, :2].std() > 0.05

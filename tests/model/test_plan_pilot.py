@@ -85,6 +85,8 @@ def reachable(root, kinds: tuple[type, ...], limit: int = 200_000) -> list:
             if id(ref) not in seen and not isinstance(ref, skip):
                 seen.add(id(ref))
                 queue.append(ref)
+    if queue:  # stopped at the limit: an unfinished walk proves nothing
+        pytest.fail(f"the walk from {type(root).__name__} reached {limit} objects unfinished; raise the limit")
     return found
 
 

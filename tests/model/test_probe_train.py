@@ -169,8 +169,13 @@ def test_a_probe_run_from_before_per_frame_heads_resumes(run, tiny_dataset_maste
     assert config["probe"]["action_dim"] == 0  # a probe that reads no thrusts records none
     del config["probe"]["substeps"], config["probe"]["action_dim"], config["train"]["increment_weight"]
     path.write_text(json.dumps(config))
+    (run / "probe" / "model.safetensors").unlink()  # so the resume has the run to finish
     req = request(run, tiny_dataset_master, epochs=1)
     train_probe(ProbeRequest(run=req.run, dataset=req.dataset, recipe=req.recipe, device="cpu", resume=True))
+    assert (run / "probe" / "model.safetensors").is_file()
+    again = json.loads(path.read_text())  # rewritten with the defaults it trained with
+    assert again["probe"]["substeps"] == 1 and again["probe"]["action_dim"] == 0
+    assert again["train"]["increment_weight"] == 0
 
 
 def test_a_probe_run_with_a_flat_training_config_resumes_as_the_same_run(run, tiny_dataset_master):

@@ -51,7 +51,11 @@ def test_an_extended_run_is_followed_to_its_new_end(tmp_path):
     run = fake_run(tmp_path / "run", 12, [4], final=True)  # the old end's weights are still there
     proc = start(run, tmp_path / "snaps")
     try:
-        time.sleep(1.5)
+        deadline = time.monotonic() + 30
+        while not (tmp_path / "snaps" / "step-4").exists():  # one scan done: it has seen the old end
+            assert proc.poll() is None and time.monotonic() < deadline, proc.stderr.read()
+            time.sleep(0.05)
+        time.sleep(1.0)  # five more polls
         assert proc.poll() is None, proc.stderr.read()  # did not stop at the old end
         checkpoint(run, 8)
         checkpoint(run, 12)

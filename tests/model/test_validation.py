@@ -147,7 +147,21 @@ def test_a_run_without_a_validation_split_refuses_split_val_in_one_line(tiny_run
     assert res.exit_code == 2 and len(lines) == 1 and "--val-fraction" in lines[0], res.output
 
 
-def test_a_policy_run_holds_out_and_is_evaluated_on_its_validation_episodes(tiny_dataset_master, tmp_path):
+def test_a_policy_run_holds_out_and_is_evaluated_on_its_validation_episodes(tiny_dataset_master, tmp_path, monkeypatch):
+    import orbitmodel.baselines.diffusion.evaluate as policy_eval
+    import orbitmodel.baselines.diffusion.train as policy_train
+
+    asked: dict[str, list] = {}  # the (split, episodes=) training and evaluation asked the loader for
+
+    def spy(stage, load):
+        def wrapped(*args, **kwargs):
+            asked.setdefault(stage, []).append((kwargs.get("split"), kwargs.get("episodes")))
+            return load(*args, **kwargs)
+
+        return wrapped
+
+    monkeypatch.setattr(policy_train, "load_windows", spy("train", policy_train.load_windows))
+    monkeypatch.setattr(policy_eval, "load_windows", spy("eval", policy_eval.load_windows))
     run, data = tmp_path / "dp", str(tiny_dataset_master)
     res = runner.invoke(
         app,
@@ -192,3 +206,8 @@ def test_a_policy_run_holds_out_and_is_evaluated_on_its_validation_episodes(tiny
     assert res.exit_code == 0, res.output
     result = json.loads(res.output)
     assert result["split"] == "val" and result["frames"] > 0
+    # Training read the train split without the held-out episodes; the evaluation read those alone.
+    ((split, trained),) = asked["train"]
+    assert split == "train" and len(trained) > 0 and set(trained).isdisjoint(held_out.episodes)
+    ((split, scored),) = asked["eval"]
+    assert split == "train" and sorted(scored) == sorted(held_out.episodes)
