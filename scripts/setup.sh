@@ -43,6 +43,7 @@ PIP=("$VENV/bin/python" -m pip --quiet --disable-pip-version-check)
 # CPU PyTorch first, by its local version (+cpu): no index can hand over the multi-GB CUDA build, and
 # nothing installed after it pulls another torch.
 TORCH=torch==2.13.0+cpu
+[ "$(uname -s)" = Linux ] || TORCH=torch==2.13.0  # elsewhere the wheels carry no +cpu and no CUDA
 if [ -n "${TORCH_INDEX_URL:-}" ]; then
   "${PIP[@]}" install "$TORCH" --index-url "$TORCH_INDEX_URL"
 elif ! "${PIP[@]}" install "$TORCH" 2>/dev/null; then
