@@ -42,8 +42,9 @@ def run(*command) -> None:
     """Run a CLI step; on failure stop with the command and the last line it printed on stderr."""
     done = subprocess.run([str(c) for c in command], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode:
-        why = [line for line in done.stderr.splitlines() if line.strip()]
-        raise SystemExit(f"error: `{' '.join(map(str, command))}` failed: {why[-1] if why else done.returncode}")
+        lines = [line for line in done.stderr.splitlines() if line.strip()]
+        why = lines[-1].removeprefix("error: ") if lines else f"exit {done.returncode}"
+        raise SystemExit(f"error: `{' '.join(map(str, command))}` failed: {why}")
 
 
 def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path | None, Path | None]:
