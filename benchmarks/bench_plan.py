@@ -22,9 +22,10 @@ untimed warm-up steps that fill the context.
 ``--profile`` adds where the K candidates' rollout spends its time (torch.profiler's op table)
 and its arithmetic: the multiply-adds of its matrix products and the time they need at the rate
 this CPU reaches on one product of the predictor's MLP shape (about the least this predictor's
-products take on this CPU, however they are scheduled); and the rollout with the other ways this CPU offers: the math attention kernel instead of
-the fused one, torch.compile, int8 dynamic quantisation of the linear layers and bfloat16 (the
-last two with their error). It runs without ``--compile`` and ``--sweep``.
+products take on this CPU, however they are scheduled); and the rollout with the other ways this
+CPU offers: a window of two latents through the fused attention kernel or the math one instead of
+written out (``orbitmodel.model.vit.causal_window_attention``), torch.compile, int8 dynamic
+quantisation of the linear layers and bfloat16 (the last two with their error). It runs without ``--compile`` and ``--sweep``.
 ``--probe NAME`` (repeatable) also times the planner reading another of the run's probes
 (``PlannerConfig.probe``: a Table I variant such as ``thrust_only``, or ``latent_probe``), each
 line beside the run's own probe's; without ``--run``, an untrained probe of that variant's recipe.
@@ -185,9 +186,12 @@ def sequential_floor(args, horizon: int | None) -> str:
 def rollout_profile(args) -> str:
     """The K-candidate rollout alone: its op table, its matrix products' floor, and other kernels."""
     import copy
+    from unittest import mock
 
     from torch.nn.attention import SDPBackend, sdpa_kernel
     from torch.profiler import ProfilerActivity, profile
+
+    from orbitmodel.model import vit
 
     pilot, _ = make_pilot(args, args.samples, args.horizon, 1)
     model, history = pilot.dynamics.model, pilot.dynamics.history
@@ -204,9 +208,15 @@ def rollout_profile(args) -> str:
     def roll(m=model):
         return m.rollout(z, actions, history=history)
 
+    def kernel_window(qkv: torch.Tensor, last: bool = False) -> torch.Tensor:
+        """The window of at most two tokens through the fused kernel, as every window went before."""
+        q, k, v = qkv.permute(2, 0, 3, 1, 4)
+        y = torch.nn.functional.scaled_dot_product_attention(q, k, v, is_causal=True).transpose(1, 2)
+        return y[:, -1:] if last else y
+
     lines = [f"rollout alone, K={K} H={horizon} ({steps} predictor calls) history {history}:"]
     eager = timed(roll)
-    lines.append(f"  eager (fused attention)   {eager[0]:7.1f} ms median {eager[1]:7.1f} p95")
+    lines.append(f"  eager                     {eager[0]:7.1f} ms median {eager[1]:7.1f} p95")
     with profile(activities=[ProfilerActivity.CPU]) as prof:
         for _ in range(5):
             roll()
@@ -218,13 +228,15 @@ def rollout_profile(args) -> str:
     )
     # multiply-adds of the matrix products: once per rollout, the action encoder and every block's
     # AdaLN modulations on the history - 1 + steps actions; per imagined step, the `history` tokens
-    # through every block (qkv + proj + the MLP), then the projector on the last
+    # through every block's qkv, and through its proj and MLP in every block but the last, where the
+    # last token alone goes on; then the projector on the last
     rows = K * history
     tokens = K * (history - 1 + steps)
-    block = 3 * c.latent_dim**2 + c.latent_dim**2 + 2 * c.latent_dim * c.pred_mlp
+    qkv, rest = 3 * c.latent_dim**2, c.latent_dim**2 + 2 * c.latent_dim * c.pred_mlp
     once = tokens * (c.step_action_dim * c.action_hidden + c.action_hidden * c.latent_dim)
     once += tokens * c.pred_depth * 6 * c.latent_dim**2
-    macs = once + steps * (rows * c.pred_depth * block + K * c.latent_dim**2)
+    per_step = c.pred_depth * rows * qkv + (c.pred_depth - 1) * rows * rest + K * rest + K * c.latent_dim**2
+    macs = once + steps * per_step
     a = torch.randn(rows, c.latent_dim, generator=g)
     w = torch.randn(c.pred_mlp, c.latent_dim, generator=g)
     ms_product = timed(lambda: torch.nn.functional.linear(a, w), n=50)[0]
@@ -233,8 +245,11 @@ def rollout_profile(args) -> str:
         f"  matrix products: {2 * macs / 1e9:.2f} GFLOP per rollout; this CPU reaches {rate:.0f} GFLOP/s on one "
         f"({rows} x {c.latent_dim}) x ({c.latent_dim} x {c.pred_mlp}) product, so they need {2 * macs / rate / 1e6:.1f} ms at least"
     )
-    with sdpa_kernel(SDPBackend.MATH):
-        math = timed(roll)
+    with mock.patch.object(vit, "causal_window_attention", kernel_window):  # no-op beyond 2 tokens
+        fused = timed(roll)
+        with sdpa_kernel(SDPBackend.MATH):
+            math = timed(roll)
+    lines.append(f"  fused attention kernel    {fused[0]:7.1f} ms median {fused[1]:7.1f} p95")
     lines.append(f"  math attention kernel     {math[0]:7.1f} ms median {math[1]:7.1f} p95")
     quantised = copy.deepcopy(model)
     with warnings.catch_warnings():  # torch.ao's eager quantisation warns that it moves to torchao

@@ -29,12 +29,20 @@ class AdaLNBlock(nn.Module):
         self.mlp = Mlp(dim, mlp, dropout)
         self.adaln = nn.Sequential(nn.SiLU(), nn.Linear(dim, 6 * dim))
 
-    def forward(self, x: torch.Tensor, c: torch.Tensor, mod: torch.Tensor | None = None) -> torch.Tensor:
-        """x, c: (B, T, D). ``mod`` (B, T, 6D), optional: ``self.adaln(c)`` computed beforehand
-        (a rollout computes it once for the whole horizon, not at every step)."""
+    def forward(
+        self, x: torch.Tensor, c: torch.Tensor, mod: torch.Tensor | None = None, last: bool = False
+    ) -> torch.Tensor:
+        """x, c: (B, T, D) -> (B, T, D). ``mod`` (B, T, 6D), optional: ``self.adaln(c)`` computed
+        beforehand (a rollout computes it once for the whole horizon, not at every step). ``last``:
+        the last position's output alone, (B, 1, D), as an imagined step needs it."""
         mod = self.adaln(c) if mod is None else mod
         shift_msa, scale_msa, gate_msa, shift_mlp, scale_mlp, gate_mlp = mod.chunk(6, dim=-1)
-        x = x + gate_msa * self.attn(modulate(self.norm1(x), shift_msa, scale_msa), causal=True)
+        y = self.attn(modulate(self.norm1(x), shift_msa, scale_msa), causal=True, last=last)
+        if last:
+            x, gate_msa, shift_mlp, scale_mlp, gate_mlp = (
+                t[:, -1:] for t in (x, gate_msa, shift_mlp, scale_mlp, gate_mlp)
+            )
+        x = x + gate_msa * y
         return x + gate_mlp * self.mlp(modulate(self.norm2(x), shift_mlp, scale_mlp))
 
 
@@ -56,10 +64,10 @@ class Predictor(nn.Module):
         return [block.adaln(cond) for block in self.blocks]
 
     def forward(
-        self, z: torch.Tensor, cond: torch.Tensor | None, mods: list[torch.Tensor] | None = None
+        self, z: torch.Tensor, cond: torch.Tensor | None, mods: list[torch.Tensor] | None = None, last: bool = False
     ) -> torch.Tensor:
         """z (B, T, D) and cond (B, T, D), or ``mods`` = ``self.modulations(cond)`` sliced to the
-        same T frames, -> features (B, T, D)."""
+        same T frames, -> features (B, T, D); with ``last`` the last frame's alone, (B, 1, D)."""
         T = z.shape[1]
         if T > self.pos.shape[1]:
             raise ValueError(
@@ -67,6 +75,7 @@ class Predictor(nn.Module):
                 "max_seq_len); give shorter windows"
             )
         x = self.drop(z + self.pos[:, :T])
+        final = len(self.blocks) - 1
         for i, block in enumerate(self.blocks):
-            x = block(x, cond, None if mods is None else mods[i])
+            x = block(x, cond, None if mods is None else mods[i], last=last and i == final)
         return self.norm(x)

@@ -13,8 +13,26 @@ from torch import nn
 from orbitmodel.config import ModelConfig
 
 
+def causal_window_attention(qkv: torch.Tensor, last: bool = False) -> torch.Tensor:
+    """Causal attention over a window of one or two tokens, written out: qkv (B, N, 3, h, d), N <= 2
+    -> (B, N, h, d), or (B, 1, h, d) for the last position only.
+
+    The planner's rollouts slide a window of two latents, where ``scaled_dot_product_attention``'s
+    fixed cost per call outweighs its arithmetic. The first position sees itself only (its output is
+    its value); the second weighs the two values by the softmax of two scores, which is the sigmoid
+    of their difference. The same function as the kernel, to float rounding."""
+    v = qkv[:, :, 2]
+    if qkv.shape[1] == 1:
+        return v
+    q1, k = qkv[:, 1, 0], qkv[:, :, 1]
+    w = torch.sigmoid((q1 * (k[:, 1] - k[:, 0])).sum(-1, keepdim=True) * q1.shape[-1] ** -0.5)  # (B, h, 1)
+    second = torch.lerp(v[:, 0], v[:, 1], w)
+    return second.unsqueeze(1) if last else torch.stack([v[:, 0], second], 1)
+
+
 class Attention(nn.Module):
-    """Multi-head self-attention through ``scaled_dot_product_attention``."""
+    """Multi-head self-attention through ``scaled_dot_product_attention``; in eval mode a causal
+    window of at most two tokens goes through :func:`causal_window_attention`."""
 
     def __init__(self, dim: int, heads: int, dropout: float = 0.0):
         super().__init__()
@@ -23,13 +41,20 @@ class Attention(nn.Module):
         self.proj = nn.Linear(dim, dim)
         self.dropout = dropout
 
-    def forward(self, x: torch.Tensor, causal: bool = False) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, causal: bool = False, last: bool = False) -> torch.Tensor:
+        """x (B, N, C) -> (B, N, C); with ``last`` (causal only) the last position's output alone, (B, 1, C)."""
         B, N, C = x.shape
-        q, k, v = self.qkv(x).view(B, N, 3, self.heads, C // self.heads).permute(2, 0, 3, 1, 4)  # 3 x (B, h, N, C/h)
+        qkv = self.qkv(x).view(B, N, 3, self.heads, C // self.heads)
+        if causal and N <= 2 and not self.training:
+            y = causal_window_attention(qkv, last)  # (B, N or 1, h, C/h)
+            return self.proj(y.reshape(B, y.shape[1], C))
+        q, k, v = qkv.permute(2, 0, 3, 1, 4)  # 3 x (B, h, N, C/h)
+        if last:  # the last query sees every key: no mask needed
+            q, causal = q[:, :, -1:], False
         y = F.scaled_dot_product_attention(
             q, k, v, is_causal=causal, dropout_p=self.dropout if self.training else 0.0
-        )  # (B, h, N, C/h)
-        return self.proj(y.transpose(1, 2).reshape(B, N, C))
+        )  # (B, h, N or 1, C/h)
+        return self.proj(y.transpose(1, 2).reshape(B, y.shape[2], C))
 
 
 class Mlp(nn.Sequential):

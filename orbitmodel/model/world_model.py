@@ -166,7 +166,7 @@ class WorldModel(NormalisedStates, nn.Module):
     def imagine_step(self, window: torch.Tensor, mods: list[torch.Tensor]) -> torch.Tensor:
         """One imagined step: latents window (B, T, D) and each block's modulations for those T
         frames -> the latent after the window's last frame (B, D)."""
-        return window[:, -1] + self.pred_projector(self.predictor(window, None, mods)[:, -1])
+        return window[:, -1] + self.pred_projector(self.predictor(window, None, mods, last=True)[:, 0])
 
     def compile_rollout(self) -> "WorldModel":
         """Make :meth:`rollout` run its imagined step through ``torch.compile`` (inductor; on a CPU

@@ -8,9 +8,11 @@ import shutil
 import numpy as np
 import pytest
 import torch
+import torch.nn.functional as F
 
 from orbitmodel.config import get_preset
 from orbitmodel.model.sigreg import sigreg
+from orbitmodel.model.vit import Attention
 from orbitmodel.model.world_model import WorldModel, effective_rank
 
 B, T = 3, 6
@@ -146,6 +148,39 @@ def test_a_shorter_rollout_history_is_a_shorter_window():
     assert not torch.allclose(short, full)
     with pytest.raises(ValueError, match="history=0"):
         model.rollout(z, actions[:, :T], history=0)
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_a_window_of_one_or_two_tokens_attends_as_the_fused_kernel_does(n):
+    """The planner's rollouts slide a window of 2 latents; their written-out attention
+    (``causal_window_attention``) must give the kernel's outputs, and ``last`` its last row."""
+    torch.manual_seed(0)
+    attn = Attention(32, 4).eval()
+    x = torch.randn(5, n, 32)
+    with torch.no_grad():
+        q, k, v = attn.qkv(x).view(5, n, 3, 4, 8).permute(2, 0, 3, 1, 4)
+        kernel = attn.proj(F.scaled_dot_product_attention(q, k, v, is_causal=True).transpose(1, 2).reshape(5, n, 32))
+        written = attn(x, causal=True)
+        last = attn(x, causal=True, last=True)
+    torch.testing.assert_close(written, kernel, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(last, kernel[:, -1:], rtol=1e-5, atol=1e-6)
+    if n == 2:  # the second token does see the first
+        assert not torch.allclose(written[:, 1], attn.proj(v[:, :, 1].reshape(5, 32)))
+
+
+@pytest.mark.parametrize("t", [2, 5])
+def test_the_predictors_last_position_alone_equals_its_full_pass(t):
+    """``last=True`` (an imagined step reads the window's last output only) skips the other
+    positions' work in the final block, not any of the last position's inputs."""
+    model = _model()
+    g = torch.Generator().manual_seed(1)
+    z = torch.randn(B, t, model.config.latent_dim, generator=g)
+    cond = torch.randn(B, t, model.config.latent_dim, generator=g)
+    with torch.no_grad():
+        full = model.predictor(z, cond)
+        last = model.predictor(z, cond, last=True)
+    assert last.shape == (B, 1, model.config.latent_dim)
+    torch.testing.assert_close(last, full[:, -1:], rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.skipif(
