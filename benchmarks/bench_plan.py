@@ -162,21 +162,12 @@ def sequential_floor(args, horizon: int | None) -> str:
     z = torch.randn(1, history, model.config.latent_dim, generator=g)
     actions = torch.rand(1, history - 1 + steps, model.config.step_action_dim, generator=g)
 
-    def step(window, mods):  # one imagined step: the predictor on the window, the last frame's change
-        return window[:, -1] + model.pred_projector(model.predictor(window, None, mods)[:, -1])
+    def rollout():
+        return model.rollout(z, actions, history=history)
 
-    def rollout(step_fn):
-        mods = model.predictor.modulations(model.action_encoder(model._norm_action(actions)))
-        zs = list(z.unbind(1))
-        for i in range(steps):
-            end = history + i
-            start = max(0, end - history)
-            zs.append(step_fn(torch.stack(zs[start:end], 1), [m[:, start:end] for m in mods]))
-        return torch.stack(zs[history:], 1)
-
-    eager = call_ms(lambda: rollout(step), n=9, warmup=1)[0]
-    compiled_step = torch.compile(step, dynamic=False)
-    compiled = call_ms(lambda: rollout(compiled_step), n=9, warmup=1)[0]
+    eager = call_ms(rollout, n=9, warmup=1)[0]
+    model.compile_rollout()  # this pilot's own model: the imagined step through torch.compile
+    compiled = call_ms(rollout, n=9, warmup=1)[0]
     return (
         f"sequential floor, K=1 H={horizon} ({steps} predictor calls) history {history}: {eager:.1f} ms eager, "
         f"{compiled:.1f} ms with torch.compile ({compiled / steps:.2f} ms per imagined step)"
@@ -209,7 +200,8 @@ def rollout_profile(args) -> str:
         return m.rollout(z, actions, history=history)
 
     def kernel_window(qkv: torch.Tensor, last: bool = False) -> torch.Tensor:
-        """The window of at most two tokens through the fused kernel, as every window went before."""
+        """The window of at most two tokens through the fused kernel (the final block still on its
+        last position alone): what writing the window out saves."""
         q, k, v = qkv.permute(2, 0, 3, 1, 4)
         y = torch.nn.functional.scaled_dot_product_attention(q, k, v, is_causal=True).transpose(1, 2)
         return y[:, -1:] if last else y

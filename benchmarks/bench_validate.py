@@ -71,7 +71,7 @@ def generate(out: Path, episodes: int, image_size: int, workers: int, config: di
         cfg = cfg.replace(sim={"camera": dataclasses.replace(cfg.sim.camera, image_size=image_size)})
     start = time.monotonic()
     info = run(out, cfg, workers=workers)
-    return info["counts"]["frames"] / (time.monotonic() - start)
+    return info.counts["frames"] / (time.monotonic() - start)
 
 
 def measure(root: Path, mode: str, workers: int) -> dict:

@@ -11,6 +11,7 @@ import torch
 import torch.nn.functional as F
 
 from orbitmodel.config import get_preset
+from orbitmodel.model import vit
 from orbitmodel.model.sigreg import sigreg
 from orbitmodel.model.vit import Attention
 from orbitmodel.model.world_model import WorldModel, effective_rank
@@ -151,17 +152,21 @@ def test_a_shorter_rollout_history_is_a_shorter_window():
 
 
 @pytest.mark.parametrize("n", [1, 2])
-def test_a_window_of_one_or_two_tokens_attends_as_the_fused_kernel_does(n):
+def test_a_window_of_one_or_two_tokens_attends_as_the_fused_kernel_does(n, monkeypatch):
     """The planner's rollouts slide a window of 2 latents; their written-out attention
     (``causal_window_attention``) must give the kernel's outputs, and ``last`` its last row."""
     torch.manual_seed(0)
     attn = Attention(32, 4).eval()
     x = torch.randn(5, n, 32)
+    calls = []
+    written_out = vit.causal_window_attention
+    monkeypatch.setattr(vit, "causal_window_attention", lambda *a: calls.append(a) or written_out(*a))
     with torch.no_grad():
         q, k, v = attn.qkv(x).view(5, n, 3, 4, 8).permute(2, 0, 3, 1, 4)
         kernel = attn.proj(F.scaled_dot_product_attention(q, k, v, is_causal=True).transpose(1, 2).reshape(5, n, 32))
         written = attn(x, causal=True)
         last = attn(x, causal=True, last=True)
+    assert len(calls) == 2  # both went the written-out way
     torch.testing.assert_close(written, kernel, rtol=1e-5, atol=1e-6)
     torch.testing.assert_close(last, kernel[:, -1:], rtol=1e-5, atol=1e-6)
     if n == 2:  # the second token does see the first
@@ -171,8 +176,14 @@ def test_a_window_of_one_or_two_tokens_attends_as_the_fused_kernel_does(n):
 @pytest.mark.parametrize("t", [2, 5])
 def test_the_predictors_last_position_alone_equals_its_full_pass(t):
     """``last=True`` (an imagined step reads the window's last output only) skips the other
-    positions' work in the final block, not any of the last position's inputs."""
-    model = _model()
+    positions' work in the final block, not any of the last position's inputs: with three
+    blocks, the first two must still carry every position."""
+    torch.manual_seed(0)
+    model = WorldModel(dataclasses.replace(get_preset("tiny").model, pred_depth=3)).eval()
+    g = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for block in model.predictor.blocks:  # AdaLN-Zero starts every block as the identity
+            block.adaln[-1].weight.copy_(0.1 * torch.randn(block.adaln[-1].weight.shape, generator=g))
     g = torch.Generator().manual_seed(1)
     z = torch.randn(B, t, model.config.latent_dim, generator=g)
     cond = torch.randn(B, t, model.config.latent_dim, generator=g)
