@@ -21,11 +21,12 @@ faster, whatever K, so it says whether the 40 ms goal is reachable by sampling f
 untimed warm-up steps that fill the context.
 ``--profile`` adds where the K candidates' rollout spends its time (torch.profiler's op table)
 and its arithmetic: the multiply-adds of its matrix products and the time they need at the rate
-this CPU reaches on one product of the predictor's MLP shape (about the least this predictor's
-products take on this CPU, however they are scheduled); and the rollout with the other ways this
+this CPU reaches on one product of the predictor's MLP shape (an estimate: the op table's share
+says what they took; larger products can run faster); and the rollout with the other ways this
 CPU offers: a window of two latents through the fused attention kernel or the math one instead of
 written out (``orbitmodel.model.vit.causal_window_attention``), torch.compile, int8 dynamic
-quantisation of the linear layers and bfloat16 (the last two with their error). It runs without ``--compile`` and ``--sweep``.
+quantisation of the linear layers and bfloat16 (the last two with their error). It runs without
+``--compile`` and ``--sweep``.
 ``--probe NAME`` (repeatable) also times the planner reading another of the run's probes
 (``PlannerConfig.probe``: a Table I variant such as ``thrust_only``, or ``latent_probe``), each
 line beside the run's own probe's; without ``--run``, an untrained probe of that variant's recipe.
@@ -235,7 +236,7 @@ def rollout_profile(args) -> str:
     rate = 2 * rows * c.latent_dim * c.pred_mlp / (ms_product * 1e-3) / 1e9
     lines.append(
         f"  matrix products: {2 * macs / 1e9:.2f} GFLOP per rollout; this CPU reaches {rate:.0f} GFLOP/s on one "
-        f"({rows} x {c.latent_dim}) x ({c.latent_dim} x {c.pred_mlp}) product, so they need {2 * macs / rate / 1e6:.1f} ms at least"
+        f"({rows} x {c.latent_dim}) x ({c.latent_dim} x {c.pred_mlp}) product, so they need about {2 * macs / rate / 1e6:.1f} ms"
     )
     with mock.patch.object(vit, "causal_window_attention", kernel_window):  # no-op beyond 2 tokens
         fused = timed(roll)
