@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from orbitdata.cli.errors import run_script, script_help
+from orbitdata.cli.errors import child_reason, run_script, script_help
 
 BIN = Path(sys.executable).parent
 OBSTACLES, SPEEDS = "1,3", ("1", "2")
@@ -42,8 +42,7 @@ def run(*command) -> None:
     """Run a CLI step; on failure stop with the command and the last line it printed on stderr."""
     done = subprocess.run([str(c) for c in command], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     if done.returncode:
-        lines = [line for line in done.stderr.splitlines() if line.strip()]
-        why = lines[-1].removeprefix("error: ") if lines else f"exit {done.returncode}"
+        why = child_reason(done.stderr, done.returncode)
         raise SystemExit(f"error: `{' '.join(map(str, command))}` failed: {why}")
 
 

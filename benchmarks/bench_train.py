@@ -20,7 +20,7 @@ import subprocess
 import sys
 import tempfile
 
-from orbitdata.cli.errors import run_script
+from orbitdata.cli.errors import child_reason, run_script
 
 os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
@@ -93,9 +93,7 @@ def main() -> None:
             text=True,
         )
         if out.returncode:  # the child's own one-line reason (a missing dataset, a bad preset)
-            lines = [line for line in out.stderr.splitlines() if line.strip()]
-            why = lines[-1].removeprefix("error: ") if lines else f"exit {out.returncode}"
-            raise SystemExit(f"error: workers {workers}: {why}")
+            raise SystemExit(f"error: workers {workers}: {child_reason(out.stderr, out.returncode)}")
         r = json.loads(out.stdout.strip().splitlines()[-1])
         print(
             f"  workers {workers}: {r['windows_per_s']:6.1f} windows/s ({r['frames_per_s']:6.0f} frames/s, "

@@ -138,6 +138,13 @@ def run_script(main) -> None:
     sys.exit(code if type(code) is int else 0)
 
 
+def child_reason(stderr: str, returncode: int) -> str:
+    """Why a failed child command stopped, for a script's own one-line error: the last line it
+    printed on stderr without its own ``error: `` prefix, else its exit code."""
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    return lines[-1].removeprefix("error: ") if lines else f"exit {returncode}"
+
+
 def script_help(doc: str) -> str:
     """A script's --help description: its docstring's first paragraph, on one line."""
     return " ".join(doc.strip().split("\n\n")[0].split())

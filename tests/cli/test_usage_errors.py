@@ -197,3 +197,13 @@ def test_a_scripts_return_value_is_its_exit_code_and_its_help_its_first_paragrap
         assert exit_.value.code == code
     doc = "How often the pilots spin the body up, and why the\nfault matters.\n\n    python check_spin.py RUN\n"
     assert script_help(doc) == "How often the pilots spin the body up, and why the fault matters."
+
+
+def test_a_failed_childs_reason_is_its_last_line_without_its_own_prefix():
+    """bench_grid and bench_train wrap a failed child's reason in their own `error: ...` line."""
+    from orbitdata.cli.errors import child_reason
+
+    assert child_reason("progress 3/4\nerror: no dataset at /nope: give a folder\n\n", 2) == (
+        "no dataset at /nope: give a folder"
+    )
+    assert child_reason("  \n", -9) == "exit -9"

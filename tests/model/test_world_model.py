@@ -19,11 +19,12 @@ from orbitmodel.model.world_model import WorldModel, effective_rank
 B, T = 3, 6
 
 
-def _model(seed: int = 0, steer: bool = True) -> WorldModel:
-    """The tiny model; ``steer`` gives the zero-initialised AdaLN and change projector random
-    weights, so that actions and the predictor actually move the predictions."""
+def _model(seed: int = 0, steer: bool = True, **sizes) -> WorldModel:
+    """The tiny model (``sizes`` override its ModelConfig); ``steer`` gives the zero-initialised
+    AdaLN and change projector random weights, so that actions and the predictor actually move the
+    predictions."""
     torch.manual_seed(seed)
-    model = WorldModel(get_preset("tiny").model)
+    model = WorldModel(dataclasses.replace(get_preset("tiny").model, **sizes))
     if steer:
         g = torch.Generator().manual_seed(seed)
         with torch.no_grad():
@@ -178,12 +179,7 @@ def test_the_predictors_last_position_alone_equals_its_full_pass(t):
     """``last=True`` (an imagined step reads the window's last output only) skips the other
     positions' work in the final block, not any of the last position's inputs: with three
     blocks, the first two must still carry every position."""
-    torch.manual_seed(0)
-    model = WorldModel(dataclasses.replace(get_preset("tiny").model, pred_depth=3)).eval()
-    g = torch.Generator().manual_seed(0)
-    with torch.no_grad():
-        for block in model.predictor.blocks:  # AdaLN-Zero starts every block as the identity
-            block.adaln[-1].weight.copy_(0.1 * torch.randn(block.adaln[-1].weight.shape, generator=g))
+    model = _model(pred_depth=3)
     g = torch.Generator().manual_seed(1)
     z = torch.randn(B, t, model.config.latent_dim, generator=g)
     cond = torch.randn(B, t, model.config.latent_dim, generator=g)
