@@ -2,6 +2,7 @@
 
     python benchmarks/bench_grid.py [--run RUN] [--policy RUN] [--batches 4,8,16] [--episodes 10]
         [--seed 2] [--max-steps 300] [--work DIR] [--no-policy | --no-planner] [--one-process]
+        [--baseline RUN] [--set KEY=VALUE ...]
 
 Flies the same 40 episodes (1 and 3 obstacles at 1 and 2 m/s, ``--episodes`` each, grid seed
 ``--seed``: a validation seed) with the planner (preset cpu) and with the Diffusion Policy
@@ -19,6 +20,11 @@ flips``), the episodes flown identically (frames and closest approach) and the p
 untrained run of the ``cpu-step5`` sizes is built (one training step on a small dataset), and
 ``--policy`` likewise (an untrained ``cpu`` policy run): the weights do not change the work per
 step, so the figures are throughput only and the outcomes are meaningless.
+
+``--baseline RUN`` first flies another Stage I run unbatched, as the first row: every ratio and
+flip count is then against that flight (a smaller model's batches against the flown run's
+unbatched flight), its own unbatched flight the second row. ``--set KEY=VALUE`` passes planner
+settings to ``--run``'s flights, not the baseline's (``--set samples=256``).
 """
 
 from __future__ import annotations
@@ -86,11 +92,14 @@ def untrained_runs(work: Path, policy: bool, planner: bool = True) -> tuple[Path
     return wm if planner else None, dp if policy else None
 
 
-def fly(run_dir: Path, out: Path, args, parts: list[tuple[str, int]], batch: int) -> tuple[float, float, dict]:
-    """Fly the grid as ``parts`` (speeds, threads) in parallel processes; (wall seconds, CPU seconds,
-    merged report)."""
+def fly(
+    run_dir: Path, out: Path, args, parts: list[tuple[str, int]], batch: int, settings: tuple[str, ...] = ()
+) -> tuple[float, float, dict]:
+    """Fly the grid as ``parts`` (speeds, threads) in parallel processes, with ``settings`` as
+    ``--set`` options; (wall seconds, CPU seconds, merged report)."""
     grid = ["--obstacles", OBSTACLES, "--episodes", str(args.episodes), "--seed", str(args.seed)]
     grid += ["--max-steps", str(args.max_steps), "--preset", "cpu", "--batch", str(batch)]
+    grid += [option for setting in settings for option in ("--set", setting)]
     jsons = [out.with_name(f"{out.stem}-{i}.json") for i in range(len(parts))]
     start = time.perf_counter()
     procs = [
@@ -124,18 +133,24 @@ def compare(name: str, key: str, run_dir: Path, args, work: Path) -> None:
 
     two = [(s, 1) for s in SPEEDS]  # two processes, one thread each
     one = [(",".join(SPEEDS), 2)]  # one process, two threads
-    rows = [("unbatched, 2 processes x 1 thread", *fly(run_dir, work / f"{key}-unbatched.json", args, two, 1))]
+    settings = tuple(args.set) if key == "planner" else ()
+    rows, baseline = [], args.baseline if key == "planner" else None
+    if baseline:
+        flight = fly(baseline, work / f"{key}-baseline.json", args, two, 1)
+        rows.append(("baseline unbatched, 2 processes x 1", *flight))
+    flight = fly(run_dir, work / f"{key}-unbatched.json", args, two, 1, settings)
+    rows.append(("unbatched, 2 processes x 1 thread", *flight))
     for n in args.batches:
-        rows.append(
-            (f"--batch {n}, 2 processes x 1 thread", *fly(run_dir, work / f"{key}-b{n}-2x1.json", args, two, n))
-        )
+        flight = fly(run_dir, work / f"{key}-b{n}-2x1.json", args, two, n, settings)
+        rows.append((f"--batch {n}, 2 processes x 1 thread", *flight))
         if args.one_process:
-            rows.append(
-                (f"--batch {n}, 1 process x 2 threads", *fly(run_dir, work / f"{key}-b{n}-1x2.json", args, one, n))
-            )
+            flight = fly(run_dir, work / f"{key}-b{n}-1x2.json", args, one, n, settings)
+            rows.append((f"--batch {n}, 1 process x 2 threads", *flight))
     base_wall, base_cpu, base = rows[0][1:]
     total = len(base["episodes"])
     print(f"\n{name}: {total} episodes (obstacles {OBSTACLES}, speeds {','.join(SPEEDS)}, seed {args.seed})")
+    if baseline:
+        print(f"baseline: {baseline}, unbatched, the planner preset as it is; ratios and flips against it")
     print(
         f"{'flight':36s} {'wall s':>7s} {'episodes/h':>10s} {'ratio':>6s} {'CPU s/ep':>8s} {'ratio':>6s} "
         f"{'flips':>6s} {'same':>6s}  success [95 % CI]"
@@ -165,6 +180,10 @@ def main() -> None:
     ap.add_argument(
         "--work", type=Path, help="folder for the untrained runs and the flights (default: a temporary one)"
     )
+    ap.add_argument("--baseline", type=Path, help="a Stage I run flown unbatched first, the ratios' reference")
+    ap.add_argument(
+        "--set", action="append", default=[], metavar="KEY=VALUE", help="a planner setting for --run's flights"
+    )
     args = ap.parse_args()
     if args.no_policy and args.no_planner:
         ap.error("--no-policy and --no-planner leave nothing to fly: give one of them")
@@ -172,6 +191,8 @@ def main() -> None:
         args.batches = [int(n) for n in args.batches.split(",")]
     except ValueError:
         ap.error(f"--batches {args.batches}: give whole numbers, comma-separated (4,8,16)")
+    if args.no_planner and (args.baseline or args.set):
+        ap.error("--baseline and --set are the planner's: leave out --no-planner")
     if min(args.batches) < 1:
         ap.error(f"--batches {','.join(map(str, args.batches))}: each batch size must be 1 or more")
     os.environ.setdefault("MUJOCO_GL", "egl")
@@ -192,7 +213,8 @@ def main() -> None:
         f"{os.cpu_count()} cores (load average {os.getloadavg()[0]:.1f} at the start); every flight one after another"
     )
     if not args.no_planner:
-        compare("planner (preset cpu: K 32, H 50, history 2)", "planner", wm, args, work)
+        preset = f"preset cpu with {', '.join(args.set)}" if args.set else "preset cpu: K 32, H 50, history 2"
+        compare(f"planner ({preset})", "planner", wm, args, work)
     if not args.no_policy:
         compare("diffusion policy (flight preset cpu)", "diffusion", dp, args, work)
 

@@ -38,7 +38,7 @@ os.environ.setdefault("HF_DATASETS_OFFLINE", "1")
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 
 from orbitdata import schema as S  # noqa: E402
-from orbitdata.cli.errors import run_script
+from orbitdata.cli.errors import child_reason, run_script
 
 COLUMNS = [S.IMAGE, S.DEPTH_LOW, S.STATE, S.ACTION, S.COLLISION, S.SUCCESS]  # the world model's inputs/targets
 BOUND = "decode-only bound (cv2.imdecode)"
@@ -188,7 +188,7 @@ def run_once(args, mode: str, workers: int) -> dict:
     ]
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode:
-        raise RuntimeError(f"{mode} with {workers} workers failed:\n{out.stderr[-3000:]}")
+        raise SystemExit(f"error: {mode} with {workers} workers failed: {child_reason(out.stderr, out.returncode)}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 

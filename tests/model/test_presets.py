@@ -49,6 +49,14 @@ def test_the_dynamic_tiers_preset_changes_only_the_probes_context_and_rate():
     )
 
 
+def test_the_lite_preset_is_the_flown_preset_with_a_one_block_predictor():
+    """cpu-step5-lite changes the predictor's depth and nothing else: the same encoder, latent,
+    training and probe recipe, so its figures compare with the flown run's."""
+    flown, lite = get_preset("cpu-step5"), get_preset("cpu-step5-lite")
+    assert lite.model == dataclasses.replace(flown.model, pred_depth=1)
+    assert (lite.train, lite.probe) == (flown.train, flown.probe)
+
+
 def test_a_custom_preset_keeps_its_recipe_through_the_run_config():
     mine = dataclasses.replace(get_preset("cpu"), name="mine", probe=get_preset("cpu").probe.with_changes(epochs=7))
     back = Preset.from_dict(json.loads(json.dumps(mine.to_dict())))
