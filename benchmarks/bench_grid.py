@@ -21,8 +21,8 @@ untrained run of the ``cpu-step5`` sizes is built (one training step on a small 
 ``--policy`` likewise (an untrained ``cpu`` policy run): the weights do not change the work per
 step, so the figures are throughput only and the outcomes are meaningless.
 
-``--baseline RUN`` first flies another Stage I run unbatched, as the first row: every ratio and
-flip count is then against that flight (a smaller model's batches against the flown run's
+``--baseline RUN`` first flies another Stage I run unbatched, as the planner's first row: the
+planner's ratios and flip counts are then against that flight (a smaller model's batches against the flown run's
 unbatched flight), its own unbatched flight the second row. ``--set KEY=VALUE`` passes planner
 settings to ``--run``'s flights, not the baseline's (``--set samples=256``).
 """
@@ -137,7 +137,7 @@ def compare(name: str, key: str, run_dir: Path, args, work: Path) -> None:
     rows, baseline = [], args.baseline if key == "planner" else None
     if baseline:
         flight = fly(baseline, work / f"{key}-baseline.json", args, two, 1)
-        rows.append(("baseline unbatched, 2 processes x 1", *flight))
+        rows.append(("baseline, unbatched, 2 x 1 thread", *flight))
     flight = fly(run_dir, work / f"{key}-unbatched.json", args, two, 1, settings)
     rows.append(("unbatched, 2 processes x 1 thread", *flight))
     for n in args.batches:
