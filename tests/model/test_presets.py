@@ -51,7 +51,7 @@ def test_the_dynamic_tiers_preset_changes_only_the_probes_context_and_rate():
 
 def test_the_lite_preset_is_the_flown_preset_with_a_one_block_predictor():
     """cpu-step5-lite changes the predictor's depth and nothing else: the same encoder, latent,
-    training and probe recipe, so its figures compare with the flown run's."""
+    training and probe recipe, so its figures compare with a cpu-step5 run's."""
     flown, lite = get_preset("cpu-step5"), get_preset("cpu-step5-lite")
     assert lite.model == dataclasses.replace(flown.model, pred_depth=1)
     assert (lite.train, lite.probe) == (flown.train, flown.probe)
