@@ -38,8 +38,8 @@ def plan_batch(pilots: list, observations: list[dict]) -> list[np.ndarray]:
         model = lead.dynamics.model
         with lead.dynamics.timings("encode"):
             cls, tokens = encode_frames(model, [o["image"] for o in observations])  # (N, width), (N, P, width)
-            states = joined([torch.as_tensor(o["state"], dtype=torch.float32)[None] for o in observations])
-            z = model.latent_from_cls(cls, states)  # (N, D)
+            states = [torch.as_tensor(o["state"], dtype=torch.float32)[None] for o in observations]
+            z = latents(model, cls, states)  # (N, D)
         for p, z_i, o in zip(pilots, z, observations):
             p.dynamics.push(z_i, p._previous, o)
         if isinstance(lead.depth, PredictedDepth) and lead.depth.model is model:
@@ -54,6 +54,14 @@ def plan_batch(pilots: list, observations: list[dict]) -> list[np.ndarray]:
     for p in pilots:
         p.step_seconds.append(seconds)
     return actions
+
+
+def latents(model, cls: torch.Tensor, states: list[torch.Tensor]) -> torch.Tensor:
+    """The N frames' latents (N, D) from their CLS features (N, width) and states N x (1, 16), one
+    frame at a time: a product of one row takes another kernel than one of several, whose sums
+    differ in the last bit, and a frame encoded alone (``LearnedDynamics.observe``) must get the
+    same latent in a batch. The encoder and every candidates' call have many rows either way."""
+    return joined([model.latent_from_cls(cls[i : i + 1], s) for i, s in enumerate(states)])
 
 
 def _rows(x: torch.Tensor | None, rows: list[int], n: int) -> torch.Tensor | None:

@@ -31,7 +31,7 @@ import numpy as np
 import torch
 
 from orbitmodel.plan.dynamics import LearnedDynamics, joined
-from orbitmodel.plan.fitted_body import ridge_solve
+from orbitmodel.plan.fitted_body import each_times, ridge_solve
 from orbitmodel.probe.integrator import D_V, D_W, increments_of, integrate
 
 CORRECTED = slice(D_V.start, D_W.stop)  # the increments the correction changes: dv (3), dw (3)
@@ -133,10 +133,14 @@ class CorrectedLearnedDynamics(LearnedDynamics):
         X = torch.cat([thrust, thrust.new_ones(*thrust.shape[:-1], 1)], -1)  # (G K, H, 9)
         inc = inc.clone()
         if self.fit_steps == 1:  # one correction for every frame
-            C = joined([m.corrections()[0][None].expand(k, -1, -1) for m, k in zip(members, sizes)])  # (G K, 9, 6)
-            inc[..., CORRECTED] += X @ C
-        else:
+            inc[..., CORRECTED] += each_times(X, [(m.corrections()[0], k) for m, k in zip(members, sizes)])
+        else:  # each imagined step's frames their step's correction, member by member
             which = (torch.arange(inc.shape[1]) // self.step).clamp(max=self.fit_steps - 1)  # each frame's step
-            C = joined([m.correction()[which][None].expand(k, -1, -1, -1) for m, k in zip(members, sizes)])
-            inc[..., CORRECTED] += torch.einsum("khi,khio->kho", X, C)  # C (G K, H, 9, 6)
+            C = [m.correction()[which] for m in members]  # G x (H, 9, 6)
+            inc[..., CORRECTED] += joined(
+                [
+                    torch.einsum("khi,khio->kho", x, c[None].expand(len(x), -1, -1, -1))
+                    for x, c in zip(X.split(sizes), C)
+                ]
+            )  # (G K, H, 6)
         return integrate(start, inc, config.dt, config.coasting)

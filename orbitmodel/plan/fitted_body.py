@@ -74,6 +74,14 @@ def fit_response(states: torch.Tensor, actions: torch.Tensor, prior: torch.Tenso
     return ridge_solve(*moments(states, actions), prior, ridge)
 
 
+def each_times(X: torch.Tensor, parts: list[tuple[torch.Tensor, int]]) -> torch.Tensor:
+    """X (sum k, ..., 9) times each member's (9, 6) on its k rows -> (sum k, ..., 6). A member's
+    rows take one flat (k ..., 9) @ (9, 6) product, the same call whether the episode flies alone
+    or in a lockstep batch (a batched product over per-candidate copies sums in another order)."""
+    rows = X.split([k for _, k in parts])
+    return joined([(x.reshape(-1, x.shape[-1]) @ B).view(*x.shape[:-1], B.shape[-1]) for x, (B, _) in zip(rows, parts)])
+
+
 class FittedBodyDynamics(RigidBodyDynamics):
     """The rigid-body rollout with each episode's thrust response fitted to its last ``frames``
     observed frames (:func:`fit_response`). Each episode has its own :meth:`fork`."""
@@ -125,16 +133,16 @@ class FittedBodyDynamics(RigidBodyDynamics):
         """B (9, 6) fitted to the history (the nominal body's before any frame)."""
         return fit_response(*self.history(), self.ridge)
 
-    def responses(self, members: list["FittedBodyDynamics"], sizes: list[int]) -> torch.Tensor:
-        """(sum(sizes), 9, 6): each member's fitted response, for each of its candidates."""
-        return joined([m.response()[None].expand(k, -1, -1) for m, k in zip(members, sizes)])
+    def responses(self, members: list["FittedBodyDynamics"], sizes: list[int]) -> list[tuple[torch.Tensor, int]]:
+        """Each member's fitted response (9, 6) and its number of candidates."""
+        return [(m.response(), k) for m, k in zip(members, sizes)]
 
     def _accelerations(self, actions, scale, mass, inertia, response):
-        """Body-frame acceleration and angular acceleration (K, H, 3) each, from each candidate's
-        fitted response (K, 9, 6)."""
+        """Body-frame acceleration and angular acceleration (K, H, 3) each, from each member's
+        fitted response (:meth:`responses`) on its candidates' rows."""
         given = actions * scale[..., None]
         X = torch.cat([given, given.new_ones(*given.shape[:-1], 1)], -1)  # (K, H, 9)
-        change = X @ response  # (K, H, 6) per frame
+        change = each_times(X, response)  # (K, H, 6) per frame
         return change[..., :3] / self.dt, change[..., 3:] / self.dt
 
 

@@ -27,10 +27,10 @@ def encode_frames(model, images: list[np.ndarray]) -> tuple[torch.Tensor, torch.
             f"the camera gives images of shape {shape}; this world model takes ({size}, {size}, 3): fly it in the "
             "SimConfig that build_pilot returns with the pilot (pilot, sim = build_pilot(...); CubeSatEnv(sim))"
         )
-    if len(images) == 1:
-        x = torch.from_numpy(np.ascontiguousarray(images[0])).permute(2, 0, 1)[None]  # (1, 3, H, W)
-    else:
-        x = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2)  # (N, 3, H, W)
+    # Channels first in memory, whatever N: a channels-last batch sends the patch convolution down
+    # another kernel, whose sums differ from a lone frame's in the last bit, and a lockstep episode
+    # would then part from its unbatched flight.
+    x = torch.from_numpy(np.stack(images)).permute(0, 3, 1, 2).contiguous()  # (N, 3, H, W)
     return model.encoder(images_to_float(x))
 
 
