@@ -101,26 +101,30 @@ def fly(
     grid += ["--max-steps", str(args.max_steps), "--preset", "cpu", "--batch", str(batch)]
     grid += [option for setting in settings for option in ("--set", setting)]
     jsons = [out.with_name(f"{out.stem}-{i}.json") for i in range(len(parts))]
+    logs = [path.with_suffix(".stderr") for path in jsons]  # a file each: no pipe to drain while they fly
+    out.parent.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    procs = [
-        subprocess.Popen(
-            [BIN / "orbitmodel", "eval", "closed-loop", run_dir, *grid, "--speeds", speeds, "--threads", str(threads)]
-            + ["--json", path],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.DEVNULL,
-        )
-        for (speeds, threads), path in zip(parts, jsons)
-    ]
+    procs = []
+    for (speeds, threads), path, log in zip(parts, jsons, logs):
+        with log.open("w") as stderr:
+            procs.append(
+                subprocess.Popen(
+                    [BIN / "orbitmodel", "eval", "closed-loop", run_dir, *grid, "--speeds", speeds]
+                    + ["--threads", str(threads), "--json", path],
+                    stdout=subprocess.DEVNULL,
+                    stderr=stderr,
+                )
+            )
     cpu = 0.0
     for p in procs:
         _, status, usage = os.wait4(p.pid, 0)
         p.returncode = os.waitstatus_to_exitcode(status)
         cpu += usage.ru_utime + usage.ru_stime
     wall = time.perf_counter() - start
-    failed = [p for p in procs if p.returncode]
-    if failed:
-        command = " ".join(map(str, failed[0].args))
-        raise SystemExit(f"error: a flight of {run_dir} failed; rerun it by hand to see why: {command}")
+    for p, log in zip(procs, logs):
+        if p.returncode:
+            why = child_reason(log.read_text(), p.returncode)
+            raise SystemExit(f"error: a flight of {run_dir} failed ({why}): {' '.join(map(str, p.args))}")
     reports = [json.loads(p.read_text()) for p in jsons]
     episodes = sorted(
         (e for r in reports for e in r["episodes"]), key=lambda e: (e["episode"], e["obstacles"], e["speed"])

@@ -317,7 +317,8 @@ def flips(
     from orbitmodel.evaluate.figure6 import read_json
     from orbitmodel.evaluate.success import outcome_flips
 
-    result = outcome_flips(read_json(first), read_json(second), (str(first), str(second)))
+    result = {"flights": [str(first), str(second)]}  # the JSON names what it compares
+    result |= outcome_flips(read_json(first), read_json(second), (str(first), str(second)))
     typer.echo(
         f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
         f"{result['successes'][1]})"

@@ -207,3 +207,22 @@ def test_a_failed_childs_reason_is_its_last_line_without_its_own_prefix():
         "no dataset at /nope: give a folder"
     )
     assert child_reason("  \n", -9) == "exit -9"
+
+
+def test_bench_grid_says_why_a_flight_failed(tmp_path):
+    """A grid's flights run as child processes beside each other; one that fails is reported with
+    its own reason and command, not a request to rerun it by hand."""
+    import importlib.util
+    import types
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "benchmarks" / "bench_grid.py"
+    spec = importlib.util.spec_from_file_location("bench_grid", path)
+    bench_grid = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench_grid)
+    args = types.SimpleNamespace(episodes=1, seed=2, max_steps=3)
+    with pytest.raises(SystemExit) as exit_:
+        bench_grid.fly(tmp_path / "no-run", tmp_path / "grid.json", args, [("1", 1), ("2", 1)], batch=1)
+    message = str(exit_.value)
+    assert message.startswith(f"error: a flight of {tmp_path / 'no-run'} failed (")
+    assert "no-run" in message.split("(", 1)[1] and "eval closed-loop" in message and "rerun" not in message

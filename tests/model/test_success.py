@@ -86,9 +86,12 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
         outcome_flips(a, {"episodes": [{**e, "seed": e["seed"] + 50} for e in a["episodes"]]})
     (tmp_path / "a.json").write_text(json.dumps(a))
     (tmp_path / "b.json").write_text(json.dumps(b))
-    res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "a.json"), str(tmp_path / "b.json")])
+    flights = [str(tmp_path / "a.json"), str(tmp_path / "b.json")]
+    res = CliRunner().invoke(app, ["eval", "flips", *flights, "--json", str(tmp_path / "flips.json")])
     assert res.exit_code == 0 and "2 of 4 episodes flip" in res.output and "success -> collision" in res.output
     assert "2 of 4 flown identically" in res.output
+    written = json.loads((tmp_path / "flips.json").read_text())
+    assert written["flights"] == flights and written["flips"] == 2  # it names the two flights it compares
 
 
 def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
