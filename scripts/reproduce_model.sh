@@ -27,8 +27,9 @@
 # both cores busy.
 # BATCH=N flies each eval closed-loop grid N episodes at a time in lockstep (--batch N), and
 # EXECUTOR=ray spreads its chunks over the Ray cluster that RAY_ADDRESS names (docs/planner.md);
-# without them the grids fly as reported (one episode at a time, here). A grid flown with either is
-# another command, so it is flown again.
+# without them the grids fly as reported (one episode at a time, here). The planner's and oracles'
+# episodes fly bit for bit as unbatched, the policy's up to float rounding. A grid flown with either
+# is another command, so it is flown again.
 # TIER=dynamic builds the dynamic tier's results instead (its dataset, run and grids; below), and
 # WAY=imagined|tracker names the way of predicting the debris that its planner.json flies.
 set -euo pipefail

@@ -128,6 +128,35 @@ def test_a_frame_encoded_in_a_batch_gets_the_latent_it_gets_alone():
             assert torch.equal(z[i], dynamics.context()[0][0])
 
 
+def test_an_episodes_candidates_imagine_the_same_in_a_batch_at_the_flown_sizes():
+    """The world model's rollout and the probe on one episode's 32 candidates give the same bits as
+    on those rows stacked with two other episodes' (an untrained cpu-step5 model and probe): what
+    lets a lockstep batch fly the unbatched flight, at the sizes the grids fly."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.model.world_model import WorldModel
+    from orbitmodel.probe.config import ProbeConfig
+    from orbitmodel.probe.model import PhysicsProbe
+
+    torch.manual_seed(0)
+    model = WorldModel(get_preset("cpu-step5").model).eval()
+    shape = dict(latent_dim=model.config.latent_dim, hidden=256, layers=2, substeps=5, action_dim=40)
+    probe = PhysicsProbe(ProbeConfig(**shape, inputs="latent+change+thrust", integrator="coasting")).eval()
+    for p in probe.parameters():  # an untrained probe predicts zero increments; give it some
+        torch.nn.init.normal_(p, std=0.05)
+    g = torch.Generator().manual_seed(1)
+    K, D, A = 32, model.config.latent_dim, model.config.action_dim * model.config.frame_step
+    z = torch.randn(3 * K, 2, D, generator=g)
+    actions = torch.rand(3 * K, 11, A, generator=g) * 0.3
+    state = torch.zeros(3 * K, 16)
+    state[:, 6], state[:, 10], state[:, 15] = 1.0, 1.0, 0.9
+    with torch.inference_mode():
+        alone = model.rollout(z[:K], actions[:K], 2)
+        batched = model.rollout(z, actions, 2)
+        assert torch.equal(alone, batched[:K])
+        read = probe.per_frame(alone, state[:K], z[:K, -1], 5, actions[:K, 1:])
+        assert torch.equal(read, probe.per_frame(batched, state, z[:, -1], 5, actions[:, 1:])[:K])
+
+
 def test_a_batch_of_three_flies_the_policys_episodes(policy_run):
     """The policy's denoiser computes one row per episode alone and several in a batch, whose
     products take other kernels: only the float reduction order differs, so no outcome flips on
