@@ -6,10 +6,10 @@
 Flies the grid's first ``--episodes`` episodes of one setting for ``--frames`` frames each, once
 one at a time (``orbitdata.fly.rollout.fly_episode``, the unbatched flight) and once all of them
 in one lockstep batch (``orbitmodel.evaluate.lockstep.fly_lockstep``), the planning pilot
-``--pilot`` with the planner preset ``cpu`` and the ``--set`` changes, on ``--threads`` torch threads. Prints, per episode, both
-outcomes, the first step whose thrusts differ (None: flown bit for bit), the largest thrust
-difference at each step, and the largest state difference at the last common frame, then how
-many episodes flew identically. A batched call whose sums ran in another order than the lone
+``--pilot`` with the planner preset ``cpu`` and the ``--set`` changes, on ``--threads`` torch
+threads. Prints, per episode, both outcomes, the first step whose thrusts differ (None: flown bit
+for bit), the largest thrust difference at each step, and the largest state difference at the last
+common frame, then how many episodes flew identically. A batched call whose sums ran in another order than the lone
 call's shows as a difference of about 1e-7 at first; a jump marks a threshold that rounding
 crossed (a depth point kept or dropped, a candidate's weight). Asserts nothing.
 """

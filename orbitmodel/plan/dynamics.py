@@ -105,9 +105,10 @@ class RigidBodyDynamics:
             states = lead._rollout(start, joined(actions), lead.responses(members, sizes))  # (N K, H, 16)
         return list(states.split(sizes))
 
-    def responses(self, members: list["RigidBodyDynamics"], sizes: list[int]) -> torch.Tensor | None:
-        """Each candidate's thrust response, for ``sizes[i]`` candidates of ``members[i]``: None,
-        the thruster geometry's wrench for all (a subclass fitting its own: ``plan.fitted_body``)."""
+    def responses(self, members: list["RigidBodyDynamics"], sizes: list[int]) -> list[tuple[torch.Tensor, int]] | None:
+        """The thrust response of the ``sizes[i]`` candidates of each of ``members``: None, the
+        thruster geometry's wrench for all (a subclass fitting its own gives each member's response
+        and its number of candidates: ``plan.fitted_body``)."""
         return None
 
     def _accelerations(self, actions, scale, mass, inertia, response=None) -> tuple[torch.Tensor, torch.Tensor]:
