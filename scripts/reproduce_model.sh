@@ -247,6 +247,38 @@ if [ "${TIER:-static}" = dynamic ]; then
   done
   # success by factor (the fault, eclipse, ...), closest approach, delta-v and time to goal
   "$BIN/orbitmodel" eval factors "${POOLED[@]}" --json "$GDIR_ROOT/test/factors.json" >"$GDIR_ROOT/test/factors.md"
+  # The static tier's run (OUT/wm-cpu-step5, the static chain's: run it into this OUT first) on this
+  # tier (docs/results.md "The dynamic tier: the static tier's world model"), OUT/dynamic/static-run/:
+  # alone with its own depth head, and corrected by its misses with a depth head refitted on this
+  # tier's frames (RUN/depth-dynamic); on validation seeds 0-2 also corrected with its own head
+  # (and, seed 0, the oracle on its corrected dynamics); the test seeds fly the two first.
+  SRUN="$OUT/wm-cpu-step5" SDIR="$OUT/dynamic/static-run"
+  if [ -f "$SRUN/model.safetensors" ] && [ -f "$SRUN/probe/model.safetensors" ]; then
+    [ -f "$SRUN/depth-dynamic/model.safetensors" ] || step depth-refit-static-run-dynamic "$BIN/orbitmodel" depth \
+      "$SRUN" "$DATA" --name dynamic --eval-split val "${DEPTH[@]}"
+    for seed in 0 1 2 3 4 5; do
+      GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds 1,3 --episodes "$N" --seed "$seed")
+      GDIR="$SDIR/seed$seed"
+      mkdir -p "$GDIR"
+      spawn fly_run "$SRUN" planner-tracker planner --set obstacle_motion=tracker
+      spawn fly_run "$SRUN" planner-corrected-tracker-depth-dynamic planner --set obstacle_motion=tracker \
+        --set body=corrected --set depth_head=dynamic
+      step "dynamic-static-run-seed$seed" join
+      [ "$seed" -le 2 ] || continue
+      spawn fly_run "$SRUN" planner-corrected-tracker planner --set obstacle_motion=tracker --set body=corrected
+      [ "$seed" != 0 ] || spawn fly_run "$SRUN" oracle-learned-dyn-corrected oracle-learned-dyn \
+        --set obstacle_motion=true --set body=corrected
+      step "dynamic-static-run-seed$seed-2" join
+    done
+    mkdir -p "$SDIR/test"
+    for pilot in planner-tracker planner-corrected-tracker-depth-dynamic; do
+      "$BIN/orbitmodel" eval pool "$SDIR"/seed{3,4,5}/"$pilot.json" --json "$SDIR/test/$pilot.json"
+    done
+    "$BIN/orbitmodel" eval factors "$SDIR"/test/planner-{tracker,corrected-tracker-depth-dynamic}.json \
+      --json "$SDIR/test/factors.json" >"$SDIR/test/factors.md"
+  else
+    echo "reproduce_model.sh: $SRUN is not there; run the static chain into $OUT to fly it on this tier" >&2
+  fi
   printf 'total\t%d\t%s\n' "$SECONDS" "$(date -u +%FT%TZ)" >>"$TIMES"
   exit 0
 fi

@@ -9,7 +9,7 @@ import typer
 
 from orbitmodel.cli.errors import fail, friendly
 from orbitmodel.data import EVAL_SPLITS
-from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig
+from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig, check_head_name
 
 _D = DepthRefitConfig()
 _I = ImaginedDepthConfig()
@@ -60,6 +60,13 @@ def depth(
             "(RUN/depth-imagined; the planner's --set obstacle_motion=imagined)"
         ),
     ] = False,
+    name: Annotated[
+        str,
+        typer.Option(
+            help="write the head to RUN/depth-NAME instead, beside the run's own (the planner's "
+            "--set depth_head=NAME): e.g. dynamic, refitted on the dynamic tier's frames"
+        ),
+    ] = "",
     overwrite: Annotated[bool, typer.Option(help="replace the head already there")] = False,
 ) -> None:
     """Refit the depth head on the frozen encoder with near cells weighted (written to RUN/depth).
@@ -70,6 +77,13 @@ def depth(
     """
     if eval_split not in EVAL_SPLITS:
         fail(f"--eval-split {eval_split}: choose one of {', '.join(EVAL_SPLITS)}")
+    if name:
+        if imagined:
+            fail("--name names a refit of the current frame's head; drop it with --imagined (RUN/depth-imagined)")
+        try:
+            check_head_name(name)
+        except ValueError as err:
+            fail(f"--name: {err}")
     recipe = dict(epochs=epochs, lr=lr, near_weight=near_weight, near_m=near_m, seed=seed, eval_split=eval_split)
     if imagined:
         cfg = ImaginedDepthConfig(windows=frames or _I.windows, test_windows=test_frames or _I.test_windows, **recipe)
@@ -79,11 +93,11 @@ def depth(
     from orbitmodel.plan.depth_refit import depth_folder, refit_depth_head
 
     cfg = DepthRefitConfig(frames=frames or _D.frames, test_frames=test_frames or _D.test_frames, **recipe)
-    result = refit_depth_head(run, dataset, cfg, overwrite=overwrite)
+    result = refit_depth_head(run, dataset, cfg, overwrite=overwrite, name=name)
     for line in comparison_lines(result):
         typer.echo(line)
     s = result["seconds"]
-    typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run)}")
+    typer.echo(f"encoded in {s['encode']:.0f} s, fitted in {s['fit']:.0f} s; wrote {depth_folder(run, name)}")
 
 
 def _imagined(run: Path, dataset: str, cfg: ImaginedDepthConfig, overwrite: bool) -> None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from orbitmodel.plan.cost import CostConfig
-from orbitmodel.plan.depth_recipe import MAX_RANGE
+from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, check_head_name
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.tracker import TrackerConfig
 from orbitmodel.probe.variants import FLOWN, LATENT, VARIANTS
@@ -46,8 +46,9 @@ class PlannerConfig:
             50 = 2 s, chosen on a validation grid seed, ``docs/planner.md``).
         max_range: metres; depth cells farther than this are not obstacles to plan around.
         depth_head: which depth head gives the point cloud: "stage1" (trained with the world
-            model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth) or
-            "auto" (the refit when the run has one, else Stage I's).
+            model), "refit" (``orbitmodel depth RUN``: refitted for near cells, in RUN/depth),
+            "auto" (the refit when the run has one, else Stage I's), or NAME, a head refitted on
+            another dataset's frames (``orbitmodel depth RUN DATASET --name NAME``, in RUN/depth-NAME).
         footprint: a point's sphere radius in half cell widths at its depth.
         support: keep a depth cell only if this many of its 8 neighbours are at a similar depth
             (``obstacles.supported_cells``; 0: keep every cell within ``max_range``; 1 chosen on
@@ -122,8 +123,14 @@ class PlannerConfig:
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
             raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
-        if self.depth_head not in ("auto", "stage1", "refit"):
-            raise ValueError(f"depth_head={self.depth_head!r}: use 'auto', 'stage1' or 'refit'")
+        if self.depth_head not in CHOICES:
+            try:
+                check_head_name(self.depth_head)
+            except ValueError:
+                raise ValueError(
+                    f"depth_head={self.depth_head!r}: use 'auto', 'stage1', 'refit' or the name of a head "
+                    "refitted with `orbitmodel depth RUN DATASET --name NAME`"
+                ) from None
         if self.history < 0:
             raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
         if not 0 <= self.support <= 8:

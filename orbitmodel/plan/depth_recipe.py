@@ -4,11 +4,25 @@ torch: the CLI shows the defaults without loading the model code (``plan.depth_r
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 from orbitmodel.data import EVAL_SPLITS
 
 MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to plan around
+# the planner's depth_head choices that name no head of their own (PlannerConfig.depth_head)
+CHOICES = ("auto", "stage1", "refit")
+HEAD_NAME = re.compile(r"[a-z0-9][a-z0-9_]*")
+
+
+def check_head_name(name: str) -> str:
+    """``name`` if it can name a refitted head (RUN/depth-NAME), else ValueError saying what can."""
+    if not HEAD_NAME.fullmatch(name) or name in CHOICES or name == "imagined":
+        raise ValueError(
+            f"depth head name {name!r}: use lower-case letters, digits and _ (not {', '.join(CHOICES)} or "
+            "imagined), e.g. dynamic for a head refitted on the dynamic tier's frames"
+        )
+    return name
 
 
 def check_fit(cfg) -> None:

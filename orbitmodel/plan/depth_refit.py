@@ -28,7 +28,7 @@ from orbitdata import schema as S
 from orbitmodel.data import read_dataset_meta, split_selection, training_episodes
 from orbitmodel.model.world_model import WorldModel, images_to_float
 from orbitmodel.plan.depth_bands import depth_by_band
-from orbitmodel.plan.depth_recipe import DepthRefitConfig
+from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, DepthRefitConfig, check_head_name
 from orbitmodel.runs import (
     CONFIG,
     DEPTH_REFIT,
@@ -46,8 +46,9 @@ FOLDER = "depth"
 EVAL = "eval.json"
 
 
-def depth_folder(run: str | Path) -> Path:
-    return Path(run) / FOLDER
+def depth_folder(run: str | Path, name: str = "") -> Path:
+    """RUN/depth, or RUN/depth-NAME for a head named ``name`` (refitted on another dataset's frames)."""
+    return Path(run) / (f"{FOLDER}-{check_head_name(name)}" if name else FOLDER)
 
 
 def _patches(
@@ -106,11 +107,35 @@ def _predict(head, tokens: torch.Tensor, scale: float) -> torch.Tensor:
         return torch.cat([head(tokens[s : s + 512].float()) for s in range(0, len(tokens), 512)]) * scale
 
 
+def _score(head, tokens: torch.Tensor, depth: torch.Tensor, scale: float, near_m: float) -> dict:
+    """MAE and :func:`depth_by_band` of ``head`` on encoded frames against their true depth."""
+    pred = _predict(head, tokens, scale)
+    return {"mae_m": float((pred - depth).abs().mean()), **depth_by_band(pred, depth, seen_within=near_m)}
+
+
+def score_heads(run: str | Path, dataset: str, names, split: str = "val", frames: int = 4000, seed: int = 1) -> dict:
+    """Each depth head of ``run`` that ``names`` gives (stage1, refit, or a NAME of RUN/depth-NAME)
+    scored on the same ``frames`` random frames of ``dataset``'s ``split`` ("val": the run's
+    validation episode numbers, "test"): {name: MAE and :func:`depth_by_band`}. With seed 1 and a
+    refit's --test-frames, they are the frames its own before/after table scored."""
+    model = WorldModel.from_pretrained(run)
+    check_image_size(read_dataset_meta(dataset), model.config.image_size, f"the world model of {run}")
+    heads = {
+        name: model.depth_head if name == "stage1" else load_refit_head(run, model, "" if name == "refit" else name)
+        for name in names
+    }
+    where, episodes = split_selection(split, model.run.validation)
+    tokens, depth = _patches(model, dataset, where, frames, seed, "--frames", episodes)
+    scale = float(model.depth_scale)
+    return {name: _score(head, tokens, depth, scale, MAX_RANGE) for name, head in heads.items()}
+
+
 def refit_depth_head(
-    run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(), overwrite: bool = False
+    run: str | Path, dataset: str, cfg: DepthRefitConfig = DepthRefitConfig(), overwrite: bool = False, name: str = ""
 ) -> dict:
-    """Refit ``run``'s depth head (see the module docstring); returns the before/after evaluation."""
-    out = depth_folder(local_run_folder(run, "a depth refit"))
+    """Refit ``run``'s depth head (see the module docstring) into RUN/depth, or RUN/depth-NAME for
+    ``name``; returns the before/after evaluation."""
+    out = depth_folder(local_run_folder(run, "a depth refit"), name)
     if (out / WEIGHTS).exists() and not overwrite:
         raise RunError(f"{out} already holds a refitted depth head; pass --overwrite to fit it again")
     model = WorldModel.from_pretrained(run)
@@ -136,11 +161,7 @@ def refit_depth_head(
         "epoch_loss": losses,
     }
     for name, h in (("stage1", model.depth_head), ("refit", head)):
-        pred = _predict(h, test_x, scale)
-        result[name] = {
-            "mae_m": float((pred - test_d).abs().mean()),
-            **depth_by_band(pred, test_d, seen_within=cfg.near_m),
-        }
+        result[name] = _score(h, test_x, test_d, scale, cfg.near_m)
     RunDir(out).start(
         run_config(DEPTH_REFIT, refit=asdict(cfg), dataset=str(dataset), world_model=model.fingerprint),
         resume=False,
@@ -151,19 +172,17 @@ def refit_depth_head(
     return result
 
 
-def load_refit_head(run: str | Path, model):
-    """The refitted depth head of ``run`` (a copy of ``model.depth_head`` with its weights), or
-    RunError with the command that makes it."""
-    folder = depth_folder(run)
+def load_refit_head(run: str | Path, model, name: str = ""):
+    """The refitted depth head of ``run`` (RUN/depth, or RUN/depth-NAME for ``name``: a copy of
+    ``model.depth_head`` with its weights), or RunError with the command that makes it."""
+    folder = depth_folder(run, name)
+    again = f"`orbitmodel depth {run} DATASET{f' --name {name}' if name else ''}"
     if not (folder / WEIGHTS).is_file() or not (folder / CONFIG).is_file():
-        raise RunError(
-            f"{run} has no refitted depth head ({folder} is missing); fit one with `orbitmodel depth {run} DATASET`"
-        )
+        raise RunError(f"{run} has no refitted depth head ({folder} is missing); fit one with {again}`")
     made_on = RunDir(folder).read_config().get("world_model")  # refits before fingerprints have none
     if made_on is not None and made_on != getattr(model, "fingerprint", made_on):
         raise RunError(
-            f"{folder} was refitted on another world model than {run} holds now; fit it again with "
-            f"`orbitmodel depth {run} DATASET --overwrite`"
+            f"{folder} was refitted on another world model than {run} holds now; fit it again with {again} --overwrite`"
         )
     head = copy.deepcopy(model.depth_head)
     try:
@@ -171,15 +190,22 @@ def load_refit_head(run: str | Path, model):
     except RuntimeError as err:
         raise RunError(
             f"{folder / WEIGHTS} does not fit this run's depth head ({str(err).splitlines()[0]}); "
-            f"fit it again with `orbitmodel depth {run} DATASET --overwrite`"
+            f"fit it again with {again} --overwrite`"
         ) from None
     return head.eval()
 
 
 def refit_head_for(run: str | Path, model, choice: str):
     """The depth head a planner flies with: the refitted one for ``choice`` "refit" (RunError if
-    the run has none), "auto" (if there is one), or None for the Stage I head ("stage1", or
-    "auto" without a refit)."""
+    the run has none), "auto" (if there is one), the one named ``choice`` (RUN/depth-NAME), or None
+    for the Stage I head ("stage1", or "auto" without a refit)."""
     if choice == "stage1" or (choice == "auto" and not (depth_folder(run) / WEIGHTS).is_file()):
         return None
-    return load_refit_head(run, model)
+    return load_refit_head(run, model, "" if choice in CHOICES else choice)
+
+
+def head_source(choice: str, head) -> str:
+    """What a pilot's metadata calls its depth head: stage1, refit, or refit-NAME."""
+    if head is None:
+        return "stage1"
+    return "refit" if choice in CHOICES else f"refit-{choice}"

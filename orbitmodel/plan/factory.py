@@ -15,7 +15,7 @@ from orbitdata.sim.config import SimConfig
 from orbitmodel.model.world_model import WorldModel
 from orbitmodel.plan.config import HISTORY_BODIES, PlannerConfig, planner_config
 from orbitmodel.plan.corrected_body import CorrectedLearnedDynamics
-from orbitmodel.plan.depth_refit import refit_head_for
+from orbitmodel.plan.depth_refit import head_source, refit_head_for
 from orbitmodel.plan.dynamics import LearnedDynamics, RigidBodyDynamics
 from orbitmodel.plan.fitted_body import FittedBodyDynamics, FittedBodyLearnedDynamics
 from orbitmodel.plan.frames import FrameEncoder, PredictedDepth
@@ -39,6 +39,12 @@ def load_world_model(run: str | Path | None, variant: Variant):
     if run is None:
         raise ValueError(f"pilot {variant.value} plans with the world model: give the run folder (RUN)")
     return WorldModel.from_pretrained(run)
+
+
+def predicted_depth(run: Path, model, choice: str, timings: Timings, frames: FrameEncoder) -> PredictedDepth:
+    """The depth head ``choice`` names (``PlannerConfig.depth_head``) on the shared frame encoder."""
+    head = refit_head_for(run, model, choice)
+    return PredictedDepth(model, timings, head, frames, head_source(choice, head))
 
 
 def load_planner_probe(run: Path, world_model: str, name: str = "") -> PhysicsProbe:
@@ -141,7 +147,7 @@ def build_pilot(
         else:
             dynamics = RigidBodyDynamics(sim, config.rigid_substeps, timings)
     depth = {
-        "depth-head": lambda: PredictedDepth(model, timings, refit_head_for(run, model, config.depth_head), frames),
+        "depth-head": lambda: predicted_depth(run, model, config.depth_head, timings, frames),
         "sensor": lambda: sensor_depth,
         "true": lambda: None,
     }[variant.obstacles]()

@@ -56,17 +56,20 @@ class PredictedDepth:
     """A depth head on the current frame: observation -> (16, 16) z-depth, metres.
 
     ``head``: the refitted head (``orbitmodel depth``); None for the one trained in Stage I.
+    ``name``: what the pilot's metadata calls it (stage1, refit, refit-NAME; by default from ``head``).
     ``frames``: the encoder pass shared with the learned dynamics: the frame's ViT pass is then
     timed under "encode", where the dynamics ran it first, and "depth-head" is the head alone.
     :meth:`maps` reads the patch tokens of a batch of frames encoded already (``plan.batch``).
     """
 
-    def __init__(self, model, timings: Timings | None = None, head=None, frames: FrameEncoder | None = None):
+    def __init__(
+        self, model, timings: Timings | None = None, head=None, frames: FrameEncoder | None = None, name: str = ""
+    ):
         self.model = model.eval()
         self.timings = timings or Timings()
         self.head = head
         self.frames = frames or FrameEncoder(self.model)
-        self.name = "stage1" if head is None else "refit"
+        self.name = name or ("stage1" if head is None else "refit")
 
     @torch.inference_mode()
     def __call__(self, obs: dict) -> np.ndarray:

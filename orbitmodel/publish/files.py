@@ -70,9 +70,16 @@ def check_complete(run: Path) -> str:
             load_probe(run, "latent", model.fingerprint)
             if (run / "depth" / WEIGHTS).is_file():  # a refit the planner would refuse must not go up either
                 load_refit_head(run, model)
+            for sub in named_heads(run):
+                load_refit_head(run, model, sub.removeprefix("depth-"))
         except RunError as err:
             raise RunError(f"incomplete run, not pushed: {err}") from None
     return stage
+
+
+def named_heads(run: Path) -> tuple[str, ...]:
+    """The run's depth heads refitted under a name (``orbitmodel depth --name``): RUN/depth-NAME."""
+    return tuple(sorted(p.name for p in Path(run).glob("depth-*") if p.is_dir() and p.name not in SUB_RUNS))
 
 
 def is_grid_result(path: Path) -> bool:
@@ -93,7 +100,7 @@ def run_files(run: Path, grids: tuple[Path, ...] = ()) -> list[RunFile]:
     for name in (CONFIG, WEIGHTS, METRICS, TRAINING):
         if (run / name).is_file():
             found[name] = run / name
-    for sub in SUB_RUNS:
+    for sub in SUB_RUNS + named_heads(run):
         for name in SUB_RUN_FILES:
             if (run / sub / name).is_file():
                 found[f"{sub}/{name}"] = run / sub / name

@@ -79,7 +79,7 @@ def test_the_planner_flies_the_refit_head_when_there_is_one(refit_run, tiny_run)
     with pytest.raises(RunError, match="orbitmodel depth"):
         build_pilot("oracle-true-dyn-depth", tiny_run, planner_config(depth_head="refit"))
     with pytest.raises(ValueError, match="depth_head"):
-        planner_config(depth_head="best")
+        planner_config(depth_head="best head")
 
 
 def test_a_refit_of_other_weights_is_refused(refit_run, tmp_path):
@@ -93,3 +93,37 @@ def test_a_refit_of_other_weights_is_refused(refit_run, tmp_path):
     save_file(weights, run / "model.safetensors")
     with pytest.raises(RunError, match="refitted on another world model"):
         load_refit_head(run, WorldModel.from_pretrained(run))
+
+
+def test_a_named_head_sits_beside_the_runs_own_and_the_planner_flies_it_by_name(refit_run, tiny_dataset_master):
+    """A head refitted on another dataset's frames (the dynamic tier's) goes to RUN/depth-NAME; the
+    run's own head, its Stage I weights and its other sub-runs stay as they were."""
+    from orbitmodel.publish.files import run_files
+
+    run, _ = refit_run
+    own = (run / "depth" / "model.safetensors").read_bytes()
+    res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), *SMALL, "--seed", "3", "--name", "tier"])
+    assert res.exit_code == 0, res.output
+    assert f"wrote {run / 'depth-tier'}" in res.output
+    assert (run / "depth" / "model.safetensors").read_bytes() == own
+    model = WorldModel.from_pretrained(run)
+    named = load_refit_head(run, model, "tier").state_dict()
+    assert any(not torch.equal(a, named[k]) for k, a in load_refit_head(run, model).state_dict().items())
+
+    pilot, _ = build_pilot("oracle-true-dyn-depth", run, planner_config(depth_head="tier"))
+    auto, _ = build_pilot("oracle-true-dyn-depth", run, planner_config())
+    assert (pilot.depth.name, auto.depth.name) == ("refit-tier", "refit")
+    assert pilot.metadata()["depth_source"] == "refit-tier"
+    image = torch.randint(0, 255, (64, 64, 3), dtype=torch.uint8).numpy()
+    assert not (pilot.depth({"image": image}) == auto.depth({"image": image})).all()
+    assert {"depth-tier/model.safetensors", "depth-tier/config.json"} <= {f.rel for f in run_files(run)}
+
+    with pytest.raises(RunError, match="--name other"):
+        build_pilot("oracle-true-dyn-depth", run, planner_config(depth_head="other"))
+    with pytest.raises(ValueError, match="--name NAME"):
+        planner_config(depth_head="Tier!")
+    for bad in (["--name", "refit"], ["--name", "Tier"], ["--name", "tier", "--imagined"]):
+        res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), *SMALL, *bad])
+        assert res.exit_code == 2 and "--name" in res.output and len(res.output.strip().splitlines()) == 1, bad
+    res = runner.invoke(app, ["depth", str(run), str(tiny_dataset_master), *SMALL, "--name", "tier"])
+    assert res.exit_code == 2 and "--overwrite" in res.output

@@ -233,7 +233,7 @@ def test_the_dynamics_and_the_depth_head_share_one_encoder_pass_per_frame():
         dict(support=-1),
         dict(memory_frames=0),
         dict(replan_every=0),
-        dict(depth_head="best"),
+        dict(depth_head="best head"),
         dict(noise="colour"),
     ],
 )
