@@ -15,9 +15,14 @@ CHOICES = ("auto", "stage1", "refit")
 HEAD_NAME = re.compile(r"[a-z0-9][a-z0-9_]*")
 
 
+def is_head_name(name: str) -> bool:
+    """Can ``name`` name a refitted head (RUN/depth-NAME)?"""
+    return bool(HEAD_NAME.fullmatch(name)) and name not in CHOICES and name != "imagined"
+
+
 def check_head_name(name: str) -> str:
     """``name`` if it can name a refitted head (RUN/depth-NAME), else ValueError saying what can."""
-    if not HEAD_NAME.fullmatch(name) or name in CHOICES or name == "imagined":
+    if not is_head_name(name):
         raise ValueError(
             f"depth head name {name!r}: use lower-case letters, digits and _ (not {', '.join(CHOICES)} or "
             "imagined), e.g. dynamic for a head refitted on the dynamic tier's frames"

@@ -160,8 +160,8 @@ def refit_depth_head(
         "seconds": {"encode": encoded, "fit": time.perf_counter() - start - encoded},
         "epoch_loss": losses,
     }
-    for name, h in (("stage1", model.depth_head), ("refit", head)):
-        result[name] = _score(h, test_x, test_d, scale, cfg.near_m)
+    for label, h in (("stage1", model.depth_head), ("refit", head)):
+        result[label] = _score(h, test_x, test_d, scale, cfg.near_m)
     RunDir(out).start(
         run_config(DEPTH_REFIT, refit=asdict(cfg), dataset=str(dataset), world_model=model.fingerprint),
         resume=False,

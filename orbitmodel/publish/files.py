@@ -14,6 +14,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+from orbitmodel.plan.depth_recipe import is_head_name
 from orbitmodel.runs import (
     CHECKPOINTS,
     CONFIG,
@@ -79,7 +80,8 @@ def check_complete(run: Path) -> str:
 
 def named_heads(run: Path) -> tuple[str, ...]:
     """The run's depth heads refitted under a name (``orbitmodel depth --name``): RUN/depth-NAME."""
-    return tuple(sorted(p.name for p in Path(run).glob("depth-*") if p.is_dir() and p.name not in SUB_RUNS))
+    found = (p.name for p in Path(run).glob("depth-*") if p.is_dir())
+    return tuple(sorted(n for n in found if is_head_name(n.removeprefix("depth-"))))
 
 
 def is_grid_result(path: Path) -> bool:

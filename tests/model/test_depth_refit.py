@@ -98,7 +98,7 @@ def test_a_refit_of_other_weights_is_refused(refit_run, tmp_path):
 def test_a_named_head_sits_beside_the_runs_own_and_the_planner_flies_it_by_name(refit_run, tiny_dataset_master):
     """A head refitted on another dataset's frames (the dynamic tier's) goes to RUN/depth-NAME; the
     run's own head, its Stage I weights and its other sub-runs stay as they were."""
-    from orbitmodel.publish.files import run_files
+    from orbitmodel.publish.files import named_heads, run_files
 
     run, _ = refit_run
     own = (run / "depth" / "model.safetensors").read_bytes()
@@ -116,6 +116,8 @@ def test_a_named_head_sits_beside_the_runs_own_and_the_planner_flies_it_by_name(
     assert pilot.metadata()["depth_source"] == "refit-tier"
     image = torch.randint(0, 255, (64, 64, 3), dtype=torch.uint8).numpy()
     assert not (pilot.depth({"image": image}) == auto.depth({"image": image})).all()
+    (run / "depth-refit").mkdir()  # a folder no head name can give is no head, and does not go up
+    assert named_heads(run) == ("depth-tier",)
     assert {"depth-tier/model.safetensors", "depth-tier/config.json"} <= {f.rel for f in run_files(run)}
 
     with pytest.raises(RunError, match="--name other"):
