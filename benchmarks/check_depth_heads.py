@@ -19,6 +19,7 @@ import json
 import torch
 
 from orbitdata.cli.errors import run_script, script_help
+from orbitmodel.data import EVAL_SPLITS
 from orbitmodel.plan.depth_bands import band_label
 from orbitmodel.plan.depth_refit import score_heads
 
@@ -28,7 +29,7 @@ def main() -> None:
     parser.add_argument("run", help="a trained run")
     parser.add_argument("dataset", help="an orbitdata dataset of the run's image size")
     parser.add_argument("--heads", nargs="+", default=["stage1", "refit"], help="stage1, refit or NAMEs")
-    parser.add_argument("--split", default="val", choices=["val", "test"])
+    parser.add_argument("--split", default="val", choices=EVAL_SPLITS)
     parser.add_argument("--frames", type=int, default=4000)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--threads", type=int, default=1)

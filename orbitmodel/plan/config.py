@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from orbitmodel.plan.cost import CostConfig
-from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, check_head_name
+from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, is_head_name
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.tracker import TrackerConfig
 from orbitmodel.probe.variants import FLOWN, LATENT, VARIANTS
@@ -123,14 +123,11 @@ class PlannerConfig:
     def __post_init__(self):
         if self.noise not in ("wrench", "thrust"):
             raise ValueError(f"noise={self.noise!r}: use 'wrench' or 'thrust'")
-        if self.depth_head not in CHOICES:
-            try:
-                check_head_name(self.depth_head)
-            except ValueError:
-                raise ValueError(
-                    f"depth_head={self.depth_head!r}: use 'auto', 'stage1', 'refit' or the name of a head "
-                    "refitted with `orbitmodel depth RUN DATASET --name NAME`"
-                ) from None
+        if self.depth_head not in CHOICES and not is_head_name(self.depth_head):
+            raise ValueError(
+                f"depth_head={self.depth_head!r}: use 'auto', 'stage1', 'refit' or the name of a head "
+                "refitted with `orbitmodel depth RUN DATASET --name NAME`"
+            )
         if self.history < 0:
             raise ValueError(f"history={self.history}: give 0 (the world model's own) or a positive number of latents")
         if not 0 <= self.support <= 8:
