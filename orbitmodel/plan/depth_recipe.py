@@ -13,11 +13,23 @@ MAX_RANGE = 10.0  # metres: depth cells farther than this are no obstacle to pla
 # the planner's depth_head choices that name no head of their own (PlannerConfig.depth_head)
 CHOICES = ("auto", "stage1", "refit")
 HEAD_NAME = re.compile(r"[a-z0-9][a-z0-9_]*")
+FOLDER = "depth"  # RUN/depth: the run's refitted head; RUN/depth-NAME: one refitted under a name
 
 
 def is_head_name(name: str) -> bool:
     """Can ``name`` name a refitted head (RUN/depth-NAME)?"""
     return bool(HEAD_NAME.fullmatch(name)) and name not in CHOICES and name != "imagined"
+
+
+def head_folder(name: str = "") -> str:
+    """The folder in a run of the refitted head named ``name`` ("": the run's own, RUN/depth)."""
+    return f"{FOLDER}-{check_head_name(name)}" if name else FOLDER
+
+
+def head_name(folder: str) -> str | None:
+    """The name of the head a run's sub-folder ``folder`` holds (RUN/depth-NAME), or None if no name gives it."""
+    name = folder.removeprefix(f"{FOLDER}-")
+    return name if name != folder and is_head_name(name) else None
 
 
 def check_head_name(name: str) -> str:

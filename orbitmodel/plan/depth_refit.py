@@ -28,7 +28,7 @@ from orbitdata import schema as S
 from orbitmodel.data import read_dataset_meta, split_selection, training_episodes
 from orbitmodel.model.world_model import WorldModel, images_to_float
 from orbitmodel.plan.depth_bands import depth_by_band
-from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, DepthRefitConfig, check_head_name
+from orbitmodel.plan.depth_recipe import CHOICES, MAX_RANGE, DepthRefitConfig, head_folder
 from orbitmodel.runs import (
     CONFIG,
     DEPTH_REFIT,
@@ -42,13 +42,12 @@ from orbitmodel.runs import (
     write_json_atomic,
 )
 
-FOLDER = "depth"
 EVAL = "eval.json"
 
 
 def depth_folder(run: str | Path, name: str = "") -> Path:
     """RUN/depth, or RUN/depth-NAME for a head named ``name`` (refitted on another dataset's frames)."""
-    return Path(run) / (f"{FOLDER}-{check_head_name(name)}" if name else FOLDER)
+    return Path(run) / head_folder(name)
 
 
 def _patches(

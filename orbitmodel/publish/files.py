@@ -14,7 +14,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from orbitmodel.plan.depth_recipe import is_head_name
+from orbitmodel.plan.depth_recipe import head_folder, head_name
 from orbitmodel.runs import (
     CHECKPOINTS,
     CONFIG,
@@ -69,10 +69,10 @@ def check_complete(run: Path) -> str:
         model = WorldModel.from_pretrained(run)
         try:
             load_probe(run, "latent", model.fingerprint)
-            if (run / "depth" / WEIGHTS).is_file():  # a refit the planner would refuse must not go up either
+            if (run / head_folder() / WEIGHTS).is_file():  # a refit the planner would refuse must not go up either
                 load_refit_head(run, model)
             for sub in named_heads(run):
-                load_refit_head(run, model, sub.removeprefix("depth-"))
+                load_refit_head(run, model, head_name(sub))
         except RunError as err:
             raise RunError(f"incomplete run, not pushed: {err}") from None
     return stage
@@ -80,8 +80,7 @@ def check_complete(run: Path) -> str:
 
 def named_heads(run: Path) -> tuple[str, ...]:
     """The run's depth heads refitted under a name (``orbitmodel depth --name``): RUN/depth-NAME."""
-    found = (p.name for p in Path(run).glob("depth-*") if p.is_dir())
-    return tuple(sorted(n for n in found if is_head_name(n.removeprefix("depth-"))))
+    return tuple(sorted(p.name for p in Path(run).glob(f"{head_folder()}-*") if p.is_dir() and head_name(p.name)))
 
 
 def is_grid_result(path: Path) -> bool:
