@@ -15,9 +15,11 @@ oracle-true-dyn-depth       rigid body          depth head (16x16)      no
 oracle-true-dyn-sensor      rigid body          rendered depth_low      no
 ==========================  ==================  ======================  ===========
 
-Only the privileged variants are handed the scenario (``reset(task, scenario=...)``); the
-planner never sees the obstacle list. On the dynamic tier an oracle's rigid body is the episode's
-own (``plan.true_body``: body, fault, CW terms; ``PlannerConfig.body``).
+The oracles that plan with the rigid body are handed the scenario (``reset(task, scenario=...)``)
+for its body: on the dynamic tier that is the episode's own (``plan.true_body``: body, fault, CW
+terms; ``PlannerConfig.body``), so ``oracle-true-dyn-depth`` and ``-sensor`` isolate what seeing
+the debris through the camera costs. Only the privileged variants (the true obstacles) read the
+scenario's obstacles; the planner is handed none of it.
 ``PlannerConfig.obstacle_motion`` says where each rollout step meets the obstacles (the step's
 time is counted in control steps since the reset): still ("static"), carried by the tracker
 ("tracker", ``plan.tracker``), or for the oracles of a scenario whose debris moves, along their
@@ -119,10 +121,10 @@ class PlannerPilot(Pilot):
             raise ValueError(
                 f"obstacle_motion={config.obstacle_motion}: pilot {variant.value} takes {', '.join(motions)}"
             )
-        if config.body == "nominal" and not (variant.privileged and not variant.learned_dynamics):
+        if config.body == "nominal" and variant.learned_dynamics:
             raise ValueError(
-                f"body={config.body}: only the rigid-body oracles handed the scenario plan with a chosen body "
-                "(oracle-true); drop the body setting"
+                f"body={config.body}: only the rigid-body oracles plan with a chosen body (oracle-true, "
+                "oracle-true-dyn-depth, oracle-true-dyn-sensor); drop the body setting"
             )
         if config.body == "corrected" and not variant.learned_dynamics:
             raise ValueError(
@@ -136,6 +138,9 @@ class PlannerPilot(Pilot):
             )
         self.variant, self.config, self.sim = variant, config, sim
         self.name = variant.value
+        # A rigid-body oracle is handed the scenario, whose body it plans with (reset); never the planner.
+        self.privileged = type(self).privileged or not variant.learned_dynamics
+        self._rigid = dynamics  # the static tier's body, and what each episode's own is built beside
         self.needs_images = bool(dynamics.needs_images or depth is not None)
         self.image_codec = config.image_codec and self.needs_images
         self.sees_depth = variant.obstacles == "sensor"  # only the sensor oracle reads the rendered depth
@@ -159,8 +164,21 @@ class PlannerPilot(Pilot):
         self._reset_episode(seed=0)
 
     # ---- the Pilot interface ----------------------------------------------------------------
-    def reset(self, task) -> None:
-        """Start an episode from an ``orbitdata.fly.Task`` (goal, goal_radius, seed, ...)."""
+    def reset(self, task, scenario=None) -> None:
+        """Start an episode from an ``orbitdata.fly.Task`` (goal, goal_radius, seed, ...).
+
+        ``scenario`` (the rigid-body oracles only; ``orbitdata.fly`` hands it to them): the episode's
+        ground truth, whose body, fault and CW terms they plan with (``body="true"`` or "nominal");
+        without it, the design's body. Its obstacles are read by :class:`OraclePilot` alone."""
+        if scenario is not None and not self.privileged:
+            raise ValueError(f"the {self.name} pilot is handed no ground truth: reset(task) without scenario")
+        if not self.variant.learned_dynamics and self.config.body not in HISTORY_BODIES:
+            if scenario is None or scenario.dynamics is None:
+                self.dynamics = self._rigid
+            else:
+                self.dynamics = EpisodeBodyDynamics(
+                    scenario.dynamics, self.sim, self.config.rigid_substeps, self.config.body == "nominal", self.timings
+                )
         self.goal = torch.tensor(task.goal, dtype=torch.float32)
         self.goal_radius = float(task.goal_radius)
         self._reset_episode(int(task.seed))
@@ -308,10 +326,6 @@ class OraclePilot(PlannerPilot):
 
     privileged = True
 
-    def __init__(self, variant: Variant, dynamics, *args, **kwargs):
-        super().__init__(variant, dynamics, *args, **kwargs)
-        self._rigid = dynamics  # the static tier's, and what each episode's body is built beside
-
     def reset(self, task, scenario=None) -> None:
         """``scenario``: the ground truth (orbitdata.fly passes it to privileged pilots only)."""
         if scenario is None:
@@ -323,11 +337,4 @@ class OraclePilot(PlannerPilot):
                 "(their exact motion) or obstacle_motion=frozen (held where they are at each replan)"
             )
         self._true = TrueObstacles(scenario, "true" if motion == "static" else motion)
-        if not self.variant.learned_dynamics and self.config.body not in HISTORY_BODIES:  # the episode's own body
-            if scenario.dynamics is None:
-                self.dynamics = self._rigid
-            else:
-                self.dynamics = EpisodeBodyDynamics(
-                    scenario.dynamics, self.sim, self.config.rigid_substeps, self.config.body == "nominal", self.timings
-                )
-        super().reset(task)
+        super().reset(task, scenario)

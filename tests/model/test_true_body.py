@@ -117,5 +117,27 @@ def test_the_oracle_plans_each_dynamic_episode_with_its_body_and_the_static_tier
         pilot.config = planner_config("cpu", body=body)
         pilot.reset(task, scenario=static)
         assert isinstance(pilot.dynamics, RigidBodyDynamics)
-    with pytest.raises(ValueError, match="body=nominal"):
-        build_pilot("oracle-true-dyn-sensor", None, planner_config("cpu", body="nominal"))
+
+
+def test_the_camera_oracles_plan_with_the_episodes_body_and_never_hold_its_debris():
+    """oracle-true-dyn-sensor (and -depth) see the debris through the camera alone, but plan a
+    dynamic-tier episode with its own body and fault, as their name says, or the design's."""
+    scn = faulty_episode()
+    moving = sample_scenario(3, DYNAMIC)
+    assert moving.obstacles and moving.dynamics.debris
+    task = Task(goal=scn.goal, goal_radius=0.5, initial_velocity=scn.initial_velocity, seed=3)
+    for body, nominal in (("true", False), ("nominal", True)):
+        pilot, _ = build_pilot(
+            "oracle-true-dyn-sensor", None, planner_config("cpu", obstacle_motion="tracker", body=body)
+        )
+        assert pilot.privileged and type(pilot).privileged is False  # handed the scenario, not the obstacles
+        for episode in (scn, moving):
+            pilot.reset(task, scenario=episode)
+            assert isinstance(pilot.dynamics, EpisodeBodyDynamics) and pilot.dynamics.nominal is nominal
+            assert pilot._true is None and not hasattr(pilot.dynamics, "record")
+        pilot.reset(task)  # no scenario: the design's body
+        assert isinstance(pilot.dynamics, RigidBodyDynamics)
+    fitted, _ = build_pilot("oracle-true-dyn-sensor", None, planner_config("cpu", body="fitted"))
+    own = fitted.dynamics
+    fitted.reset(task, scenario=scn)
+    assert fitted.dynamics is own  # a body fitted to its own history reads no record
