@@ -250,8 +250,10 @@ if [ "${TIER:-static}" = dynamic ]; then
   # The static tier's run (OUT/wm-cpu-step5, the static chain's: run it into this OUT first) on this
   # tier (docs/results.md "The dynamic tier: the static tier's world model"), OUT/dynamic/static-run/:
   # alone with its own depth head, and corrected by its misses with a depth head refitted on this
-  # tier's frames (RUN/depth-dynamic); on validation seeds 0-2 also corrected with its own head
-  # (and, seed 0, the oracle on its corrected dynamics); the test seeds fly the two first.
+  # tier's frames (RUN/depth-dynamic); on validation seeds 0-2 also corrected with its own head.
+  # Beside them, on every seed, the oracles that say where the corrected planner loses: its corrected
+  # dynamics with the true debris, and the true body with the tier's head or the rendered depth,
+  # each through the tracker (docs/results.md "Where the static run's planner loses on the tier").
   SRUN="$OUT/wm-cpu-step5" SDIR="$OUT/dynamic/static-run"
   if [ -f "$SRUN/model.safetensors" ] && [ -f "$SRUN/probe/model.safetensors" ]; then
     [ -f "$SRUN/depth-dynamic/model.safetensors" ] || step depth-refit-static-run-dynamic "$BIN/orbitmodel" depth \
@@ -264,18 +266,26 @@ if [ "${TIER:-static}" = dynamic ]; then
       spawn fly_run "$SRUN" planner-corrected-tracker-depth-dynamic planner --set obstacle_motion=tracker \
         --set body=corrected --set depth_head=dynamic
       step "dynamic-static-run-seed$seed" join
-      [ "$seed" -le 2 ] || continue
-      spawn fly_run "$SRUN" planner-corrected-tracker planner --set obstacle_motion=tracker --set body=corrected
-      [ "$seed" != 0 ] || spawn fly_run "$SRUN" oracle-learned-dyn-corrected oracle-learned-dyn \
-        --set obstacle_motion=true --set body=corrected
+      spawn fly_run "$SRUN" oracle-learned-dyn-corrected oracle-learned-dyn --set obstacle_motion=true \
+        --set body=corrected
+      spawn fly_run "$SRUN" oracle-true-dyn-depth-dynamic-tracker oracle-true-dyn-depth \
+        --set obstacle_motion=tracker --set depth_head=dynamic
+      step "dynamic-static-run-seed$seed-oracles" join
+      spawn fly "$GDIR/oracle-true-dyn-sensor-tracker.json" "$BIN/orbitmodel" eval closed-loop \
+        --pilot oracle-true-dyn-sensor --preset cpu "${GRID[@]}" "${FLIGHT[@]}" "${AT_SCALE[@]}" --set obstacle_motion=tracker
+      [ "$seed" -gt 2 ] || spawn fly_run "$SRUN" planner-corrected-tracker planner --set obstacle_motion=tracker \
+        --set body=corrected
       step "dynamic-static-run-seed$seed-2" join
     done
     mkdir -p "$SDIR/test"
-    for pilot in planner-tracker planner-corrected-tracker-depth-dynamic; do
+    LOSSES=(planner-tracker planner-corrected-tracker-depth-dynamic oracle-learned-dyn-corrected
+      oracle-true-dyn-depth-dynamic-tracker oracle-true-dyn-sensor-tracker)
+    POOLED=()
+    for pilot in "${LOSSES[@]}"; do
       "$BIN/orbitmodel" eval pool "$SDIR"/seed{3,4,5}/"$pilot.json" --json "$SDIR/test/$pilot.json"
+      POOLED+=("$SDIR/test/$pilot.json")
     done
-    "$BIN/orbitmodel" eval factors "$SDIR"/test/planner-{tracker,corrected-tracker-depth-dynamic}.json \
-      --json "$SDIR/test/factors.json" >"$SDIR/test/factors.md"
+    "$BIN/orbitmodel" eval factors "${POOLED[@]}" --json "$SDIR/test/factors.json" >"$SDIR/test/factors.md"
   else
     echo "reproduce_model.sh: $SRUN is not there; run the static chain into $OUT to fly it on this tier" >&2
   fi
