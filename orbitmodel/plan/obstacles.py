@@ -168,15 +168,19 @@ class PointCloud:
 
     def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
         """(..., 3) metres -> (...,) distance to the nearest sphere surface (+inf beyond reach).
-        The points stand still: ``times`` is not read."""
+        The points stand still: ``times`` is not read. A position that is not finite (a candidate
+        whose rollout diverged) gets NaN, so its cost is not finite and MPPI gives it no weight."""
         shape = positions.shape[:-1]
         if self._tree is None:
             return torch.full(shape, math.inf)
         x = positions.detach().reshape(-1, 3).double().numpy()
-        bound = self.reach + float(self.radii.max())
-        dist, idx = self._tree.query(x, k=self.k, distance_upper_bound=bound)  # (M, k) or (M,)
-        gap = np.asarray(dist) - self._pad_radii[np.asarray(idx)]  # inf where none within bound
-        gap = gap.min(-1) if gap.ndim == 2 else gap
+        finite = np.isfinite(x).all(1)
+        gap = np.full(len(x), np.nan)
+        if finite.any():
+            bound = self.reach + float(self.radii.max())
+            dist, idx = self._tree.query(x[finite], k=self.k, distance_upper_bound=bound)  # (M, k) or (M,)
+            near = np.asarray(dist) - self._pad_radii[np.asarray(idx)]  # inf where none within bound
+            gap[finite] = near.min(-1) if near.ndim == 2 else near
         return torch.from_numpy(gap).float().reshape(shape)
 
 

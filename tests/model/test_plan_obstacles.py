@@ -13,7 +13,9 @@ from orbitdata.scenario.spec import Obstacle, Scenario
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitdata.sim.env import CubeSatEnv
 from orbitdata.state import make_state
+from orbitmodel.plan.mppi import MPPI, MPPIConfig
 from orbitmodel.plan.obstacles import Camera, PointCloud, PointMemory, TrueObstacles, depth_to_points, signed_distance
+from orbitmodel.plan.tracker import MovingCloud
 
 torch.set_num_threads(1)
 
@@ -154,6 +156,29 @@ def test_point_cloud_clearance_is_the_nearest_sphere_within_reach():
     assert np.allclose(got.numpy()[near], brute[near], atol=1e-5)
     assert (got.numpy()[~near] >= 1.0).all()  # beyond reach: reported far (+inf)
     assert torch.isinf(PointCloud(np.zeros((0, 3)), np.zeros(0)).clearance(x)).all()
+
+
+def test_a_diverged_candidate_gets_no_clearance_and_no_weight():
+    """A rollout that diverged (inf or NaN positions) must not stop the flight: its clearance is NaN,
+    so its cost is not finite and MPPI weighs it zero; the finite candidates' clearances are unchanged."""
+    rng = np.random.default_rng(1)
+    points, radii = rng.uniform(-2, 2, (50, 3)), rng.uniform(0.05, 0.2, 50)
+    cloud = PointCloud(points, radii, reach=1.0)
+    x = torch.tensor(rng.uniform(-3, 3, (4, 10, 3)), dtype=torch.float32)
+    clean = cloud.clearance(x)
+    x[1, 6:] = float("inf")
+    x[2, 3, 0] = float("nan")
+    got = cloud.clearance(x)
+    assert torch.isnan(got[1, 6:]).all() and torch.isnan(got[2, 3]) and torch.isfinite(got[1, :6]).any()
+    keep = ~torch.isnan(got)
+    assert torch.equal(got[keep], clean[keep])
+    moving = MovingCloud([(points, radii, np.array([0.5, 0.0, 0.0]))], time=0.0, reach=1.0)
+    assert torch.isnan(moving.clearance(x, torch.arange(10) * 0.04)[1, 6:]).all()
+    mppi = MPPI(MPPIConfig(samples=4, horizon=10))
+    candidates = torch.rand(4, 10, 8)
+    costs = torch.where(torch.isnan(got).any(1), torch.nan, got.nan_to_num(posinf=5.0).sum(1))
+    result = mppi.update(candidates, costs)
+    assert result.weights[1] == 0 and result.weights[2] == 0 and result.weights.sum().item() == pytest.approx(1.0)
 
 
 def test_memory_keeps_the_last_frames():
