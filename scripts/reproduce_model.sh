@@ -253,7 +253,7 @@ if [ "${TIER:-static}" = dynamic ]; then
   # tier's frames (RUN/depth-dynamic); on validation seeds 0-2 also corrected with its own head.
   # Beside them, on every seed, the oracles that say where the corrected planner loses: its corrected
   # dynamics with the true debris, and the true body with the tier's head or the rendered depth,
-  # each through the tracker (docs/results.md "Where the static run's planner loses on the tier").
+  # each through the tracker (docs/results.md "The dynamic tier: where the static run's planner loses").
   SRUN="$OUT/wm-cpu-step5" SDIR="$OUT/dynamic/static-run"
   if [ -f "$SRUN/model.safetensors" ] && [ -f "$SRUN/probe/model.safetensors" ]; then
     [ -f "$SRUN/depth-dynamic/model.safetensors" ] || step depth-refit-static-run-dynamic "$BIN/orbitmodel" depth \
