@@ -11,8 +11,8 @@ variant                     dynamics            obstacles               privileg
 planner                     world model+probe   depth head (16x16)      no
 oracle-true                 rigid body          the scenario's          yes
 oracle-learned-dyn          world model+probe   the scenario's          yes
-oracle-true-dyn-depth       rigid body          depth head (16x16)      no
-oracle-true-dyn-sensor      rigid body          rendered depth_low      no
+oracle-true-dyn-depth       rigid body          depth head (16x16)      the body
+oracle-true-dyn-sensor      rigid body          rendered depth_low      the body
 ==========================  ==================  ======================  ===========
 
 The oracles that plan with the rigid body are handed the scenario (``reset(task, scenario=...)``)
