@@ -128,8 +128,8 @@ def test_the_planner_pilot_never_receives_the_obstacles(make):
     if not sensor:
         with pytest.raises(ValueError, match="no ground truth"):
             pilot.reset(args[0], scenario=result.scenario)
-    sensor = {"depth", "depth_low"} if sensor else set()
-    assert all(keys == {"state", "image"} | sensor for keys in spy.observations)  # the rendered depth: sensor only
+    rendered = {"depth", "depth_low"} if sensor else set()
+    assert all(keys == {"state", "image"} | rendered for keys in spy.observations)  # the rendered depth: sensor only
     del result, env, spy
     gc.collect()
     assert reachable(pilot, (Scenario, Obstacle)) == []
