@@ -61,6 +61,13 @@ def _progress_bar(console):
     )
 
 
+def _below_one(value: float | None) -> float | None:
+    """--test-fraction's upper end is open (a test split of every episode leaves none to train)."""
+    if value is not None and value >= 1.0:
+        raise typer.BadParameter(f"{value:g} must be less than 1")
+    return value
+
+
 def register(app: typer.Typer) -> None:
     @app.command()
     @friendly
@@ -70,7 +77,7 @@ def register(app: typer.Typer) -> None:
         test_fraction: float = typer.Option(
             None,
             min=0.0,
-            max=1.0,
+            callback=_below_one,
             show_default=str(DatasetConfig.test_fraction),
             help="Share of each level in the test split: at least 0, below 1.",
         ),

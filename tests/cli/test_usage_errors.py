@@ -30,7 +30,7 @@ def run(args: list[str], capsys, application: typer.Typer = app) -> tuple[int, s
     "args, line",
     [
         (["--episodes", "-3"], "error: --episodes -3: must be greater than or equal to 1"),
-        (["--test-fraction", "2"], "error: --test-fraction 2: must be less than or equal to 1"),
+        (["--test-fraction", "1"], "error: --test-fraction: 1 must be less than 1"),
         (["--episodes", "many"], "error: --episodes many: must be a valid integer"),
         (["--executor", "dask"], "error: --executor dask: 'dask' is not one of 'local', 'ray'"),
         (["--bogus"], "error: No such option: --bogus"),
