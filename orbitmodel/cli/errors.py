@@ -1,5 +1,5 @@
 """One-line errors: the library raises, only the CLI exits (2 for bad input, as for usage; 1 for a
-missing optional dependency or a failing disk)."""
+missing optional dependency, a failing disk, or a grid's flight that fails once under way)."""
 
 from __future__ import annotations
 

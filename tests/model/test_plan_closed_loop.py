@@ -188,6 +188,32 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert line.startswith(f"error: --json {tmp_path} is a folder") and not list(tmp_path.glob("*.episodes.jsonl"))
 
 
+def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monkeypatch):
+    """A failure while the grid flies (a diverged rollout, say) is the flight's, not bad input:
+    exit 1, one line naming how many episodes landed and the file that keeps them."""
+    from orbitmodel.plan.pilot import OraclePilot
+
+    resets, reset = [], OraclePilot.reset
+
+    def second_fails(self, task, scenario=None):
+        resets.append(task)
+        if len(resets) == 2:
+            raise ValueError("'x' must be finite\nsecond line")
+        return reset(self, task, scenario)
+
+    monkeypatch.setattr(OraclePilot, "reset", second_fails)
+    out = tmp_path / "grid.json"
+    args = ["eval", "closed-loop", "--pilot", "oracle-true", "--obstacles", "1", "--speeds", "1", "--episodes", "3"]
+    res = runner.invoke(
+        app, [*args, "--set", "samples=8", "--set", "horizon=5", "--max-steps", "3", "--json", str(out)]
+    )
+    kept = out.with_suffix(".episodes.jsonl")
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
+    assert errors == [f"error: the flight stopped after 1 episode: 'x' must be finite; those are in {kept}"]
+    assert not out.exists() and len(kept.read_text().splitlines()) == 1
+
+
 def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
     """eval table, flips and figure6 name the file given and what to give instead."""
     (tmp_path / "other.json").write_text('{"a": 1}')
