@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import ClassVar
 
 import numpy as np
 
@@ -60,7 +59,8 @@ class Pilot(ABC):
     metres: a perfect depth sensor, which a camera-only pilot does not have. ``act`` returns 8
     thrusts in [0, 1]. One pilot may fly many episodes: ``reset`` starts each one afresh.
 
-    Class attributes:
+    Class attributes, each a default an instance may set for itself (a planner picks its name,
+    camera and privilege from the variant it flies):
         name: the registry name (and the ``level`` column for the built-in levels).
         privileged: ``reset`` also gets ``scenario=``, the ground truth (obstacles included).
         needs_images: ``act`` reads the camera, so the env must render.
@@ -69,10 +69,10 @@ class Pilot(ABC):
             on the dataset's frames saw them (``orbitdata fly --image-codec`` asks it of any pilot).
     """
 
-    name: ClassVar[str] = ""
-    privileged: ClassVar[bool] = False
-    needs_images: ClassVar[bool] = False
-    sees_depth: ClassVar[bool] = False
+    name: str = ""
+    privileged: bool = False
+    needs_images: bool = False
+    sees_depth: bool = False
     image_codec: bool = False
 
     @abstractmethod
