@@ -188,7 +188,11 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert line.startswith(f"error: --json {tmp_path} is a folder") and not list(tmp_path.glob("*.episodes.jsonl"))
 
 
-def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monkeypatch):
+@pytest.mark.parametrize(
+    "error, line",
+    [(ValueError("'x' must be finite\nsecond line"), "'x' must be finite"), (ZeroDivisionError(), "ZeroDivisionError")],
+)
+def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monkeypatch, error, line):
     """A failure while the grid flies (a diverged rollout, say) is the flight's, not bad input:
     exit 1, one line naming how many episodes landed and the file that keeps them."""
     from orbitmodel.plan.pilot import OraclePilot
@@ -198,7 +202,7 @@ def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monk
     def second_fails(self, task, scenario=None):
         resets.append(task)
         if len(resets) == 2:
-            raise ValueError("'x' must be finite\nsecond line")
+            raise error
         return reset(self, task, scenario)
 
     monkeypatch.setattr(OraclePilot, "reset", second_fails)
@@ -210,7 +214,7 @@ def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monk
     kept = out.with_suffix(".episodes.jsonl")
     assert res.exit_code == 1 and "Traceback" not in res.output, res.output
     errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
-    assert errors == [f"error: the flight stopped after 1 episode: 'x' must be finite; those are in {kept}"]
+    assert errors == [f"error: the flight stopped after 1 episode: {line}; those are in {kept}"]
     assert not out.exists() and len(kept.read_text().splitlines()) == 1
 
 
