@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.errors import fail, first_line, friendly
 from orbitmodel.plan.variant import Variant
 
 PilotName = Enum("PilotName", {v.value: v.value for v in Variant}, type=str)
@@ -159,8 +159,10 @@ def _fly_with_progress(loop, json_out: Path | None):
         except (ValueError, ArithmeticError) as exc:
             # every refusal of the request came before the bar: a failure now is the flight's, not bad input
             kept = f"; those are in {stream.name}" if stream is not None else ""
-            flown, why = int(bar.tasks[0].completed), (str(exc).splitlines() or [type(exc).__name__])[0]
-            fail(f"the flight stopped after {flown} episode{'' if flown == 1 else 's'}: {why}{kept}", code=1)
+            flown = int(bar.tasks[0].completed)
+            fail(
+                f"the flight stopped after {flown} episode{'' if flown == 1 else 's'}: {first_line(exc)}{kept}", code=1
+            )
         finally:
             if stream is not None:
                 stream.close()

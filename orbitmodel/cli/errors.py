@@ -11,6 +11,11 @@ import typer
 BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError)
 
 
+def first_line(exc: BaseException) -> str:
+    """An exception's message in one line: its first, or its type's name when it has none."""
+    return (str(exc).splitlines() or [type(exc).__name__])[0]
+
+
 def fail(message: str, code: int = 2) -> None:
     typer.secho(f"error: {message}", fg=typer.colors.RED, err=True)
     raise typer.Exit(code)
@@ -33,7 +38,7 @@ def friendly(func):
                 raise  # a real import bug keeps its traceback
             fail(str(exc).splitlines()[0], code=1)
         except BAD_INPUT as exc:
-            fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+            fail(first_line(exc))
         except OSError as exc:
             fail(f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), code=1)
 
