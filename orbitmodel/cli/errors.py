@@ -36,7 +36,7 @@ def friendly(func):
         except ImportError as exc:  # MissingExtra, or an optional package's ImportError with its install hint
             if "pip install" not in str(exc):
                 raise  # a real import bug keeps its traceback
-            fail(str(exc).splitlines()[0], code=1)
+            fail(first_line(exc), code=1)
         except BAD_INPUT as exc:
             fail(first_line(exc))
         except OSError as exc:

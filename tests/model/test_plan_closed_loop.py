@@ -189,10 +189,10 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
 
 
 @pytest.mark.parametrize(
-    "error, line",
+    "error, expected",
     [(ValueError("'x' must be finite\nsecond line"), "'x' must be finite"), (ZeroDivisionError(), "ZeroDivisionError")],
 )
-def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monkeypatch, error, line):
+def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monkeypatch, error, expected):
     """A failure while the grid flies (a diverged rollout, say) is the flight's, not bad input:
     exit 1, one line naming how many episodes landed and the file that keeps them."""
     from orbitmodel.plan.pilot import OraclePilot
@@ -214,7 +214,7 @@ def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monk
     kept = out.with_suffix(".episodes.jsonl")
     assert res.exit_code == 1 and "Traceback" not in res.output, res.output
     errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
-    assert errors == [f"error: the flight stopped after 1 episode: {line}; those are in {kept}"]
+    assert errors == [f"error: the flight stopped after 1 episode: {expected}; those are in {kept}"]
     assert not out.exists() and len(kept.read_text().splitlines()) == 1
 
 
