@@ -204,10 +204,12 @@ if [ "${TIER:-static}" = dynamic ]; then
   fi
   [ -f "$WMS/depth-imagined/model.safetensors" ] || step imagined-dynamic "$BIN/orbitmodel" depth "$WMS" "$DATA" \
     --imagined --eval-split val "${IMAGINED[@]}"
-  for seed in 0 1 2 3 4 5; do
-    GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds 1,3 --episodes "$N" --seed "$seed")
-    GDIR="$GDIR_ROOT/seed$seed"
+  use_tier_grid() {  # use_tier_grid SEED DIR [SPEEDS]: the tier's grid (both speeds unless SPEEDS), and its folder
+    GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds "${3:-1,3}" --episodes "$N" --seed "$1") GDIR=$2
     mkdir -p "$GDIR"
+  }
+  for seed in 0 1 2 3 4 5; do
+    use_tier_grid "$seed" "$GDIR_ROOT/seed$seed"
     spawn fly_model planner-imagined planner --set obstacle_motion=imagined
     spawn fly_model planner-tracker planner --set obstacle_motion=tracker
     step "dynamic-seed$seed-planner" join
@@ -260,9 +262,7 @@ if [ "${TIER:-static}" = dynamic ]; then
     [ -f "$SRUN/depth-dynamic/model.safetensors" ] || step depth-refit-static-run-dynamic "$BIN/orbitmodel" depth \
       "$SRUN" "$DATA" --name dynamic --eval-split val "${DEPTH[@]}"
     for seed in 0 1 2 3 4 5; do
-      GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds 1,3 --episodes "$N" --seed "$seed")
-      GDIR="$SDIR/seed$seed"
-      mkdir -p "$GDIR"
+      use_tier_grid "$seed" "$SDIR/seed$seed"
       spawn fly_run "$SRUN" planner-tracker planner --set obstacle_motion=tracker
       spawn fly_run "$SRUN" planner-corrected-tracker-depth-dynamic planner --set obstacle_motion=tracker \
         --set body=corrected --set depth_head=dynamic
@@ -282,7 +282,7 @@ if [ "${TIER:-static}" = dynamic ]; then
       # of the grid (one speed each) fly side by side and `eval merge` joins them.
       K128=planner-corrected-tracker-depth-dynamic-k128
       for speed in 1 3; do
-        GRID=(--config configs/dynamic.toml --obstacles 3,7,10 --speeds "$speed" --episodes "$N" --seed "$seed")
+        use_tier_grid "$seed" "$GDIR" "$speed"
         spawn fly_run "$SRUN" "$K128-speed$speed" planner --set obstacle_motion=tracker --set body=corrected \
           --set depth_head=dynamic --set samples=128
       done
