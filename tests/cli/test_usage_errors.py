@@ -226,3 +226,23 @@ def test_bench_grid_says_why_a_flight_failed(tmp_path):
     message = str(exit_.value)
     assert message.startswith(f"error: a flight of {tmp_path / 'no-run'} failed (")
     assert "no-run" in message.split("(", 1)[1] and "eval closed-loop" in message and "rerun" not in message
+
+
+def test_estimate_tier_chain_reads_each_grids_steps_and_refuses_a_wrong_folder(tmp_path, capsys):
+    """The tier chain's estimate sums frames x median step per episode, a batched step once per
+    batch; a folder without the tier's results is a usage error naming it."""
+    import importlib.util
+    import json
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "benchmarks" / "estimate_tier_chain.py"
+    spec = importlib.util.spec_from_file_location("estimate_tier_chain", path)
+    estimate = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(estimate)
+    episodes = [{"frames": 100, "step_ms_median": 40.0}, {"frames": 50, "step_ms_median": 80.0}]
+    for batch, seconds in ((1, 8.0), (4, 2.0)):
+        grid = tmp_path / f"batch{batch}.json"
+        grid.write_text(json.dumps({"batch": batch, "episodes": episodes}))
+        assert estimate.grid_seconds(grid) == (seconds, batch)
+    assert estimate.main(["--results", str(tmp_path / "nope")]) == 2
+    assert f"{tmp_path / 'nope'}/static-run is not there" in capsys.readouterr().err
