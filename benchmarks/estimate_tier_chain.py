@@ -3,11 +3,11 @@
 The chain flies about twenty grids on each of six seeds. This script reads the grids already
 flown on the test seeds (docs/results/dynamic/{grid,static-run}/seed{3,4,5}/PILOT.json) and
 estimates each one's wall time from its own records: the sum over its episodes of frames times the
-median control step (divided by the batch size, whose step serves the whole batch), as each grid
-was flown (one torch thread, two grids at a time). The chain flies two grids at a time, so half
-the sum over its grids estimates their wall time. Left out: the training steps, the expert's and
-the Diffusion Policy's grids (which record no control-step times), the time outside the control
-step, and a pair waiting for its slower grid.
+median control step (divided by the batch size, whose step serves the whole batch), at the
+batch size and beside whatever shared the cores when it was flown. The chain flies two grids at a
+time, so half the sum over its grids estimates their wall time. Left out: the training steps, the
+expert's and the Diffusion Policy's grids (which record no control-step times), the time outside
+the control step, and a pair waiting for its slower grid.
 
     python benchmarks/estimate_tier_chain.py [--results docs/results/dynamic] [--seeds 6]
 """
