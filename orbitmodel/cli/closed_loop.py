@@ -297,14 +297,14 @@ def factors(
     """Print each grid's success by what its episodes were dealt (debris moving or still, a faulty
     thruster and its kind, eclipse, the CW terms), each with its 95 % Wilson interval, and how they
     flew: failures by kind, the closest approach, and the delta-v and time to the goal of a success.
-    One row per file, named by the file."""
-    from orbitmodel.evaluate.factors import breakdown, factor_tables
+    One row per file, named by the file (with its folders, where two files share a name)."""
+    from orbitmodel.evaluate.factors import breakdown, distinct_names, factor_tables
     from orbitmodel.evaluate.figure6 import read_report
 
     rows = []
-    for path in results:
+    for name, path in zip(distinct_names(results), results):
         try:
-            rows.append((path.stem, breakdown(read_report(path))))
+            rows.append((name, breakdown(read_report(path))))
         except ValueError as err:
             fail(str(err) if str(err).startswith(str(path)) else f"{path}: {err}")
     typer.echo(factor_tables(rows), nl=False)

@@ -11,6 +11,7 @@ result records (``eval closed-loop --json``, ``orbitdata fly --json``, ``eval po
 from __future__ import annotations
 
 import statistics
+from pathlib import Path
 from typing import Callable
 
 from orbitdata.schema import DT, TUMBLING
@@ -74,6 +75,23 @@ def breakdown(report: dict) -> dict:
         "groups": groups,
         "flight": flight,
     }
+
+
+def distinct_names(paths: list[Path]) -> list[str]:
+    """Each file's name without its suffix, led by as many of its folders as it takes to tell it
+    from the others' (``seed3/planner`` and ``seed4/planner``); a file given twice keeps one name."""
+    parts = [Path(p).with_suffix("").parts for p in paths]
+    depth = [1] * len(parts)
+    while True:
+        names = ["/".join(pp[-d:]) for pp, d in zip(parts, depth)]
+        shared = {n for n in names if names.count(n) > 1}
+        grown = False
+        for i, (pp, name) in enumerate(zip(parts, names)):
+            if name in shared and depth[i] < len(pp):
+                depth[i] += 1
+                grown = True
+        if not grown:
+            return names
 
 
 def _group_cell(group: dict | None) -> str:

@@ -84,3 +84,24 @@ def test_the_cli_prints_a_row_per_file_and_refuses_a_result_without_episodes(tmp
     res = runner.invoke(app, ["eval", "factors", str(tmp_path / "bare.json")])
     assert res.exit_code != 0 and "bare.json" in res.output and "holds no episodes" in res.output
     assert "Traceback" not in res.output
+
+
+def test_files_of_one_name_keep_a_row_and_a_json_entry_each(tmp_path):
+    """Two seeds' grids of one pilot share a file name; each keeps its own row and JSON entry."""
+    for seed, episodes in ((3, GRID[:3]), (4, GRID[3:])):
+        (tmp_path / f"seed{seed}").mkdir()
+        (tmp_path / f"seed{seed}" / "planner.json").write_text(json.dumps(report(seed, episodes)))
+    (tmp_path / "oracle.json").write_text(json.dumps(report(3, GRID)))
+    out = tmp_path / "factors.json"
+    files = [
+        str(tmp_path / "seed3" / "planner.json"),
+        str(tmp_path / "seed4" / "planner.json"),
+        str(tmp_path / "oracle.json"),
+    ]
+    res = CliRunner().invoke(app, ["eval", "factors", *files, "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "| seed3/planner | none flown |" in res.output and "| seed4/planner | none flown |" in res.output
+    assert "| oracle | none flown |" in res.output
+    written = json.loads(out.read_text())
+    assert sorted(written) == ["oracle", "seed3/planner", "seed4/planner"]
+    assert (written["seed3/planner"]["flight"]["episodes"], written["seed4/planner"]["flight"]["episodes"]) == (3, 2)
