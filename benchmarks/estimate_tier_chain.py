@@ -68,6 +68,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--results", type=Path, default=Path("docs/results/dynamic"))
     parser.add_argument("--seeds", type=int, default=6, help="seeds the chain flies (0-5)")
     args = parser.parse_args(argv)
+    if args.seeds < 1:
+        parser.error(f"--seeds {args.seeds}: give the number of seeds the chain flies, 1 or more")
     if not (args.results / "static-run").is_dir():
         print(
             f"estimate_tier_chain.py: {args.results}/static-run is not there; give --results the tier's results folder",
