@@ -19,6 +19,16 @@ from orbitdata.cli.errors import run_app
 runner = CliRunner()
 
 
+def load_benchmark(name: str):
+    """A script of benchmarks/ imported as a module (the folder is not a package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).parents[2] / "benchmarks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def run(args: list[str], capsys, application: typer.Typer = app) -> tuple[int, str, str]:
     with pytest.raises(SystemExit) as exit_:
         run_app(application, args)
@@ -212,14 +222,9 @@ def test_a_failed_childs_reason_is_its_last_line_without_its_own_prefix():
 def test_bench_grid_says_why_a_flight_failed(tmp_path):
     """A grid's flights run as child processes beside each other; one that fails is reported with
     its own reason and command, not a request to rerun it by hand."""
-    import importlib.util
     import types
-    from pathlib import Path
 
-    path = Path(__file__).parents[2] / "benchmarks" / "bench_grid.py"
-    spec = importlib.util.spec_from_file_location("bench_grid", path)
-    bench_grid = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench_grid)
+    bench_grid = load_benchmark("bench_grid")
     args = types.SimpleNamespace(episodes=1, seed=2, max_steps=3)
     with pytest.raises(SystemExit) as exit_:
         bench_grid.fly(tmp_path / "no-run", tmp_path / "grid.json", args, [("1", 1), ("2", 1)], batch=1)
@@ -231,14 +236,9 @@ def test_bench_grid_says_why_a_flight_failed(tmp_path):
 def test_estimate_tier_chain_reads_each_grids_steps_and_refuses_a_wrong_folder(tmp_path, capsys):
     """The tier chain's estimate sums frames x median step per episode, a batched step once per
     batch; a folder without the tier's results is a usage error naming it."""
-    import importlib.util
     import json
-    from pathlib import Path
 
-    path = Path(__file__).parents[2] / "benchmarks" / "estimate_tier_chain.py"
-    spec = importlib.util.spec_from_file_location("estimate_tier_chain", path)
-    estimate = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(estimate)
+    estimate = load_benchmark("estimate_tier_chain")
     episodes = [{"frames": 100, "step_ms_median": 40.0}, {"frames": 50, "step_ms_median": 80.0}]
     for batch, seconds in ((1, 8.0), (4, 2.0)):
         grid = tmp_path / f"batch{batch}.json"
