@@ -76,6 +76,19 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    needed = [(f, p, (3, 4, 5)) for f, p in EVERY_SEED] + [(*VALIDATION_ONLY, (0, 1, 2))]
+    missing = [
+        path
+        for f, p, seeds in needed
+        for s in seeds
+        if not (path := args.results / f / f"seed{s}" / f"{p}.json").is_file()
+    ]
+    if missing:
+        print(
+            f"estimate_tier_chain.py: {missing[0]} is not there; fly that grid or give --results another folder",
+            file=sys.stderr,
+        )
+        return 2
     print(f"{'grid':<72} {'batch':>5} {'seconds':>16}")
     per_seed = sum(statistics.fmean(row(args.results, f, p, (3, 4, 5))) for f, p in EVERY_SEED)
     validation = row(args.results, *VALIDATION_ONLY, (0, 1, 2))

@@ -246,3 +246,8 @@ def test_estimate_tier_chain_reads_each_grids_steps_and_refuses_a_wrong_folder(t
         assert estimate.grid_seconds(grid) == (seconds, batch)
     assert estimate.main(["--results", str(tmp_path / "nope")]) == 2
     assert f"{tmp_path / 'nope'}/static-run is not there" in capsys.readouterr().err
+    (tmp_path / "partial" / "static-run").mkdir(parents=True)
+    assert estimate.main(["--results", str(tmp_path / "partial")]) == 2
+    assert (
+        f"{tmp_path / 'partial' / 'grid' / 'seed3' / 'planner-imagined.json'} is not there" in capsys.readouterr().err
+    )
