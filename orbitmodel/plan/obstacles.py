@@ -150,7 +150,8 @@ class PointCloud:
     """Obstacles as a union of spheres; nearest-neighbour queries through a k-d tree.
 
     ``reach``: clearances beyond it are reported as +inf (the cost ignores them anyway), which
-    lets the tree prune almost every query far from the points.
+    lets the tree prune almost every query far from the points; :attr:`box` (lo (3,), hi (3,))
+    metres bounds where an answer can be finite.
     """
 
     def __init__(self, points: np.ndarray, radii: np.ndarray, reach: float = 2.0, neighbours: int = 4):
@@ -162,6 +163,16 @@ class PointCloud:
         self.k = min(neighbours, len(self.points))
         self._tree = cKDTree(self.points) if len(self.points) else None
         self._pad_radii = np.append(self.radii, 0.0)  # the tree's "no neighbour" index is N
+        # The box around the centres widened by the query bound, and a hair more so that rounding
+        # never drops a query the tree would answer: outside it no centre lies within the bound,
+        # the answer is +inf, and the query is skipped. Empty: a box that holds nothing.
+        self._bound = self.reach + float(self.radii.max()) if len(self.points) else 0.0
+        slack = self._bound * (1 + 1e-9) + 1e-9
+        self.box = (
+            (self.points.min(0) - slack, self.points.max(0) + slack)
+            if len(self.points)
+            else (np.full(3, np.inf), np.full(3, -np.inf))
+        )
 
     def __len__(self) -> int:
         return len(self.points)
@@ -175,12 +186,13 @@ class PointCloud:
             return torch.full(shape, math.inf)
         x = positions.detach().reshape(-1, 3).double().numpy()
         finite = np.isfinite(x).all(1)
-        gap = np.full(len(x), np.nan)
-        if finite.any():
-            bound = self.reach + float(self.radii.max())
-            dist, idx = self._tree.query(x[finite], k=self.k, distance_upper_bound=bound)  # (M, k) or (M,)
+        gap = np.where(finite, np.inf, np.nan)
+        lo, hi = self.box
+        ask = np.flatnonzero(finite & ((x >= lo) & (x <= hi)).all(1))  # the rest are beyond the bound
+        if len(ask):
+            dist, idx = self._tree.query(x[ask], k=self.k, distance_upper_bound=self._bound)  # (M, k) or (M,)
             near = np.asarray(dist) - self._pad_radii[np.asarray(idx)]  # inf where none within bound
-            gap[finite] = near.min(-1) if near.ndim == 2 else near
+            gap[ask] = near.min(-1) if near.ndim == 2 else near
         return torch.from_numpy(gap).float().reshape(shape)
 
 

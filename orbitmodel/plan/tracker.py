@@ -220,11 +220,29 @@ class MovingCloud:
 
     def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
         """(..., H, 3) metres, row h at ``times[h]`` (H,) s -> (..., H) metres to the nearest sphere
-        surface then (+inf beyond reach). Without times: (..., 3) -> (...,) at this field's time."""
+        surface then (+inf beyond reach; NaN where a position is not finite, as
+        :meth:`PointCloud.clearance`). Without times: (..., 3) -> (...,) at this field's time.
+
+        A cloud whose reach the positions cannot enter, wherever its velocity carries them, is
+        not queried: it would answer +inf for every one of them."""
         out = torch.full(positions.shape[:-1], math.inf)
-        if times is not None:
-            ahead = (torch.as_tensor(times, dtype=torch.float64) - self.time).float()[:, None]  # (H, 1) s
+        if not len(self):
+            return out
+        ahead = None if times is None else (torch.as_tensor(times, dtype=torch.float64) - self.time).float()[:, None]
+        finite = torch.isfinite(positions).all(-1)  # (..., H)
+        inside = positions[finite].double()  # (M, 3)
+        if len(inside):
+            lo, hi = inside.amin(0).numpy(), inside.amax(0).numpy()
+            furthest = 0.0 if ahead is None else float(ahead.abs().max())  # s
         for cloud, velocity in self.clouds:
-            moved = positions if times is None or not velocity.any() else positions - ahead * velocity
+            moving = ahead is not None and bool(velocity.any())
+            if len(inside):
+                # every moved position lies within the positions' box, widened by how far the velocity
+                # carries them (and a millimetre for float32 rounding of the move)
+                shift = furthest * velocity.abs().double().numpy() + 1e-3 if moving else 0.0
+                box_lo, box_hi = cloud.box
+                if (box_hi < lo - shift).any() or (box_lo > hi + shift).any():
+                    continue
+            moved = positions - ahead * velocity if moving else positions
             out = torch.minimum(out, cloud.clearance(moved))
-        return out
+        return torch.where(finite, out, torch.nan)

@@ -216,6 +216,31 @@ def test_the_cost_meets_each_step_where_the_obstacle_will_be(motion):
     assert costs[clear] == (0.0, 0.0), costs
 
 
+def test_clouds_out_of_reach_are_skipped_and_the_answer_is_unchanged():
+    """A moving cloud that no candidate can reach at any step is not queried; the clearances are
+    the minimum over every cloud's own answer to the bit, NaN for a diverged candidate included."""
+    rng = np.random.default_rng(5)
+    centres = ([2.0, 0, 0], [6.0, 1, 0], [-30.0, 0, 0], [0, 40.0, 0], [3.0, -2, 1], [-5.5, 0, 0])
+    velocities = ([0, 0, 0], [0.5, -0.3, 0.2], [0, 0, 0], [0.4, 0.1, -1.0], [0, 0, 0], [2.0, 0, 0])
+    # the last one starts out of reach and comes within it during the horizon
+    clouds = [
+        (rng.normal(c, 0.3, (30, 3)), rng.uniform(0.05, 0.2, 30), np.array(v)) for c, v in zip(centres, velocities)
+    ]
+    field = MovingCloud(clouds, time=1.0, reach=2.0)
+    x = torch.tensor(rng.uniform([-1, -3, -2], [7, 3, 3], (32, 50, 3)), dtype=torch.float32)
+    x[3, 20:] = float("nan")
+    times = 1.0 + torch.arange(50) * 0.04
+    ahead = (times.double() - 1.0).float()[:, None]
+    every = torch.full(x.shape[:-1], float("inf"))
+    for cloud, velocity in field.clouds:
+        every = torch.minimum(every, cloud.clearance(x - ahead * velocity if velocity.any() else x))
+    got = field.clearance(x, times)
+    assert torch.isnan(got[3, 20:]).all() and torch.isfinite(got).sum() > 300
+    assert torch.isfinite(field.clouds[-1][0].clearance(x - ahead * field.clouds[-1][1])).any()
+    torch.testing.assert_close(got, every, rtol=0, atol=0, equal_nan=True)
+    torch.testing.assert_close(field.clearance(x), field.clearance(x, None), rtol=0, atol=0, equal_nan=True)
+
+
 def test_true_motion_is_the_exact_pose_at_each_step():
     box = Obstacle("box", (2.0, 0.5, -0.3), (0.4, 0.2, 0.3), quat=(0.9, 0.1, 0.3, 0.2))
     ball = Obstacle("sphere", (1.0, -1.0, 0.5), (0.3, 0.0, 0.0))

@@ -158,6 +158,23 @@ def test_point_cloud_clearance_is_the_nearest_sphere_within_reach():
     assert torch.isinf(PointCloud(np.zeros((0, 3)), np.zeros(0)).clearance(x)).all()
 
 
+def test_positions_far_from_the_cloud_are_beyond_reach_and_near_ones_exact():
+    """Most candidates pass far from most clouds; those are answered +inf without a tree query,
+    the ones near it exactly as before."""
+    rng = np.random.default_rng(3)
+    points, radii = rng.uniform(-0.5, 0.5, (40, 3)) + [5.0, 0.0, 0.0], rng.uniform(0.05, 0.2, 40)
+    cloud = PointCloud(points, radii, reach=1.0)
+    x = torch.tensor(rng.uniform(-10, 10, (64, 50, 3)), dtype=torch.float32)
+    x[:8] = torch.tensor(rng.uniform(-1.5, 1.5, (8, 50, 3)) + [5.0, 0.0, 0.0], dtype=torch.float32)  # some near it
+    got = cloud.clearance(x).numpy()
+    centre = np.linalg.norm(x.double().numpy()[..., None, :] - points, axis=-1)  # (64, 50, 40)
+    brute = (centre - radii).min(-1)
+    near = brute < 1.0
+    assert near.sum() > 50 and (centre.min(-1) > 1.0 + radii.max()).sum() > 1000
+    assert np.allclose(got[near], brute[near], atol=1e-5)
+    assert np.isinf(got[centre.min(-1) > 1.0 + radii.max()]).all()
+
+
 def test_a_diverged_candidate_gets_no_clearance_and_no_weight():
     """A rollout that diverged (inf or NaN positions) must not stop the flight: its clearance is NaN,
     so its cost is not finite and MPPI weighs it zero; the finite candidates' clearances are unchanged."""
