@@ -20,7 +20,8 @@ import statistics
 import sys
 from pathlib import Path
 
-# (folder, pilot) for every grid the chain flies on each seed, timed on the test seeds 3-5
+# (folder, pilot) for every grid the chain flies on each seed, timed on the test seeds 3-5 (the same
+# list as scripts/reproduce_model.sh flies: tests/cli/test_usage_errors.py holds the two together)
 EVERY_SEED = [
     ("grid", "planner-imagined"),
     ("grid", "planner-tracker"),

@@ -251,3 +251,27 @@ def test_estimate_tier_chain_reads_each_grids_steps_and_refuses_a_wrong_folder(t
     assert (
         f"{tmp_path / 'partial' / 'grid' / 'seed3' / 'planner-imagined.json'} is not there" in capsys.readouterr().err
     )
+
+
+def test_the_tier_chain_estimate_counts_the_grids_the_chain_flies():
+    """``estimate_tier_chain.EVERY_SEED`` copies the grids that ``TIER=dynamic`` flies on every seed
+    from scripts/reproduce_model.sh: a grid added to (or dropped from) the chain must be added to (or
+    dropped from) the estimate, or it silently under- or over-counts."""
+    import re
+
+    estimate = load_benchmark("estimate_tier_chain")
+    script = (Path(__file__).parents[2] / "scripts" / "reproduce_model.sh").read_text()
+    dynamic = script.split('if [ "${TIER:-static}" = dynamic ]; then', 1)[1]
+    tier, static_run = dynamic.split('SRUN="$OUT/wm-cpu-step5"', 1)
+    static_run = static_run.split('mkdir -p "$SDIR/test"', 1)[0]
+    flown = {("grid", name) for name in re.findall(r"spawn fly_model (\S+)", tier)}
+    validation_only = set()
+    for line in static_run.splitlines():
+        named = re.search(r'spawn fly_run "\$SRUN" (\S+)|spawn fly "\$GDIR/([^"]+)\.json"', line)
+        if named:
+            grid = ("static-run", named.group(1) or named.group(2))
+            (validation_only if '"$seed" -gt 2 ] ||' in line else flown).add(grid)
+    halves = re.search(r"^\s*K128=(\S+)$", static_run, re.M).group(1)  # flown as two halves, merged
+    flown = {(folder, halves if name == '"$K128-speed$speed"' else name) for folder, name in flown}
+    assert flown == set(estimate.EVERY_SEED) and len(estimate.EVERY_SEED) == len(flown)
+    assert validation_only == {estimate.VALIDATION_ONLY}
