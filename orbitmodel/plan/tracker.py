@@ -221,25 +221,30 @@ class MovingCloud:
     def clearance(self, positions: torch.Tensor, times: torch.Tensor | None = None) -> torch.Tensor:
         """(..., H, 3) metres, row h at ``times[h]`` (H,) s -> (..., H) metres to the nearest sphere
         surface then (+inf beyond reach; NaN where a position is not finite, as
-        :meth:`PointCloud.clearance`). Without times: (..., 3) -> (...,) at this field's time.
+        :meth:`PointCloud.clearance`; +inf everywhere for a field without points). Without
+        times: (..., 3) -> (...,) at this field's time.
 
-        A cloud whose reach the positions cannot enter, wherever its velocity carries them, is
-        not queried: it would answer +inf for every one of them."""
+        A cloud is not queried when its :attr:`PointCloud.box` lies, along some axis, beyond the
+        box of all the positions widened by how far its velocity carries them: it would answer
+        +inf for every one of them."""
         out = torch.full(positions.shape[:-1], math.inf)
         if not len(self):
             return out
         ahead = None if times is None else (torch.as_tensor(times, dtype=torch.float64) - self.time).float()[:, None]
         finite = torch.isfinite(positions).all(-1)  # (..., H)
-        inside = positions[finite].double()  # (M, 3)
+        inside = positions.detach()[finite].double()  # (M, 3)
         if len(inside):
             lo, hi = inside.amin(0).numpy(), inside.amax(0).numpy()
             furthest = 0.0 if ahead is None else float(ahead.abs().max())  # s
+            largest = float(np.maximum(np.abs(lo), np.abs(hi)).max())  # metres
         for cloud, velocity in self.clouds:
             moving = ahead is not None and bool(velocity.any())
             if len(inside):
                 # every moved position lies within the positions' box, widened by how far the velocity
-                # carries them (and a millimetre for float32 rounding of the move)
-                shift = furthest * velocity.abs().double().numpy() + 1e-3 if moving else 0.0
+                # carries them, and by more than the float32 rounding of the move (two roundings of
+                # at most 2^-24 of the largest coordinate each)
+                carry = furthest * velocity.abs().double().numpy()
+                shift = carry + 1e-6 * (largest + carry.max()) + 1e-3 if moving else 0.0
                 box_lo, box_hi = cloud.box
                 if (box_hi < lo - shift).any() or (box_lo > hi + shift).any():
                     continue

@@ -255,8 +255,10 @@ def test_estimate_tier_chain_reads_each_grids_steps_and_refuses_a_wrong_folder(t
 
 def test_the_tier_chain_estimate_counts_the_grids_the_chain_flies():
     """``estimate_tier_chain.EVERY_SEED`` copies the grids that ``TIER=dynamic`` flies on every seed
-    from scripts/reproduce_model.sh: a grid added to (or dropped from) the chain must be added to (or
-    dropped from) the estimate, or it silently under- or over-counts."""
+    from scripts/reproduce_model.sh (those it spawns two at a time; the expert's and the Diffusion
+    Policy's, which record no control-step times, are left out of both): a grid added to (or dropped
+    from) the chain must be added to (or dropped from) the estimate, or it silently under- or
+    over-counts."""
     import re
 
     estimate = load_benchmark("estimate_tier_chain")

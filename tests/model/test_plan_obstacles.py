@@ -173,6 +173,13 @@ def test_positions_far_from_the_cloud_are_beyond_reach_and_near_ones_exact():
     assert near.sum() > 50 and (centre.min(-1) > 1.0 + radii.max()).sum() > 1000
     assert np.allclose(got[near], brute[near], atol=1e-5)
     assert np.isinf(got[centre.min(-1) > 1.0 + radii.max()]).all()
+    # to the bit what the tree answers when asked for every position, those on the box's faces too
+    lo, hi = cloud.box
+    x[8, :3] = torch.tensor(np.stack([lo, hi, [lo[0], 0.0, hi[2]]]), dtype=torch.float32)
+    bound = 1.0 + radii.max()
+    dist, idx = cloud._tree.query(x.reshape(-1, 3).double().numpy(), k=4, distance_upper_bound=bound)
+    every = (dist - np.append(radii, 0.0)[idx]).min(-1).astype(np.float32).reshape(64, 50)
+    np.testing.assert_array_equal(cloud.clearance(x).numpy(), every)
 
 
 def test_a_diverged_candidate_gets_no_clearance_and_no_weight():
