@@ -166,13 +166,12 @@ class PointCloud:
         # The box around the centres widened by the query bound, and a hair more so that rounding
         # never drops a query the tree would answer: outside it no centre lies within the bound,
         # the answer is +inf, and the query is skipped. Empty: a box that holds nothing.
-        self._bound = self.reach + float(self.radii.max()) if len(self.points) else 0.0
-        slack = self._bound * (1 + 1e-9) + 1e-9
-        self.box = (
-            (self.points.min(0) - slack, self.points.max(0) + slack)
-            if len(self.points)
-            else (np.full(3, np.inf), np.full(3, -np.inf))
-        )
+        if len(self.points):
+            self._bound = self.reach + float(self.radii.max())
+            slack = self._bound * (1 + 1e-9) + 1e-9
+            self.box = (self.points.min(0) - slack, self.points.max(0) + slack)
+        else:
+            self._bound, self.box = 0.0, (np.full(3, np.inf), np.full(3, -np.inf))
 
     def __len__(self) -> int:
         return len(self.points)

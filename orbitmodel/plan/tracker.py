@@ -232,14 +232,14 @@ class MovingCloud:
             return out
         ahead = None if times is None else (torch.as_tensor(times, dtype=torch.float64) - self.time).float()[:, None]
         finite = torch.isfinite(positions).all(-1)  # (..., H)
-        inside = positions.detach()[finite].double()  # (M, 3)
-        if len(inside):
-            lo, hi = inside.amin(0).numpy(), inside.amax(0).numpy()
+        finite_positions = positions.detach()[finite].double()  # (M, 3)
+        if len(finite_positions):
+            lo, hi = finite_positions.amin(0).numpy(), finite_positions.amax(0).numpy()
             furthest = 0.0 if ahead is None else float(ahead.abs().max())  # s
             largest = float(np.maximum(np.abs(lo), np.abs(hi)).max())  # metres
         for cloud, velocity in self.clouds:
             moving = ahead is not None and bool(velocity.any())
-            if len(inside):
+            if len(finite_positions):
                 # every moved position lies within the positions' box, widened by how far the velocity
                 # carries them, and by more than the float32 rounding of the move (two roundings of
                 # at most 2^-24 of the largest coordinate each)
