@@ -42,6 +42,7 @@ EVERY_SEED = [
     ("static-run", "oracle-true-dyn-depth-dynamic-tracker"),
     ("static-run", "oracle-true-dyn-sensor-tracker"),
     ("static-run", "planner-corrected-tracker-depth-dynamic-k128"),
+    ("static-run", "planner-corrected-tracker-depth-dynamic-k256"),
 ]
 # and the one it flies on validation seeds 0-2 alone, timed there: the static run corrected, on its own depth head
 VALIDATION_ONLY = ("static-run", "planner-corrected-tracker")

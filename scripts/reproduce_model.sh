@@ -252,8 +252,8 @@ if [ "${TIER:-static}" = dynamic ]; then
   # The static tier's run (OUT/wm-cpu-step5, the static chain's: run it into this OUT first) on this
   # tier (docs/results.md "The dynamic tier: the static tier's world model"), OUT/dynamic/static-run/:
   # alone with its own depth head, and corrected by its misses with a depth head refitted on this
-  # tier's frames (RUN/depth-dynamic), at the preset's K = 32 and at K = 128 (its -k128 grids, chosen on
-  # validation seeds 0-2); on validation seeds 0-2 also corrected with its own head.
+  # tier's frames (RUN/depth-dynamic), at the preset's K = 32, at K = 128 and at K = 256 (its -k128 and
+  # -k256 grids, each chosen on validation seeds 0-2); on validation seeds 0-2 also corrected with its own head.
   # Beside them, on every seed, the oracles that say where the corrected planner loses: its corrected
   # dynamics with the true debris, and the true body with the tier's head or the rendered depth,
   # each through the tracker (docs/results.md "The dynamic tier: where the static run's planner loses").
@@ -277,21 +277,25 @@ if [ "${TIER:-static}" = dynamic ]; then
       [ "$seed" -gt 2 ] || spawn fly_run "$SRUN" planner-corrected-tracker planner --set obstacle_motion=tracker \
         --set body=corrected
       step "dynamic-static-run-seed$seed-2" join
-      # K = 128 candidates for this planner, chosen on validation seeds 0-2 (docs/results.md "The dynamic
-      # tier: the flown planner's cost and K"): about 2.5 times the CPU of its K = 32 grid, so two halves
-      # of the grid (one speed each) fly side by side and `eval merge` joins them.
-      K128=planner-corrected-tracker-depth-dynamic-k128
-      for speed in 1 3; do
-        use_tier_grid "$seed" "$GDIR" "$speed"
-        spawn fly_run "$SRUN" "$K128-speed$speed" planner --set obstacle_motion=tracker --set body=corrected \
-          --set depth_head=dynamic --set samples=128
+      # K = 128 candidates for this planner, chosen on validation seeds 0-2 against K = 32 (docs/results.md
+      # "The dynamic tier: the flown planner's cost and K"), then K = 256, chosen there against K = 128
+      # ("The dynamic tier: K = 256 on validation seeds 0-2"): 2 and 4-5 times the CPU of its K = 32 grid,
+      # so two halves of each grid (one speed each) fly side by side and `eval merge` joins them.
+      for k in 128 256; do
+        KN=planner-corrected-tracker-depth-dynamic-k$k
+        for speed in 1 3; do
+          use_tier_grid "$seed" "$GDIR" "$speed"
+          spawn fly_run "$SRUN" "$KN-speed$speed" planner --set obstacle_motion=tracker --set body=corrected \
+            --set depth_head=dynamic --set samples=$k
+        done
+        step "dynamic-static-run-seed$seed-k$k" join
+        "$BIN/orbitmodel" eval merge "$GDIR/$KN-speed1.json" "$GDIR/$KN-speed3.json" --json "$GDIR/$KN.json"
       done
-      step "dynamic-static-run-seed$seed-k128" join
-      "$BIN/orbitmodel" eval merge "$GDIR/$K128-speed1.json" "$GDIR/$K128-speed3.json" --json "$GDIR/$K128.json"
     done
     mkdir -p "$SDIR/test"
-    LOSSES=(planner-tracker planner-corrected-tracker-depth-dynamic planner-corrected-tracker-depth-dynamic-k128 oracle-learned-dyn-corrected
-      oracle-true-dyn-depth-dynamic-tracker oracle-true-dyn-sensor-tracker)
+    LOSSES=(planner-tracker planner-corrected-tracker-depth-dynamic planner-corrected-tracker-depth-dynamic-k128
+      planner-corrected-tracker-depth-dynamic-k256 oracle-learned-dyn-corrected oracle-true-dyn-depth-dynamic-tracker
+      oracle-true-dyn-sensor-tracker)
     POOLED=()
     for pilot in "${LOSSES[@]}"; do
       "$BIN/orbitmodel" eval pool "$SDIR"/seed{3,4,5}/"$pilot.json" --json "$SDIR/test/$pilot.json"

@@ -273,7 +273,11 @@ def test_the_tier_chain_estimate_counts_the_grids_the_chain_flies():
         if named:
             grid = ("static-run", named.group(1) or named.group(2))
             (validation_only if '"$seed" -gt 2 ] ||' in line else flown).add(grid)
-    halves = re.search(r"^\s*K128=(\S+)$", static_run, re.M).group(1)  # flown as two halves, merged
-    flown = {(folder, halves if name == '"$K128-speed$speed"' else name) for folder, name in flown}
+    # each K's grid is flown as two halves and merged: one name per K in the loop
+    ks = re.search(r"^\s*for k in ([\d ]+); do$", static_run, re.M).group(1).split()
+    stem = re.search(r"^\s*KN=(\S+)\$k$", static_run, re.M).group(1)
+    halves = ("static-run", '"$KN-speed$speed"')
+    assert halves in flown and ks, "the chain no longer flies each K's grid as two halves: update this test"
+    flown = (flown - {halves}) | {("static-run", stem + k) for k in ks}
     assert flown == set(estimate.EVERY_SEED) and len(estimate.EVERY_SEED) == len(flown)
     assert validation_only == {estimate.VALIDATION_ONLY}
