@@ -277,10 +277,11 @@ if [ "${TIER:-static}" = dynamic ]; then
       [ "$seed" -gt 2 ] || spawn fly_run "$SRUN" planner-corrected-tracker planner --set obstacle_motion=tracker \
         --set body=corrected
       step "dynamic-static-run-seed$seed-2" join
-      # K = 128 candidates for this planner, chosen on validation seeds 0-2 against K = 32 (docs/results.md
-      # "The dynamic tier: the flown planner's cost and K"), then K = 256, chosen there against K = 128
-      # ("The dynamic tier: K = 256 on validation seeds 0-2"): 2 and 4-5 times the CPU of its K = 32 grid,
-      # so two halves of each grid (one speed each) fly side by side and `eval merge` joins them.
+      # K = 128 candidates for this planner, chosen on validation seeds 0-2 against K = 32
+      # (docs/results.md "The dynamic tier: the flown planner's cost and K, on validation"), then
+      # K = 256, chosen there against K = 128 ("The dynamic tier: K = 256 on validation seeds 0-2"):
+      # each several times the CPU of its K = 32 grid, so two halves of each grid (one speed each)
+      # fly side by side and `eval merge` joins them.
       for k in 128 256; do
         KN=planner-corrected-tracker-depth-dynamic-k$k
         for speed in 1 3; do
