@@ -281,3 +281,10 @@ def test_the_tier_chain_estimate_counts_the_grids_the_chain_flies():
     flown = (flown - {halves}) | {("static-run", stem + k) for k in ks}
     assert flown == set(estimate.EVERY_SEED) and len(estimate.EVERY_SEED) == len(flown)
     assert validation_only == {estimate.VALIDATION_ONLY}
+    # and the test seeds pool every grid flown on every seed: the tier's (with its planner.json, the
+    # expert's and the policy's) and the static run's (LOSSES)
+    pooled = re.search(r"for pilot in (.*?); do", tier, re.S).group(1).replace("\\\n", " ")
+    pooled = set(re.sub(r"\$\(.*?\)", " ", pooled).split())
+    assert pooled == {p for f, p in flown if f == "grid"} | {"planner", "expert"}
+    losses = re.search(r"LOSSES=\((.*?)\)", dynamic, re.S).group(1).split()
+    assert sorted(losses) == sorted(p for f, p in flown if f == "static-run")
