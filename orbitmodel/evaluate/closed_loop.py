@@ -230,13 +230,15 @@ class ClosedLoop:
 
     def report(self, result: ClosedLoopResult) -> dict:
         """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
-        flight preset and every sampling setting) and the torch threads it flew on."""
+        flight preset and every sampling setting), and the torch threads and kernels (the CPU capability,
+        which ``ATEN_CPU_CAPABILITY`` can lower) of the process that flew it."""
         planning = self.name == self.req.variant.value
         report = closed_loop_report(self.req, result, None if planning else self.name, self.image_codec)
         return {
             **report,
             "pilot_settings": None if planning else self.pilot.metadata(),
             "threads": torch.get_num_threads(),
+            "cpu_capability": torch.backends.cpu.get_cpu_capability(),
             "batch": self.req.batch,
         }
 

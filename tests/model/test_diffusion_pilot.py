@@ -349,6 +349,7 @@ def test_eval_closed_loop_flies_a_policy_run_as_itself(policy, tmp_path):
         "image_codec": True,
     }
     assert report["threads"] >= 1
+    assert report["cpu_capability"] == torch.backends.cpu.get_cpu_capability()  # the kernels it flew on
     res = CliRunner().invoke(
         app,
         ["eval", "closed-loop", str(run.path), "--set", "draws=2", "--set", "pick=central", *grid, "--json", str(out)],
