@@ -364,18 +364,19 @@ def merge_reports(reports: list[dict]) -> dict:
     ``--speeds 2`` in two processes; each episode's seed depends only on its setting and index,
     so the episodes are the ones a single run flies).
 
-    Every part must be the same pilot, grid seed and planner settings. Latency, which the parts
+    Every part must be the same pilot, grid seed and planner settings, flown on the same kernels
+    (``cpu_capability``). Latency, which the parts
     summarise separately, becomes the median and p95 over the episodes' own medians.
     """
     if len(reports) < 2:
         raise ValueError("give at least two grid results to merge")
     first = reports[0]
-    for key in ("pilot", "seed", "planner", "run"):
+    for key in ("pilot", "seed", "planner", "run", "cpu_capability"):
         odd = [r for r in reports if r.get(key) != first.get(key)]
         if odd:
             raise ValueError(
                 f"the parts differ in {key} ({first.get(key)!r} vs {odd[0].get(key)!r}); merge only "
-                "parts of one grid flown with the same flags"
+                "parts of one grid flown with the same flags and kernels (ATEN_CPU_CAPABILITY)"
             )
     keys = [(s["obstacles"], s["speed"]) for r in reports for s in r["settings"]]
     if len(set(keys)) != len(keys):

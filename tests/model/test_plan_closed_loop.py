@@ -289,6 +289,23 @@ def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
         ],
     )
     assert res.exit_code == 2 and "overlap" in res.output and "Traceback" not in res.output
+    # a part flown on other kernels (ATEN_CPU_CAPABILITY=default) is another rounding: not one grid
+    assert merged["cpu_capability"] == whole["cpu_capability"] == torch.backends.cpu.get_cpu_capability()
+    kernels = "DEFAULT" if merged["cpu_capability"] != "DEFAULT" else "AVX2"
+    other = {**json.loads((tmp_path / "v1.json").read_text()), "cpu_capability": kernels}
+    (tmp_path / "v1-default.json").write_text(json.dumps(other))
+    res = runner.invoke(
+        app,
+        [
+            "eval",
+            "merge",
+            str(tmp_path / "v2.json"),
+            str(tmp_path / "v1-default.json"),
+            "--json",
+            str(tmp_path / "bad.json"),
+        ],
+    )
+    assert res.exit_code == 2 and "cpu_capability" in res.output and "Traceback" not in res.output
 
 
 def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path, monkeypatch):
