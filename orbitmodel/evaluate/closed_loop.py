@@ -230,8 +230,8 @@ class ClosedLoop:
 
     def report(self, result: ClosedLoopResult) -> dict:
         """:func:`closed_loop_report` of this flight, with the pilot's own settings (a policy's
-        flight preset and every sampling setting), and the torch threads and kernels (the CPU capability,
-        which ``ATEN_CPU_CAPABILITY`` can lower) of the process that flew it."""
+        flight preset and every sampling setting), and the torch threads and kernels (the CPU
+        capability, which ``ATEN_CPU_CAPABILITY`` can lower) of this process (on Ray, the driver's)."""
         planning = self.name == self.req.variant.value
         report = closed_loop_report(self.req, result, None if planning else self.name, self.image_codec)
         return {
@@ -365,8 +365,8 @@ def merge_reports(reports: list[dict]) -> dict:
     so the episodes are the ones a single run flies).
 
     Every part must be the same pilot, grid seed and planner settings, flown on the same kernels
-    (``cpu_capability``). Latency, which the parts
-    summarise separately, becomes the median and p95 over the episodes' own medians.
+    (``cpu_capability``). Latency, which the parts summarise separately, becomes the median and p95
+    over the episodes' own medians.
     """
     if len(reports) < 2:
         raise ValueError("give at least two grid results to merge")
