@@ -141,6 +141,23 @@ class GenerationConfig:
         return dataclasses.replace(self, **updates)
 
 
+_KINDS = {bool: "true or false", int: "a whole number", float: "a number", str: "a string"}
+
+
+def _check_type(hint, value, where: str) -> None:
+    """Refuse a TOML value of the wrong kind for a plain setting (``dt = "fast"``), naming the key;
+    a whole number stands for a float, and ``str | None`` takes a string."""
+    kinds = [k for k in typing.get_args(hint) if k is not type(None)] or [hint]
+    if len(kinds) != 1 or kinds[0] not in _KINDS or (value is None and type(None) in typing.get_args(hint)):
+        return
+    kind = kinds[0]
+    ok = isinstance(value, kind) and (kind is bool or not isinstance(value, bool))
+    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+        ok = True
+    if not ok:
+        raise ValueError(f"{where}: expected {_KINDS[kind]}, got {value!r}")
+
+
 def build(cls, data, where: str):
     """Build dataclass ``cls`` from a plain dict, strictly: unknown keys are errors.
 
@@ -164,6 +181,7 @@ def build(cls, data, where: str):
                 raise ValueError(f"{where}.{key}: expected a list, got {value!r}")
             kwargs[key] = tuple(value)
         else:
+            _check_type(hint, value, f"{where}.{key}")
             kwargs[key] = value
     try:
         if cls is ScenarioConfig and "tier" in kwargs:

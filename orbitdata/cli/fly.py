@@ -100,7 +100,7 @@ def register(app: typer.Typer) -> None:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
         from rich.table import Table
 
-        from orbitdata.cli.options import check_report_path
+        from orbitdata.cli.options import check_report_path, check_video_folder
         from orbitdata.fly.grid import check_grid, fly_grid, grid_report, pooled
         from orbitdata.fly.registry import pilot_factory
         from orbitdata.scenario.config import STATIC
@@ -109,8 +109,7 @@ def register(app: typer.Typer) -> None:
         with usage_errors(flags={"image_size": "--image-size"} if image_size is not None else None):
             check_grid(obstacles, speeds, episodes)
             check_report_path(json_out)
-            if video is not None and video.exists() and not video.is_dir():
-                raise ValueError(f"--video {video} is a file: give a folder for the videos")
+            check_video_folder(video)
             if video is not None and render is False:
                 raise ValueError(f"--video {video} records the camera: drop --no-render")
             if video is None and video_format is not None:

@@ -39,6 +39,12 @@ def check_report_path(path: Path | None, flag: str = "--json") -> None:
         raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
 
 
+def check_video_folder(video: Path | None) -> None:
+    """Refuse, before any flight, a ``--video`` folder that is an existing file."""
+    if video is not None and Path(video).exists() and not Path(video).is_dir():
+        raise ValueError(f"--video {video} is a file: give a folder for the videos")
+
+
 def wide_console():
     """A rich console for tables: the terminal's width, or 160 columns into a pipe or a file (rich's
     80 would cut the tables' cells)."""

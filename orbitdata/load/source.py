@@ -82,9 +82,12 @@ def dataset_folder(source: str | Path) -> Path:
     """A local, finished dataset folder (it holds meta/info.json); raises saying what is wrong."""
     folder = local_folder(source, repo_ok=False)
     if not (folder / S.INFO_PATH).is_file():
+        if (folder / S.PARTS_DIR).is_dir():  # generate's scratch space: a generation under way or stopped
+            fix = "a `generate` run into it did not finish: run the same command again"
+        else:
+            fix = "give a folder made by `orbitdata generate`"
         raise FileNotFoundError(
-            f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset "
-            "(if a `generate` run into it was interrupted, run the same command again)"
+            f"{folder / S.INFO_PATH} is missing: {folder} is not a finished orbitdata dataset; {fix}"
         )
     return folder
 

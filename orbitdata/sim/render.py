@@ -45,6 +45,12 @@ def _release_all() -> None:
 os.register_at_fork(before=_release_all)  # runs before sim.gl's hook, registered earlier
 
 
+def _scene(model: mujoco.MjModel) -> mujoco.MjvScene:
+    """A scene with room for every geom of ``model`` and the few MuJoCo adds: geoms past a scene's
+    room are left out of the frames, with only a warning in MuJoCo's log."""
+    return mujoco.MjvScene(model, maxgeom=max(64, model.ngeom + 32))
+
+
 class CameraRenderer:
     """Renders the named camera of a model offscreen.
 
@@ -60,7 +66,7 @@ class CameraRenderer:
         self._closed = False
         self._model = model
         self._rect = mujoco.MjrRect(0, 0, size, size)
-        self._scene = mujoco.MjvScene(model, maxgeom=64)
+        self._scene = _scene(model)
         self._option = mujoco.MjvOption()
         self._camera = mujoco.MjvCamera()
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
@@ -97,7 +103,7 @@ class CameraRenderer:
         if not self.can_render(model):
             raise ValueError("the model's rendering assets differ from the ones this renderer's context holds")
         self._model = model
-        self._scene = mujoco.MjvScene(model, maxgeom=64)
+        self._scene = _scene(model)
         self._camera.fixedcamid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera)
 
     def _open(self) -> None:

@@ -66,7 +66,7 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
     elif existing is None and out.exists() and any(out.iterdir()):
         if not overwrite:
             raise UnusableOutput(
-                f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite (overwrite=True)"
+                f"{out} is not empty and holds no orbitdata dataset; choose an empty folder or pass --overwrite (overwrite=True in Python)"
             )
         clear_output(out)
     complete = (out / S.INFO_PATH).exists() and not parts.parts_dir(out).exists() and existing == mine

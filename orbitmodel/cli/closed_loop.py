@@ -98,7 +98,7 @@ def closed_loop(
     """
     import torch
 
-    from orbitdata.cli.options import check_report_path, key_values
+    from orbitdata.cli.options import check_report_path, check_video_folder, key_values
     from orbitdata.config import GenerationConfig
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
 
@@ -121,6 +121,7 @@ def closed_loop(
         executor=executor.value,
     )
     check_report_path(json_out)
+    check_video_folder(video)
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
     report = loop.report(_fly_with_progress(loop, json_out))
     print_table(report, episodes)
@@ -330,6 +331,11 @@ def flips(
         f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
         f"{result['successes'][1]})"
     )
+    if "only_first" in result or "only_second" in result:
+        typer.echo(
+            f"compared the {result['episodes']} episodes both flew: {result.get('only_first', 0)} more in {first}, "
+            f"{result.get('only_second', 0)} more in {second}"
+        )
     if "identical" in result:
         c, f = result["clearance_change_m"], result["frames_change"]
         typer.echo(

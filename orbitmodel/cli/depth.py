@@ -8,6 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.data import EVAL_SPLITS
 from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig, check_head_name
 
@@ -68,6 +69,7 @@ def depth(
         ),
     ] = "",
     overwrite: Annotated[bool, typer.Option(help="replace the head already there")] = False,
+    threads: Threads = None,
 ) -> None:
     """Refit the depth head on the frozen encoder with near cells weighted (written to RUN/depth).
 
@@ -75,6 +77,7 @@ def depth(
     range. The latents, and so the dynamics and the probe, are untouched. `orbitmodel eval
     closed-loop` uses RUN/depth when it is there (`--set depth_head=stage1` for the Stage I head).
     """
+    use_threads(threads)
     if eval_split not in EVAL_SPLITS:
         fail(f"--eval-split {eval_split}: choose one of {', '.join(EVAL_SPLITS)}")
     if name:

@@ -11,6 +11,7 @@ import typer
 
 from orbitmodel.baselines.diffusion.config import POLICY_PRESETS
 from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
 PolicyPresetName = Enum("PolicyPresetName", {name: name for name in POLICY_PRESETS}, type=str)
@@ -79,12 +80,14 @@ def train_policy(
             "longer schedule from the checkpoint on)"
         ),
     ] = False,
+    threads: Threads = None,
 ) -> None:
     """Train a Diffusion Policy (Chi et al. 2023) on the dataset's expert episodes.
 
     It sees the last 2 camera images (none for --preset cpu-state) and states and the goal in the
     body frame, predicts 16 actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
     """
+    use_threads(threads)
     from orbitmodel.baselines.diffusion.config import get_policy_preset
     from orbitmodel.baselines.diffusion.train import DEFAULT_LEVELS, PolicyRequest
     from orbitmodel.baselines.diffusion.train import train_policy as train

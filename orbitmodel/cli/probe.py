@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
@@ -9,6 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.cli.train import Device, echo_trained
 from orbitmodel.config import INPUTS, INTEGRATORS
 from orbitmodel.extras import MissingExtra
@@ -113,6 +115,7 @@ def probe(
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     resume: Annotated[bool, typer.Option(help="continue the probe run from its latest checkpoint")] = False,
     overwrite: Annotated[bool, typer.Option(help="replace a probe already trained in RUN")] = False,
+    threads: Threads = None,
 ) -> None:
     """Train the physics probe on the run's frozen world model (written to RUN/probe).
 
@@ -120,6 +123,7 @@ def probe(
     the logged actions, the probe turns them into state increments, integrated from the true
     state at the last context frame; the loss is the MSE of the integrated states.
     """
+    use_threads(threads)
     from orbitmodel.probe.model import probe_folder
     from orbitmodel.probe.train import ProbeRequest, run_recipe, train_probe, trained_recipe
     from orbitmodel.probe.variants import FLOWN, VARIANTS, variant_recipe
@@ -173,7 +177,11 @@ def probe(
     )
     label = "the state-only probe" if state_only else f"the probe {variant.value}"
     label += " (the run's own)" if variant.value == FLOWN and not state_only else ""
-    echo_trained(label, train_probe(req), probe_folder(run, kind, variant.value))
+    start = time.perf_counter()
+    result = train_probe(req)
+    seconds = time.perf_counter() - start
+    before = "reading the windows" if state_only else "imagining the windows"
+    echo_trained(label, result, probe_folder(run, kind, variant.value), before, seconds)
 
 
 @friendly

@@ -10,6 +10,7 @@ import typer
 
 from orbitdata import schema as S
 from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.config import PRESETS
 
 Preset = Enum("Preset", {name: name for name in PRESETS}, type=str)
@@ -22,11 +23,13 @@ def register(app: typer.Typer) -> None:
     app.command("train")(train)
 
 
-def echo_trained(what: str, result, where) -> None:
-    """The one line every training command ends with (``train.loop.FitResult``)."""
+def echo_trained(what: str, result, where, before: str = "", seconds: float | None = None) -> None:
+    """The one line every training command ends with (``train.loop.FitResult``); ``seconds``: the
+    whole command's, when it did more than train (``before``: what, e.g. imagining the windows)."""
+    whole = f"; {seconds / 60:.1f} min in all, {before} included" if seconds is not None else ""
     typer.echo(
         f"trained {what} {result.steps} steps in {result.seconds / 60:.1f} min ({result.windows_per_s:.1f} "
-        f"windows/s, {100 * result.data_wait:.1f} % waiting for data); weights in {where}"
+        f"windows/s, {100 * result.data_wait:.1f} % waiting for data){whole}; weights in {where}"
     )
 
 
@@ -74,11 +77,13 @@ def train(
     device: Annotated[Device, typer.Option(help="auto = CUDA when available")] = "auto",
     resume: Annotated[bool, typer.Option(help="continue the run in --out from its latest checkpoint")] = False,
     overwrite: Annotated[bool, typer.Option(help="replace a run already in --out")] = False,
+    threads: Threads = None,
 ) -> None:
     """Train the Stage I world model (ViT + AdaLN-Zero predictor + depth head, SIGReg).
 
     Multi-GPU / multi-node: launch with `torchrun --nproc_per_node N -m orbitmodel.cli.app train ...`.
     """
+    use_threads(threads)
     from orbitmodel.config import get_preset
     from orbitmodel.train.stage1 import Stage1Request, train_world_model
 

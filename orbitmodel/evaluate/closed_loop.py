@@ -359,25 +359,45 @@ def closed_loop_report(
     return report
 
 
+# What makes two parts one grid: the same pilot flown the same way on the same scenario.
+SAME_GRID = ("pilot", "seed", "tier", "run", "preset", "planner_preset", "planner", "flight", "pilot_settings")
+SAME_GRID += ("image_codec", "max_steps", "cpu_capability")
+
+
+def _differences(a, b, path: str) -> list[str]:
+    """The dotted paths where two recorded values differ, each with both values (``planner.mppi.samples
+    (32 vs 64)``); nested dictionaries are walked, anything else compared whole."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return [d for key in sorted(a.keys() | b.keys()) for d in _differences(a.get(key), b.get(key), f"{path}.{key}")]
+    return [] if a == b else [f"{path} ({a!r} vs {b!r})"]
+
+
 def merge_reports(reports: list[dict]) -> dict:
     """One grid table from grids flown in parallel on disjoint settings (e.g. ``--speeds 1`` and
     ``--speeds 2`` in two processes; each episode's seed depends only on its setting and index,
     so the episodes are the ones a single run flies).
 
-    Every part must be the same pilot, grid seed and planner settings, flown on the same kernels
-    (``cpu_capability``). Latency, which the parts summarise separately, becomes the median and p95
-    over the episodes' own medians.
+    Every part must be the same pilot, grid seed, tier, preset and planner settings, frame limit and
+    episodes per setting, flown on the same kernels (``cpu_capability``); a refusal names the first
+    field that differs. Latency, which the parts summarise separately, becomes the median and p95
+    over the episodes' own medians; the dynamic tier's rejected debris draws are summed.
     """
     if len(reports) < 2:
         raise ValueError("give at least two grid results to merge")
     first = reports[0]
-    for key in ("pilot", "seed", "planner", "run", "cpu_capability"):
-        odd = [r for r in reports if r.get(key) != first.get(key)]
+    for report in reports[1:]:
+        odd = [d for key in SAME_GRID for d in _differences(first.get(key), report.get(key), key)]
         if odd:
+            more = f" and {len(odd) - 1} more" if len(odd) > 1 else ""
             raise ValueError(
-                f"the parts differ in {key} ({first.get(key)!r} vs {odd[0].get(key)!r}); merge only "
-                "parts of one grid flown with the same flags and kernels (ATEN_CPU_CAPABILITY)"
+                f"the parts differ in {odd[0]}{more}; merge only parts of one grid flown with the same "
+                "flags and kernels (ATEN_CPU_CAPABILITY)"
             )
+    counts = sorted({s["episodes"] for r in reports for s in r["settings"]})
+    if len(counts) > 1:
+        raise ValueError(
+            f"the parts fly {' and '.join(map(str, counts))} episodes per setting; fly every part with the same --episodes"
+        )
     keys = [(s["obstacles"], s["speed"]) for r in reports for s in r["settings"]]
     if len(set(keys)) != len(keys):
         raise ValueError(
@@ -387,6 +407,11 @@ def merge_reports(reports: list[dict]) -> dict:
     settings = sorted((s for r in reports for s in r["settings"]), key=lambda s: (s["obstacles"], s["speed"]))
     episodes = [e for r in reports for e in r.get("episodes", [])]
     merged = {**first, "settings": settings, "episodes": episodes, "merged_from": len(reports)}
+    if "rejections" in first:
+        rejected = sum(r["rejections"]["unsurvivable_draws"] for r in reports)
+        kept = sum(r["rejections"]["debris"] for r in reports)
+        rate = rejected / (rejected + kept) if rejected + kept else 0.0
+        merged["rejections"] = {"unsurvivable_draws": rejected, "debris": kept, "rate": rate}
     merged["latency_ms"] = {
         name: _stats([e[f"{name}_ms_median"] for e in episodes if e.get(f"{name}_ms_median") is not None])
         for name in ("step", "replan")

@@ -188,7 +188,8 @@ def outcome_flips(a: dict, b: dict, names: tuple[str, str] = ("the first report"
     Episodes are matched by seed; both reports need their ``episodes``. Beside the flips, how much
     the flights themselves moved: the episodes flown identically (the same frame count and
     closest approach) and the median and largest change of the closest approach (metres) and of the
-    frame count, where the reports record them."""
+    frame count, where the reports record them. Only the episodes both flew are compared; those of
+    one alone are counted (``only_first``, ``only_second``)."""
 
     def by_seed(report: dict, name: str) -> dict[int, dict]:
         episodes = report.get("episodes")
@@ -222,4 +223,13 @@ def outcome_flips(a: dict, b: dict, names: tuple[str, str] = ("the first report"
             "clearance_change_m": {"median": float(statistics.median(clearance)), "max": float(max(clearance))},
             "frames_change": {"median": float(statistics.median(frames)), "max": int(max(frames))},
         }
-    return {"episodes": len(common), "flips": len(flips), "successes": list(success), "flipped": flips, **moved}
+    unshared = {"only_first": len(set(ea) - set(eb)), "only_second": len(set(eb) - set(ea))}
+    unshared = {k: v for k, v in unshared.items() if v}  # episodes one flight flew and the other did not
+    return {
+        "episodes": len(common),
+        "flips": len(flips),
+        "successes": list(success),
+        "flipped": flips,
+        **moved,
+        **unshared,
+    }

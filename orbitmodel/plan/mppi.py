@@ -48,11 +48,9 @@ class MPPIConfig:
     shift_fill: str = "zero"
 
     def __post_init__(self):
-        if self.samples < 2 or self.horizon < 1 or self.iterations < 1:
-            raise ValueError(
-                f"MPPI needs samples >= 2, horizon >= 1 and iterations >= 1; got "
-                f"{self.samples}, {self.horizon}, {self.iterations}"
-            )
+        for key, least in (("samples", 2), ("horizon", 1), ("iterations", 1)):
+            if getattr(self, key) < least:
+                raise ValueError(f"{key}={getattr(self, key)} must be >= {least} (MPPI)")
         if not self.noise_std > 0 or not self.temperature > 0:
             raise ValueError(f"noise_std={self.noise_std} and temperature={self.temperature} must be > 0")
         if not 0 <= self.smoothing < 1:

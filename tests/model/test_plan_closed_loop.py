@@ -182,6 +182,7 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert "unknown planner option 'urgncy'" in one_line_error(runner.invoke(app, rigid + ["--set", "urgncy=1"]))
     assert "urgency='high': give a number" in one_line_error(runner.invoke(app, rigid + ["--set", "urgency=high"]))
     assert "true or false" in one_line_error(runner.invoke(app, rigid + ["--set", "image_codec=maybe"]))
+    assert "samples=-5 must be >= 2" in one_line_error(runner.invoke(app, rigid + ["--set", "samples=-5"]))
     assert "presets are paper, cpu" in one_line_error(runner.invoke(app, rigid + ["--preset", "reference"]))
     # a table that could not be written at the end is refused before the first episode flies
     line = one_line_error(runner.invoke(app, rigid + ["--json", str(tmp_path)]))
@@ -216,6 +217,17 @@ def test_a_flight_that_fails_midway_exits_1_and_keeps_what_landed(tmp_path, monk
     errors = [line for line in res.stderr.splitlines() if line.startswith("error:")]
     assert errors == [f"error: the flight stopped after 1 episode: {expected}; those are in {kept}"]
     assert not out.exists() and len(kept.read_text().splitlines()) == 1
+
+
+def test_a_video_path_that_is_a_file_is_refused_before_the_first_episode(tmp_path):
+    (tmp_path / "ep0.gif").write_text("x")
+    args = ["eval", "closed-loop", "--pilot", "oracle-true", "--obstacles", "1", "--speeds", "1", "--episodes", "1"]
+    res = runner.invoke(app, [*args, "--max-steps", "3", "--video", str(tmp_path / "ep0.gif")])
+    line = one_line_error(res)
+    assert (
+        res.exit_code == 2 and line == f"error: --video {tmp_path / 'ep0.gif'} is a file: give a folder for the videos"
+    )
+    assert "Episode" not in res.output and (tmp_path / "ep0.gif").read_text() == "x"
 
 
 def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
@@ -306,6 +318,49 @@ def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
         ],
     )
     assert res.exit_code == 2 and "cpu_capability" in res.output and "Traceback" not in res.output
+    # a part flown with another flag is another grid: the refusal names the field and both values
+    v1 = json.loads((tmp_path / "v1.json").read_text())
+    samples = v1["planner"]["mppi"]["samples"]
+    odd_parts = {
+        "samples": (
+            {**v1, "planner": {**v1["planner"], "mppi": {**v1["planner"]["mppi"], "samples": 16}}},
+            f"planner.mppi.samples ({samples} vs 16)",
+        ),
+        "max-steps": ({**v1, "max_steps": 40}, "max_steps (4 vs 40)"),
+        "tier": ({**v1, "tier": "dynamic"}, "tier (None vs 'dynamic')"),
+        "episodes": (
+            {**v1, "settings": [{**s, "episodes": 2} for s in v1["settings"]]},
+            "1 and 2 episodes per setting",
+        ),
+    }
+    for name, (part, says) in odd_parts.items():
+        (tmp_path / f"v1-{name}.json").write_text(json.dumps(part))
+        res = runner.invoke(
+            app,
+            [
+                "eval",
+                "merge",
+                str(tmp_path / "v2.json"),
+                str(tmp_path / f"v1-{name}.json"),
+                "--json",
+                str(tmp_path / "bad.json"),
+            ],
+        )
+        lines = res.output.strip().splitlines()
+        assert res.exit_code == 2 and says in res.output and len(lines) == 1, (name, res.output)
+    assert not (tmp_path / "bad.json").exists()
+
+
+def test_a_merged_dynamic_grid_counts_every_parts_rejected_draws():
+    from orbitmodel.evaluate.closed_loop import merge_reports
+
+    def part(speed, rejected, kept):
+        setting = {"obstacles": 3, "speed": speed, "episodes": 1, "success": 1}
+        rejections = {"unsurvivable_draws": rejected, "debris": kept, "rate": rejected / (rejected + kept)}
+        return {"pilot": "expert", "seed": 0, "tier": "dynamic", "rejections": rejections, "settings": [setting]}
+
+    merged = merge_reports([part(1.0, 1, 3), part(3.0, 3, 3)])
+    assert merged["rejections"] == {"unsurvivable_draws": 4, "debris": 6, "rate": 0.4}
 
 
 def test_a_frame_step_run_trains_probes_and_flies(tiny_dataset_master, tmp_path, monkeypatch):

@@ -2,6 +2,7 @@
 the Table I layout, and bad input gives one line and exit 2."""
 
 import json
+import re
 import shutil
 from dataclasses import replace
 
@@ -220,6 +221,10 @@ def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
     for flag in ([], ["--state-only"]):
         res = runner.invoke(app, ["probe", str(run), str(tiny_dataset_master), "--device", "cpu", *flag])
         assert res.exit_code == 0, res.output
+        # the time it ends with is the command's, imagining the windows and all, beside the training's
+        assert re.search(
+            r"steps in [0-9.]+ min \(.*\); [0-9.]+ min in all, (imagining|reading) the windows included", res.output
+        )
     config = PhysicsProbe.from_pretrained(run).config
     assert (config.integrator, config.inputs) == ("coasting", "latent+change")  # the defaults
     out = tmp_path / "eval"

@@ -92,6 +92,12 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     assert "2 of 4 flown identically" in res.output
     written = json.loads((tmp_path / "flips.json").read_text())
     assert written["flights"] == flights and written["flips"] == 2  # it names the two flights it compares
+    assert "only_first" not in written and "only_second" not in written  # the same episodes: nothing left out
+    # a flight with an episode the other did not fly: the shared ones are compared, the others counted
+    (tmp_path / "c.json").write_text(json.dumps({"episodes": a["episodes"][:3]}))
+    res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "c.json"), flights[1]])
+    assert res.exit_code == 0 and "1 of 3 episodes flip" in res.output
+    assert f"compared the 3 episodes both flew: 0 more in {tmp_path / 'c.json'}, 1 more in {flights[1]}" in res.output
 
 
 def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):

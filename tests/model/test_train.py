@@ -147,10 +147,18 @@ def test_missing_dataset(tmp_path):
 
 
 def test_folder_that_is_not_a_dataset(tmp_path):
+    """A folder generate never wrote is not told to run generate "again"; one it left unfinished is."""
+    from orbitdata import schema as S
+
     (tmp_path / "plain").mkdir()
     _one_line_exit_2(
         runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
-        "not a finished orbitdata dataset",
+        "not a finished orbitdata dataset; give a folder made by `orbitdata generate`",
+    )
+    (tmp_path / "plain" / S.PARTS_DIR).mkdir()
+    _one_line_exit_2(
+        runner.invoke(app, ["train", str(tmp_path / "plain"), "--out", str(tmp_path / "r")]),
+        "a `generate` run into it did not finish: run the same command again",
     )
 
 
@@ -174,6 +182,22 @@ def test_run_folder_with_another_config_needs_overwrite(tiny_dataset_master, tra
     assert runner.invoke(app, [*args, "--overwrite"]).exit_code == 0
     assert runner.invoke(app, [*args, "--window", "4", "--overwrite"]).exit_code == 0
     assert json.loads((run / "config.json").read_text())["preset"]["train"]["window"] == 4  # the flag, recorded
+
+
+@pytest.mark.parametrize("command", ["train", "train-policy"])
+def test_threads_sets_the_torch_threads_the_run_records(tiny_dataset_master, tmp_path, command):
+    """--threads N trains on N torch threads (beside other work), and training.json says so."""
+    before = torch.get_num_threads()
+    threads = 2 if before == 1 else 1
+    run = tmp_path / "run"
+    args = [command, str(tiny_dataset_master), "--preset", "tiny", "--max-steps", "1", "--device", "cpu"]
+    try:
+        res = runner.invoke(app, [*args, "--threads", str(threads), "--out", str(run)])
+    finally:
+        torch.set_num_threads(before)
+    assert res.exit_code == 0, res.output
+    segments = json.loads((run / "training.json").read_text())["segments"]
+    assert segments[-1]["hardware"].endswith(f"{threads} torch threads"), segments
 
 
 def test_a_run_resumes_whatever_the_spelling_of_its_dataset_path(tmp_path, monkeypatch):

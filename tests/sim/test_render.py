@@ -43,3 +43,11 @@ def test_pool_depth_is_area_mean_with_no_return_as_far():
     assert pooled.shape == (16, 16)
     assert pooled[0, 0] == pytest.approx((1 + 2 + 3 + 10) / 4)
     assert pooled[5, 5] == pytest.approx(10.0)
+
+
+def test_every_obstacle_of_a_crowded_scene_is_drawn(render_env):
+    """The scene has room for all of a model's geoms: 80 obstacles are all drawn, none dropped."""
+    render_env.reset(seed=0, options={"n_obstacles": 80})
+    render_env.step(np.zeros(8))
+    scene = render_env._renderer._scene
+    assert scene.ngeom >= 80 + 1 and scene.ngeom < scene.maxgeom  # every obstacle and the goal, with room to spare

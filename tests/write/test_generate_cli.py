@@ -39,6 +39,16 @@ def test_config_file_errors(tmp_path):
     assert res.exit_code == 2 and "bogus" in res.output and "unknown setting" in res.output
     res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(tmp_path / "missing.toml")])
     assert res.exit_code == 2 and "does not exist" in res.output
+    for setting, says in (
+        ('[sim]\ndt = "fast"', "sim.dt: expected a number, got 'fast'"),
+        ("[scenario]\nmax_tries = 1.5", "scenario.max_tries: expected a whole number, got 1.5"),
+        ('[dataset]\nepisodes = "10"', "dataset.episodes: expected a whole number, got '10'"),
+        ("[dataset]\nepisodes = true", "dataset.episodes: expected a whole number, got True"),
+    ):
+        bad.write_text(setting + "\n")
+        res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(bad)])
+        assert res.exit_code == 2 and says in res.output and len(res.output.strip().splitlines()) == 1, res.output
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_sim_dt_other_than_the_schemas_is_refused(tmp_path):
