@@ -141,6 +141,19 @@ class GenerationConfig:
         return dataclasses.replace(self, **updates)
 
 
+def config_changes(theirs: dict, mine: dict, prefix: str = "") -> list[str]:
+    """The settings that differ between two stored configs (or any nested records), as
+    ``key: theirs -> mine`` with dotted keys for nested tables."""
+    out = []
+    for key in sorted(set(theirs) | set(mine)):
+        a, b = theirs.get(key), mine.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            out += config_changes(a, b, f"{prefix}{key}.")
+        elif a != b:
+            out.append(f"{prefix}{key}: {a!r} -> {b!r}")
+    return out
+
+
 _KINDS = {bool: "true or false", int: "a whole number", float: "a number", str: "a string"}
 
 

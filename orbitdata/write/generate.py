@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 from orbitdata import schema as S
-from orbitdata.config import GenerationConfig
+from orbitdata.config import GenerationConfig, config_changes
 from orbitdata.info import Info
 from orbitdata.load.source import read_info
 from orbitdata.version import __version__
@@ -99,18 +99,6 @@ def clear_output(out: Path) -> None:
                 path.unlink()
         if not any((out / folder).iterdir()):
             (out / folder).rmdir()
-
-
-def config_changes(theirs: dict, mine: dict, prefix: str = "") -> list[str]:
-    """The settings that differ between two stored configs, as ``key: theirs -> mine``."""
-    out = []
-    for key in sorted(set(theirs) | set(mine)):
-        a, b = theirs.get(key), mine.get(key)
-        if isinstance(a, dict) and isinstance(b, dict):
-            out += config_changes(a, b, f"{prefix}{key}.")
-        elif a != b:
-            out.append(f"{prefix}{key}: {a!r} -> {b!r}")
-    return out
 
 
 def generate(

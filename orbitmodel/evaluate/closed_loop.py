@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from orbitdata.config import GenerationConfig
+from orbitdata.config import GenerationConfig, config_changes
 from orbitdata.fly.grid import CellResult, check_grid, grid_report
 from orbitdata.fly.record import episode_summary
 from orbitdata.seeding import episode_seed, grid_seed
@@ -364,14 +364,6 @@ SAME_GRID = ("pilot", "seed", "tier", "run", "preset", "planner_preset", "planne
 SAME_GRID += ("image_codec", "max_steps", "cpu_capability")
 
 
-def _differences(a, b, path: str) -> list[str]:
-    """The dotted paths where two recorded values differ, each with both values (``planner.mppi.samples
-    (32 vs 64)``); nested dictionaries are walked, anything else compared whole."""
-    if isinstance(a, dict) and isinstance(b, dict):
-        return [d for key in sorted(a.keys() | b.keys()) for d in _differences(a.get(key), b.get(key), f"{path}.{key}")]
-    return [] if a == b else [f"{path} ({a!r} vs {b!r})"]
-
-
 def merge_reports(reports: list[dict]) -> dict:
     """One grid table from grids flown in parallel on disjoint settings (e.g. ``--speeds 1`` and
     ``--speeds 2`` in two processes; each episode's seed depends only on its setting and index,
@@ -386,7 +378,7 @@ def merge_reports(reports: list[dict]) -> dict:
         raise ValueError("give at least two grid results to merge")
     first = reports[0]
     for report in reports[1:]:
-        odd = [d for key in SAME_GRID for d in _differences(first.get(key), report.get(key), key)]
+        odd = config_changes({k: first.get(k) for k in SAME_GRID}, {k: report.get(k) for k in SAME_GRID})
         if odd:
             more = f" and {len(odd) - 1} more" if len(odd) > 1 else ""
             raise ValueError(

@@ -324,10 +324,10 @@ def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
     odd_parts = {
         "samples": (
             {**v1, "planner": {**v1["planner"], "mppi": {**v1["planner"]["mppi"], "samples": 16}}},
-            f"planner.mppi.samples ({samples} vs 16)",
+            f"planner.mppi.samples: {samples} -> 16",
         ),
-        "max-steps": ({**v1, "max_steps": 40}, "max_steps (4 vs 40)"),
-        "tier": ({**v1, "tier": "dynamic"}, "tier (None vs 'dynamic')"),
+        "max-steps": ({**v1, "max_steps": 40}, "max_steps: 4 -> 40"),
+        "tier": ({**v1, "tier": "dynamic"}, "tier: None -> 'dynamic'"),
         "episodes": (
             {**v1, "settings": [{**s, "episodes": 2} for s in v1["settings"]]},
             "1 and 2 episodes per setting",
