@@ -2,7 +2,7 @@
 
     python benchmarks/bench_plan.py [--run RUN] [--planner paper|cpu] [--samples K] [--horizon H]
         [--history N] [--threads 1] [--replan-every 1] [--steps 20] [--sweep] [--floor] [--compile]
-        [--probe NAME ...] [--profile]
+        [--precision bfloat16] [--probe NAME ...] [--profile]
 
 Times the ``planner`` pilot's ``act`` on synthetic 64 px frames: per replan and per control
 step (median, p95), and the share of the time spent encoding the frame, in the depth head,
@@ -18,7 +18,8 @@ predictor's H sequential steps alone for ONE candidate (K = 1), eagerly and thro
 ``torch.compile`` (needs a C++ compiler): no replan with this predictor and horizon can be
 faster, whatever K, so it says whether the 40 ms goal is reachable by sampling fewer candidates.
 ``--compile`` runs the planner's imagined step through ``torch.compile``; it compiles during the
-untimed warm-up steps that fill the context.
+untimed warm-up steps that fill the context. ``--precision bfloat16`` runs the planner's rollout in
+bfloat16 (``PlannerConfig.precision``).
 ``--profile`` adds where the K candidates' rollout spends its time (torch.profiler's op table)
 and its arithmetic: the multiply-adds of its matrix products and the time they need at the rate
 this CPU reaches on one product of the predictor's MLP shape (an estimate: the op table's share
@@ -74,7 +75,16 @@ def make_pilot(
     timings = Timings()
     sim = SimConfig(camera=CameraConfig(image_size=model.config.image_size))
     changes = {k: v for k, v in dict(samples=samples, horizon=horizon, history=args.history).items() if v is not None}
-    config = planner_config(args.planner, replan_every=replan_every, compile=args.compile, probe=probe_name, **changes)
+    config = planner_config(
+        args.planner,
+        replan_every=replan_every,
+        compile=args.compile,
+        precision=args.precision,
+        probe=probe_name,
+        **changes,
+    )
+    if config.precision == "bfloat16":
+        model.bfloat16_rollout()
     if args.compile:
         model.compile_rollout()
     dynamics = LearnedDynamics(model, probe.eval(), timings, history=config.history or None)
@@ -256,9 +266,9 @@ def rollout_profile(args) -> str:
     lines.append(
         f"  int8 dynamic quantisation {q[0]:7.1f} ms median {q[1]:7.1f} p95 (largest error {100 * error:.0f} % of the mean |z|)"
     )
-    half = copy.deepcopy(model).to(torch.bfloat16)
-    error = (half.rollout(z.bfloat16(), actions.bfloat16(), history=history).float() - reference).abs().max().item()
-    b = timed(lambda: half.rollout(z.bfloat16(), actions.bfloat16(), history=history))
+    half = copy.deepcopy(model).bfloat16_rollout()  # what the planner's precision=bfloat16 runs
+    error = (roll(half) - reference).abs().max().item()
+    b = timed(lambda: roll(half))
     lines.append(
         f"  bfloat16                  {b[0]:7.1f} ms median {b[1]:7.1f} p95 (largest error "
         f"{100 * error / reference.abs().mean().item():.0f} % of the mean |z|)"
@@ -286,6 +296,12 @@ def main() -> None:
         "--compile", action="store_true", help="torch.compile the imagined step (WorldModel.compile_rollout)"
     )
     parser.add_argument(
+        "--precision",
+        choices=["float32", "bfloat16"],
+        default="float32",
+        help="what the planner's rollout runs in (PlannerConfig.precision)",
+    )
+    parser.add_argument(
         "--profile", action="store_true", help="also profile the K candidates' rollout and time other kernels for it"
     )
     parser.add_argument(
@@ -301,6 +317,8 @@ def main() -> None:
         parser.error(
             f"--profile times the rollout eager and compiled itself: drop --{'compile' if args.compile else 'sweep'}"
         )
+    if args.profile and args.precision != "float32":
+        parser.error("--profile times the rollout in float32 and in bfloat16 itself: drop --precision")
     unknown = [p for p in args.probe if p not in PROBES]
     if unknown:
         parser.error(f"--probe {unknown[0]}: choose {LATENT} or a probe variant ({', '.join(PROBES[2:])})")
@@ -311,7 +329,7 @@ def main() -> None:
     model = args.run or f"untrained {args.preset} preset"
     print(
         f"{model}, planner {args.planner}, {args.threads} torch thread(s), {os.cpu_count()} cores visible, "
-        f"torch {torch.__version__}"
+        f"torch {torch.__version__}" + (f", rollout in {args.precision}" if args.precision != "float32" else "")
     )
     with torch.inference_mode():
         if not args.sweep:

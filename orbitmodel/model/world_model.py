@@ -18,6 +18,7 @@ so callers pass raw dataset values.
 
 from __future__ import annotations
 
+import copy
 import math
 from pathlib import Path
 
@@ -101,6 +102,7 @@ class WorldModel(NormalisedStates, nn.Module):
         self.register_state_stats(c.state_dim)
         self.register_buffer("depth_scale", torch.tensor(50.1))  # metres per unit of the depth head
         self._compiled_step = None  # set by compile_rollout()
+        self._low: tuple[nn.Module, ...] = ()  # bfloat16 copies of the rollout's layers, set by bfloat16_rollout()
         self.initialize_weights()
 
     def initialize_weights(self) -> None:
@@ -153,20 +155,40 @@ class WorldModel(NormalisedStates, nn.Module):
             raise ValueError(f"history={history} must be in [1, max_seq_len={self.config.max_seq_len}]")
         if n < 1:
             raise ValueError(f"actions cover {actions.shape[1]} frames; with {m} context latents give at least {m}")
-        cond = self.action_encoder(self._norm_action(actions))  # (B, m-1+n, D)
-        mods = self.predictor.modulations(cond)  # each block's AdaLN for every frame, computed once
+        action_encoder, predictor, _ = self._rollout_layers()
+        dtype = predictor.pos.dtype  # float32, or bfloat16 after bfloat16_rollout()
+        cond = action_encoder(self._norm_action(actions).to(dtype))  # (B, m-1+n, D)
+        mods = predictor.modulations(cond)  # each block's AdaLN for every frame, computed once
         step = self._compiled_step or self.imagine_step
-        z = list(z_context.unbind(1))
+        z = list(z_context.to(dtype).unbind(1))
         for i in range(n):
             end = m + i  # frames [0, end) are known; predict frame `end`
             start = max(0, end - history)
             z.append(step(torch.stack(z[start:end], 1), [mod[:, start:end] for mod in mods]))
-        return torch.stack(z[m:], 1)
+        return torch.stack(z[m:], 1).to(z_context.dtype)
 
     def imagine_step(self, window: torch.Tensor, mods: list[torch.Tensor]) -> torch.Tensor:
         """One imagined step: latents window (B, T, D) and each block's modulations for those T
         frames -> the latent after the window's last frame (B, D)."""
-        return window[:, -1] + self.pred_projector(self.predictor(window, None, mods, last=True)[:, 0])
+        _, predictor, projector = self._rollout_layers()
+        return window[:, -1] + projector(predictor(window, None, mods, last=True)[:, 0])
+
+    def _rollout_layers(self) -> tuple[nn.Module, nn.Module, nn.Module]:
+        """The action encoder, predictor and predictor projector :meth:`rollout` runs: the model's
+        own, or their bfloat16 copies (:meth:`bfloat16_rollout`)."""
+        return self._low or (self.action_encoder, self.predictor, self.pred_projector)
+
+    def bfloat16_rollout(self) -> "WorldModel":
+        """Make :meth:`rollout` run in bfloat16: the action encoder, the predictor and its projector
+        are copied to bfloat16 (the model's own layers, and the encoder, stay float32), the context
+        latents and normalised actions are rounded to bfloat16 on the way in and the imagined
+        latents returned as float32. With PyTorch's CPU kernels each row still gets the same bits
+        whatever the batch (``tests/model/test_lockstep.py``). On a CPU with AVX-512 BF16 or AMX
+        the products run natively and faster; elsewhere they are emulated and can be much slower
+        (``benchmarks/bench_plan.py --profile`` times the rollout both ways). Inference only."""
+        layers = (self.action_encoder, self.predictor, self.pred_projector)
+        self._low = tuple(copy.deepcopy(layer).to(torch.bfloat16).eval() for layer in layers)
+        return self
 
     def compile_rollout(self) -> "WorldModel":
         """Make :meth:`rollout` run its imagined step through ``torch.compile`` (inductor; on a CPU

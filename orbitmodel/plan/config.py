@@ -27,7 +27,11 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
 BODIES = ("true", "nominal", "fitted", "inferred", "corrected")  # the body a pilot plans a dynamic-tier episode with
-HISTORY_BODIES = ("fitted", "inferred")  # the bodies a pilot infers from its own history (no record read)
+HISTORY_BODIES = ("fitted", "inferred")
+PRECISIONS = (
+    "float32",
+    "bfloat16",
+)  # what the world model's rollout runs in  # the bodies a pilot infers from its own history (no record read)
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,10 @@ class PlannerConfig:
         compile: run the world model's imagined step through ``torch.compile``
             (:meth:`WorldModel.compile_rollout`; learned-dynamics pilots only). Same plans to
             float rounding, faster rollouts, slow first replans.
+        precision: "float32", or "bfloat16": the world model's rollout (action encoder, predictor,
+            projector) runs in bfloat16 (:meth:`WorldModel.bfloat16_rollout`; pilots that roll the
+            world model out only). Fast on a CPU with AVX-512 BF16 or AMX, emulated and slow
+            elsewhere; the encoder, the depth head, the probe and the cost stay float32.
         record: keep each replan's best imagined path and the believed points (for videos).
         image_codec: hand the pilot its camera through the dataset's JPEG codec (the reported
             grids fly raw renders).
@@ -110,6 +118,7 @@ class PlannerConfig:
     rigid_substeps: int = 1
     replan_every: int = 1
     compile: bool = False
+    precision: str = "float32"
     record: bool = False
     image_codec: bool = False
     probe: str = ""
@@ -134,6 +143,8 @@ class PlannerConfig:
             raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
+        if self.precision not in PRECISIONS:
+            raise ValueError(f"precision={self.precision!r}: use {' or '.join(PRECISIONS)}")
         if self.probe not in PROBES:
             raise ValueError(
                 f"probe={self.probe!r}: give {LATENT} (the one chosen on validation) or a probe variant of the "
@@ -173,7 +184,7 @@ class PlannerConfig:
 
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
-    own (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
+    own (the default), ``precision`` when float32 (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
     flies, ``body`` when "true" (the default) and the fit's knobs when nothing is fitted (an
     inferred body keeps ``fit_frames``; its ridge is the inference's; ``fit_steps`` is
     the corrected body's only), so that
@@ -181,6 +192,8 @@ def recorded(config: PlannerConfig) -> dict:
     out = dataclasses.asdict(config)
     if not config.probe:
         del out["probe"]
+    if config.precision == "float32":
+        del out["precision"]
     if config.obstacle_motion == "static":
         del out["obstacle_motion"]
     if config.obstacle_motion != "tracker":

@@ -114,6 +114,8 @@ def build_pilot(
                 f"{step} frames (got {config.mppi.horizon}); pass --horizon "
                 f"{max(step, config.mppi.horizon // step * step)}"
             )
+        if config.precision == "bfloat16":
+            model.bfloat16_rollout()
         if config.compile:
             model.compile_rollout()
         probe = load_planner_probe(run, model.fingerprint, config.probe)
@@ -141,6 +143,11 @@ def build_pilot(
             raise ValueError(
                 f"probe={config.probe}: pilot {variant.value} plans with the rigid-body model, which reads no probe; "
                 "drop the probe setting or fly a pilot that plans with the world model"
+            )
+        if config.precision != "float32":
+            raise ValueError(
+                f"precision={config.precision}: pilot {variant.value} plans with the rigid-body model, not the world "
+                "model's rollout; drop the precision setting or fly a pilot that plans with the world model"
             )
         if config.body in HISTORY_BODIES:
             dynamics = body_from_history(run, sim, config, timings)

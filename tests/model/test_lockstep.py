@@ -19,7 +19,13 @@ from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
 from orbitmodel.cli.app import app
 from orbitmodel.evaluate import lockstep
-from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, episode_record, pilot_settings
+from orbitmodel.evaluate.closed_loop import (
+    ClosedLoop,
+    ClosedLoopRequest,
+    closed_loop_report,
+    episode_record,
+    pilot_settings,
+)
 from orbitmodel.evaluate.lockstep import fly_lockstep
 from orbitmodel.plan.config import planner_config
 from orbitmodel.plan.pilot import Variant
@@ -103,6 +109,18 @@ def test_a_batch_of_three_flies_the_planners_episodes_bit_for_bit(variant, probe
     assert len({r.states.tobytes() for r in got}) == 8  # eight flights, not one flown eight times
 
 
+def test_a_bfloat16_planner_flies_its_episodes_bit_for_bit_in_a_batch_and_records_its_precision(probed_run):
+    """``precision=bfloat16`` flies other episodes than float32 (another rounding), and a batch of
+    three still flies each as it flies alone; the grid's file records the precision."""
+    low = dataclasses.replace(SMALL, precision="bfloat16")
+    loop = ClosedLoop(dataclasses.replace(request(probed_run, batch=3), settings=low))
+    expected, got = unbatched(loop), lockstep_results(loop, 3)
+    assert len(got) == 8 and all(same_episode(a, b) for a, b in zip(expected, got))
+    full = unbatched(ClosedLoop(request(probed_run, batch=3)))
+    assert any(not np.array_equal(a.actions, b.actions) for a, b in zip(full, got))
+    assert closed_loop_report(loop.req, loop.fly())["planner"]["precision"] == "bfloat16"
+
+
 def test_a_frame_encoded_in_a_batch_gets_the_latent_it_gets_alone():
     """At the flown sizes (an untrained cpu-step5 model), where a product of one row and one of
     several sum in different orders: the frames of a lockstep batch (channels-last in memory when
@@ -155,6 +173,22 @@ def test_an_episodes_candidates_imagine_the_same_in_a_batch_at_the_flown_sizes()
         assert torch.equal(alone, batched[:K])
         read = probe.per_frame(alone, state[:K], z[:K, -1], 5, actions[:K, 1:])
         assert torch.equal(read, probe.per_frame(batched, state, z[:, -1], 5, actions[:, 1:])[:K])
+
+
+def test_a_bfloat16_rollout_imagines_each_episodes_candidates_alone():
+    """In bfloat16 too (``precision=bfloat16``), one episode's 32 candidates imagine the same bits
+    alone as stacked with two other episodes' (an untrained cpu-step5 model): a lockstep batch still
+    flies each episode as it flies alone."""
+    from orbitmodel.config import get_preset
+    from orbitmodel.model.world_model import WorldModel
+
+    torch.manual_seed(0)
+    model = WorldModel(get_preset("cpu-step5").model).eval().bfloat16_rollout()
+    g = torch.Generator().manual_seed(1)
+    K, D, A = 32, model.config.latent_dim, model.config.action_dim * model.config.frame_step
+    z, actions = torch.randn(3 * K, 2, D, generator=g), torch.rand(3 * K, 11, A, generator=g) * 0.3
+    with torch.inference_mode():
+        assert torch.equal(model.rollout(z[:K], actions[:K], 2), model.rollout(z, actions, 2)[:K])
 
 
 def test_a_batch_of_three_flies_the_policys_episodes(policy_run):

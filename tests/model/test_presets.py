@@ -8,7 +8,9 @@ import pytest
 
 from orbitmodel.baselines.diffusion.config import POLICY_PRESETS, PolicyPreset, PolicyTrainConfig, get_policy_preset
 from orbitmodel.config import PRESETS, Preset, ProbeRecipe, ProbeTrainConfig, TrainConfig, get_preset
-from orbitmodel.plan.config import PLANNER_PRESETS, planner_config
+from orbitmodel.plan.config import PLANNER_PRESETS, planner_config, recorded
+from orbitmodel.plan.factory import build_pilot
+from orbitmodel.plan.pilot import Variant
 
 
 def test_each_preset_carries_its_probe_recipe():
@@ -86,6 +88,17 @@ def test_planner_presets_and_their_overrides():
         planner_config("fast")
     with pytest.raises(ValueError, match="unknown planner option 'bogus'"):
         planner_config("cpu", bogus=1)
+
+
+def test_the_rollouts_precision_is_recorded_only_when_it_is_not_float32():
+    """A bfloat16 flight says so in its result file; a float32 one records what it did before the
+    setting existed, so it pools with the grids flown then."""
+    assert "precision" not in recorded(planner_config("cpu"))
+    assert recorded(planner_config("cpu", precision="bfloat16"))["precision"] == "bfloat16"
+    with pytest.raises(ValueError, match="precision='half': use float32 or bfloat16"):
+        planner_config("cpu", precision="half")
+    with pytest.raises(ValueError, match="precision=bfloat16: pilot oracle-true plans with the rigid-body model"):
+        build_pilot(Variant.ORACLE_TRUE, None, planner_config("cpu", precision="bfloat16"))
 
 
 def flat(train: dict) -> dict:

@@ -207,6 +207,24 @@ def test_a_compiled_rollout_imagines_the_same_latents():
     torch.testing.assert_close(compiled, eager, rtol=1e-4, atol=1e-5)
 
 
+def test_a_bfloat16_rollout_imagines_nearly_the_same_latents_and_leaves_the_model_float32():
+    """bfloat16_rollout (the planner's ``precision=bfloat16``) rounds the rollout, not the model: the
+    latents come back float32 and near the float32 rollout's, the encoder and the saved weights
+    stay float32."""
+    model = _model()
+    images, states, actions, _ = _batch(model)
+    with torch.no_grad():
+        z = model.encode(images, states)[:, :2]
+        acts = torch.cat([actions, actions], dim=1)[:, : 1 + 7]
+        full = model.rollout(z, acts, history=3)
+        low = model.bfloat16_rollout().rollout(z, acts, history=3)
+        assert torch.equal(model.encode(images, states)[:, :2], z)
+    assert low.dtype == torch.float32 and low.shape == full.shape
+    assert not torch.equal(low, full)  # it did run in bfloat16
+    assert (low - full).abs().mean() < 0.05 * full.abs().mean()
+    assert all(t.dtype == torch.float32 for t in model.state_dict().values() if t.is_floating_point())
+
+
 def test_rollout_refuses_too_few_actions():
     model = _model()
     with pytest.raises(ValueError, match="at least 4"):
