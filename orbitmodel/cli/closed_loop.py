@@ -101,9 +101,16 @@ def closed_loop(
     from orbitdata.cli.options import check_report_path, check_video_folder, key_values
     from orbitdata.config import GenerationConfig
     from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest, pilot_settings
+    from orbitmodel.model.world_model import bfloat16_is_native
 
     options = key_values(set_ or [], "--set", "samples=32")
     settings, preset = pilot_settings(run, preset, **options)
+    if getattr(settings, "precision", "float32") == "bfloat16" and not bfloat16_is_native():
+        typer.echo(
+            "note: this CPU has neither AVX-512 BF16 nor AMX, so precision=bfloat16 is emulated: "
+            "slower than float32 here",
+            err=True,
+        )
     torch.set_num_threads(threads)
     req = ClosedLoopRequest(
         variant=Variant(pilot.value),

@@ -77,6 +77,13 @@ class DepthHead(nn.Module):
         return cells
 
 
+def bfloat16_is_native() -> bool:
+    """Whether this CPU multiplies bfloat16 natively (AVX-512 BF16 or AMX tiles). Elsewhere PyTorch
+    emulates it, and a bfloat16 rollout (:meth:`WorldModel.bfloat16_rollout`) is slower than float32."""
+    checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")  # torch.cpu's probes of the CPU's flags
+    return any(getattr(torch.cpu, name, lambda: False)() for name in checks)
+
+
 def images_to_float(images: torch.Tensor) -> torch.Tensor:
     """uint8 (..., 3, H, W) -> float in [0, 1]; float input is taken as already scaled."""
     return images.float() / 255.0 if images.dtype == torch.uint8 else images.float()
