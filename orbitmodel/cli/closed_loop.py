@@ -108,7 +108,7 @@ def closed_loop(
     if getattr(settings, "precision", "float32") == "bfloat16" and not bfloat16_is_native():
         typer.echo(
             "note: this CPU has neither AVX-512 BF16 nor AMX, so precision=bfloat16 is emulated: "
-            "slower than float32 here",
+            "it can be slower than float32 here",
             err=True,
         )
     torch.set_num_threads(threads)

@@ -79,7 +79,7 @@ class DepthHead(nn.Module):
 
 def bfloat16_is_native() -> bool:
     """Whether this CPU multiplies bfloat16 natively (AVX-512 BF16 or AMX tiles). Elsewhere PyTorch
-    emulates it, and a bfloat16 rollout (:meth:`WorldModel.bfloat16_rollout`) is slower than float32."""
+    emulates it, and a bfloat16 rollout (:meth:`WorldModel.bfloat16_rollout`) can be slower than float32."""
     checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")  # torch.cpu's probes of the CPU's flags
     return any(getattr(torch.cpu, name, lambda: False)() for name in checks)
 

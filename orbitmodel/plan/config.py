@@ -65,7 +65,7 @@ class PlannerConfig:
             float rounding, faster rollouts, slow first replans.
         precision: "float32", or "bfloat16": the world model's rollout (action encoder, predictor,
             projector) runs in bfloat16 (:meth:`WorldModel.bfloat16_rollout`; pilots that roll the
-            world model out only). Fast on a CPU with AVX-512 BF16 or AMX, emulated and slow
+            world model out only). Fast on a CPU with AVX-512 BF16 or AMX, emulated and can be slower
             elsewhere; the encoder, the depth head, the probe and the cost stay float32.
         record: keep each replan's best imagined path and the believed points (for videos).
         image_codec: hand the pilot its camera through the dataset's JPEG codec (the reported
