@@ -27,11 +27,8 @@ PROBES = ("", LATENT, *VARIANTS)  # the probes a planner may read: "" is the run
 # "imagined" for the pilots that see them (depth), "true" and "frozen" for the oracles handed the scenario.
 OBSTACLE_MOTIONS = ("static", "tracker", "imagined", "true", "frozen")
 BODIES = ("true", "nominal", "fitted", "inferred", "corrected")  # the body a pilot plans a dynamic-tier episode with
-HISTORY_BODIES = ("fitted", "inferred")
-PRECISIONS = (
-    "float32",
-    "bfloat16",
-)  # what the world model's rollout runs in  # the bodies a pilot infers from its own history (no record read)
+HISTORY_BODIES = ("fitted", "inferred")  # the bodies a pilot infers from its own history (no record read)
+PRECISIONS = ("float32", "bfloat16")  # what the world model's rollout runs in
 
 
 @dataclass(frozen=True)
@@ -184,11 +181,11 @@ class PlannerConfig:
 
 def recorded(config: PlannerConfig) -> dict:
     """The settings a result file records: every field, with ``probe`` left out when it is the run's
-    own (the default), ``precision`` when float32 (the default), ``obstacle_motion`` when "static" (the default), ``tracker`` when no tracker
-    flies, ``body`` when "true" (the default) and the fit's knobs when nothing is fitted (an
-    inferred body keeps ``fit_frames``; its ridge is the inference's; ``fit_steps`` is
-    the corrected body's only), so that
-    the flights of the defaults all record the same settings."""
+    own (the default), ``precision`` when float32 (the default), ``obstacle_motion`` when "static"
+    (the default), ``tracker`` when no tracker flies, ``body`` when "true" (the default) and the
+    fit's knobs when nothing is fitted (an inferred body keeps ``fit_frames``; its ridge is the
+    inference's; ``fit_steps`` is the corrected body's only), so that the flights of the defaults
+    all record the same settings."""
     out = dataclasses.asdict(config)
     if not config.probe:
         del out["probe"]

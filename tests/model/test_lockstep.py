@@ -278,9 +278,9 @@ def test_a_grid_on_ray_is_the_local_grid(probed_run, monkeypatch):
     assert remote == local
 
 
-def test_the_cli_says_when_bfloat16_is_emulated_on_this_cpu(probed_run, tmp_path, monkeypatch):
-    """On a CPU without AVX-512 BF16 or AMX a bfloat16 rollout is slower than float32: the flight
-    says so in one line, and flies."""
+def test_the_cli_says_when_bfloat16_is_emulated_on_this_cpu(probed_run, monkeypatch):
+    """On a CPU without AVX-512 BF16 or AMX a bfloat16 rollout is emulated and can be slower than
+    float32: the flight says so in one line, and flies."""
     grid = ["--obstacles", "1", "--speeds", "1", "--episodes", "1", "--max-steps", "3", "--set", "samples=8"]
     flight = ["eval", "closed-loop", str(probed_run), "--preset", "cpu", *grid, "--set", "horizon=5"]
     monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda: False)
