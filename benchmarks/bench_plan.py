@@ -49,9 +49,9 @@ from orbitdata.fly.pilot import Task
 from orbitdata.sim.config import CameraConfig, SimConfig
 from orbitmodel.config import PRESETS, get_preset
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.plan.config import PLANNER_PRESETS, PROBES, planner_config
+from orbitmodel.plan.config import PLANNER_PRESETS, PRECISIONS, PROBES, planner_config
 from orbitmodel.plan.dynamics import LearnedDynamics
-from orbitmodel.plan.factory import PredictedDepth, load_planner_probe
+from orbitmodel.plan.factory import PredictedDepth, load_planner_probe, prepare_rollout
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import PlannerPilot, Variant
 from orbitmodel.plan.timing import Timings
@@ -83,10 +83,7 @@ def make_pilot(
         probe=probe_name,
         **changes,
     )
-    if config.precision == "bfloat16":
-        model.bfloat16_rollout()
-    if args.compile:
-        model.compile_rollout()
+    prepare_rollout(model, config)
     dynamics = LearnedDynamics(model, probe.eval(), timings, history=config.history or None)
     pilot = PlannerPilot(
         Variant.PLANNER,
@@ -297,7 +294,7 @@ def main() -> None:
     )
     parser.add_argument(
         "--precision",
-        choices=["float32", "bfloat16"],
+        choices=PRECISIONS,
         default="float32",
         help="what the planner's rollout runs in (PlannerConfig.precision)",
     )

@@ -114,10 +114,7 @@ def build_pilot(
                 f"{step} frames (got {config.mppi.horizon}); pass --horizon "
                 f"{max(step, config.mppi.horizon // step * step)}"
             )
-        if config.precision == "bfloat16":
-            model.bfloat16_rollout()
-        if config.compile:
-            model.compile_rollout()
+        prepare_rollout(model, config)
         probe = load_planner_probe(run, model.fingerprint, config.probe)
         if config.body in HISTORY_BODIES:  # the world model sees; the body inferred from history gives the states
             body = body_from_history(run, sim, config, timings)
@@ -169,6 +166,15 @@ def build_pilot(
         return PlannerPilot(variant, dynamics, depth, camera, config, sim, timings, imagined), sim
     cls = OraclePilot if variant.privileged else PlannerPilot
     return cls(variant, dynamics, depth, camera, config, sim, timings), sim
+
+
+def prepare_rollout(model, config: PlannerConfig) -> None:
+    """Make the world model's rollout run as ``config`` flies it: in bfloat16 (``precision``), then
+    through ``torch.compile`` (``compile``)."""
+    if config.precision == "bfloat16":
+        model.bfloat16_rollout()
+    if config.compile:
+        model.compile_rollout()
 
 
 def body_from_history(run: Path | None, sim: SimConfig, config: PlannerConfig, timings: Timings) -> FittedBodyDynamics:
