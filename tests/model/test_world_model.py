@@ -108,6 +108,21 @@ def test_adaln_zero_blocks_start_as_the_identity_and_the_model_as_persistence():
         torch.testing.assert_close(model.predict_next(z, actions), z)  # z_{t+1} = z_t before training
 
 
+def test_an_adaln_block_computes_dits_modulation_to_the_bit_whether_or_not_its_modulations_come_precomputed():
+    """x (1 + scale) + shift as DiT writes it; a rollout's modulations, computed once for its
+    whole horizon (``Predictor.modulations``), give the same bits."""
+    model = _model()
+    block, D = model.predictor.blocks[0], model.config.latent_dim
+    g = torch.Generator().manual_seed(3)
+    x, c = torch.randn(2, 5, D, generator=g), torch.randn(2, 5, D, generator=g)
+    with torch.no_grad():
+        shift, scale, gate, shift2, scale2, gate2 = block.adaln(c).chunk(6, dim=-1)
+        h = x + gate * block.attn(block.norm1(x) * (1 + scale) + shift, causal=True)
+        want = h + gate2 * block.mlp(block.norm2(h) * (1 + scale2) + shift2)
+        assert torch.equal(block(x, c), want)
+        assert torch.equal(block(x, None, model.predictor.modulations(c)[0]), want)
+
+
 def test_rollout_of_one_step_equals_the_teacher_forced_prediction():
     model = _model()
     images, states, actions, _ = _batch(model)
