@@ -205,7 +205,9 @@ class RunDir:
         like, and the file is rewritten in the current form). ``extend`` (with ``resume``): the
         config may differ from the run's in a larger ``preset.train.loop.max_steps`` only; the run goes
         on to the new total (its schedule from the checkpoint on is the new total's, and
-        training.json records each segment's ``schedule_steps``)."""
+        training.json records each segment's ``schedule_steps``). A run cut before its first
+        checkpoint holds nothing trained: it starts again from step 0, resumed or not (the caller's
+        loop resumes only when :meth:`has_checkpoint`)."""
         if extend and not resume:
             raise RunError("--extend continues a run: pass --resume with it")
         existing = self.path / CONFIG
@@ -235,9 +237,14 @@ class RunDir:
                     f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
                     "pass --overwrite to replace it, or train into another folder"
                 )
-            if not resume:
+            if not resume and self.trained_any():
                 raise RunError(
                     f"{self.path} already holds this run; pass --resume to continue it, or --overwrite to start again"
+                )
+            if resume and not self.has_checkpoint() and (self.path / WEIGHTS).exists():
+                raise RunError(
+                    f"--resume: {self.path} holds trained weights but no checkpoint to continue from; "
+                    "pass --overwrite to train it again"
                 )
             if extend and same and (self.path / WEIGHTS).exists():
                 raise RunError(
@@ -260,6 +267,15 @@ class RunDir:
         write_json_atomic(existing, config)
 
     # ---- checkpoints ------------------------------------------------------------------------
+    def has_checkpoint(self) -> bool:
+        """Whether the run has saved a checkpoint that ``--resume`` continues from."""
+        return (self.path / CHECKPOINTS / LATEST).is_file()
+
+    def trained_any(self) -> bool:
+        """Whether the run holds any training to lose: a checkpoint or its final weights. One cut
+        before its first checkpoint holds none, and starts again with or without ``--resume``."""
+        return self.has_checkpoint() or (self.path / WEIGHTS).exists()
+
     def save_checkpoint(self, step: int, weights: dict[str, torch.Tensor], state: dict) -> None:
         import torch
         from safetensors.torch import save_file
@@ -290,7 +306,7 @@ class RunDir:
         root = self.path / CHECKPOINTS
         pointer = root / LATEST
         if not pointer.is_file():
-            raise RunError(f"--resume: {self.path} has no checkpoint yet; start the run again without --resume")
+            raise RunError(f"--resume: {self.path} has no checkpoint; pass --overwrite to train it again")
         folder = root / pointer.read_text().strip()
         try:
             weights = load_file(folder / WEIGHTS)

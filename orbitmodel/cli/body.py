@@ -8,6 +8,7 @@ from typing import Annotated
 import typer
 
 from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.plan.body_recipe import InferenceConfig
 
 _C = InferenceConfig()
@@ -30,6 +31,7 @@ def body(
     ] = _C.frames,
     seed: Annotated[int, typer.Option(min=0)] = _C.seed,
     overwrite: Annotated[bool, typer.Option(help="replace the inference already there")] = False,
+    threads: Threads = None,
 ) -> None:
     """Learn a prior over the tier's bodies and faults from its training episodes (RUN/body).
 
@@ -40,6 +42,7 @@ def body(
     """
     from orbitmodel.plan.inferred_body import FOLDER, fit_body
 
+    use_threads(threads)
     cfg = InferenceConfig(steps=steps, frames=frames, seed=seed)
     card = fit_body(run, dataset, cfg, overwrite=overwrite, log=typer.echo)
     typer.echo(

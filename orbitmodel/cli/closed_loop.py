@@ -63,8 +63,8 @@ def closed_loop(
         typer.Option(
             "--set",
             help="KEY=VALUE: change one setting of the preset, repeatable: for a planner a field of "
-            "PlannerConfig, MPPIConfig or CostConfig (samples=K, horizon, history, depth_head, "
-            "margin_per_speed, image_codec, ...), for a policy a field of PolicySampling (draws, pick, "
+            "PlannerConfig, MPPIConfig, CostConfig or TrackerConfig (samples=K, horizon, history, depth_head, "
+            "margin_per_speed, image_codec, window, ...), for a policy a field of PolicySampling (draws, pick, "
             "action_steps, ensemble, noise_scale, timestep_spacing, inference_steps, image_codec)",
         ),
     ] = None,
@@ -238,15 +238,11 @@ def merge(
     parts: Annotated[list[Path], typer.Argument(help="JSON tables of one grid flown in parts (disjoint settings)")],
     json_out: Annotated[Path, typer.Option("--json", help="write the merged table here")],
 ) -> None:
-    """Merge a grid flown in parallel, e.g. `--speeds 1` and `--speeds 2` in two processes, into one table."""
+    """Merge a grid flown in parallel (say `--speeds 1` and `--speeds 2` in two processes) into one table."""
     from orbitmodel.evaluate.closed_loop import merge_reports
+    from orbitmodel.evaluate.figure6 import read_json
 
-    reports = []
-    for path in parts:
-        try:
-            reports.append(json.loads(path.read_text()))
-        except (OSError, json.JSONDecodeError) as err:
-            fail(f"{path}: not a readable grid result ({err}); give the --json tables of eval closed-loop")
+    reports = [read_json(path) for path in parts]
     try:
         report = merge_reports(reports)
     except (KeyError, TypeError) as err:
@@ -278,7 +274,7 @@ def pool(
     results: Annotated[list[Path], typer.Argument(help="one pilot's grid results, one per root seed (--seed)")],
     json_out: Annotated[Optional[Path], typer.Option("--json", help="write the pooled table here")] = None,
 ) -> None:
-    """Pool one pilot's grid over several seeds (e.g. the test seeds 3, 4 and 5) into one table: the
+    """Pool one pilot's grid over several seeds (say the test seeds 3, 4 and 5) into one table: the
     success rate over every episode with its 95 % Wilson interval, and the worst setting on any seed."""
     from orbitmodel.evaluate.figure6 import read_report
     from orbitmodel.evaluate.success import pool_seeds, rate_text, report_totals

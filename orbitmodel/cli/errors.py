@@ -4,6 +4,7 @@ missing optional dependency, a failing disk, or a grid's flight that fails once 
 from __future__ import annotations
 
 import functools
+import inspect
 import sys
 
 import typer
@@ -23,6 +24,11 @@ def fail(message: str, code: int = 2) -> None:
 
 def friendly(func):
     """Library exceptions become one line on stderr and exit 2, never a traceback."""
+    again = (
+        "run the same command with --resume to continue"
+        if "resume" in inspect.signature(func).parameters
+        else "run the same command again"
+    )
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
@@ -31,7 +37,7 @@ def friendly(func):
         except typer.Exit:
             raise
         except KeyboardInterrupt:
-            typer.secho("interrupted; run the same command with --resume to continue", err=True)
+            typer.secho(f"interrupted; {again}", err=True)
             sys.exit(130)
         except ImportError as exc:  # MissingExtra, or an optional package's ImportError with its install hint
             if "pip install" not in str(exc):

@@ -82,7 +82,7 @@ def train_policy(
     ] = False,
     threads: Threads = None,
 ) -> None:
-    """Train a Diffusion Policy (Chi et al. 2023) on the dataset's expert episodes.
+    """Train a Diffusion Policy (Chi and others, 2023) on the dataset's expert episodes.
 
     It sees the last 2 camera images (none for --preset cpu-state) and states and the goal in the
     body frame, predicts 16 actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.

@@ -387,6 +387,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     if req.variant != FLOWN:
         parts["variant"] = req.variant
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
+    resume = req.resume and run.has_checkpoint()  # a probe cut before its first checkpoint starts again
     data = windows
     if t.cache_windows:
         chosen = [pool[i] for i in subset(len(pool), t.cache_windows, t.loop.seed)]
@@ -404,11 +405,9 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
         model = StateDynamics(config)
         model.set_state_stats(stage1.dataset.state_mean, stage1.dataset.state_std)
         module = StateObjective(model, t)
-    if not req.resume:
+    if not resume:
         model.increments.set_scale(increment_scale(req.dataset, t, config, pool, frame_step, episodes))
         if latent and config.reads_thrust:
             model.set_thrust_stats(meta.action_mean, meta.action_std)
     job = ProbeJob(module, model, req.kind, t.context)
-    return fit(
-        job, data, t.loop, run, device, resume=req.resume, label="probe" if latent else "state-only", on_log=on_log
-    )
+    return fit(job, data, t.loop, run, device, resume=resume, label="probe" if latent else "state-only", on_log=on_log)

@@ -143,8 +143,13 @@ def test_orbitmodel_body_trains_into_the_run_and_keeps_what_is_there(
     record = json.loads((run / "config.json").read_text())
     record["validation"]["episodes"] = [0]  # as a run trained with a validation fraction records them
     (run / "config.json").write_text(json.dumps(record))
-    done = cli.invoke(app, args)
-    assert done.exit_code == 0, done.output
+    before = torch.get_num_threads()
+    try:
+        done = cli.invoke(app, [*args, "--threads", "1"])  # as the training commands take it, beside other work
+        assert done.exit_code == 0, done.output
+        assert torch.get_num_threads() == 1
+    finally:
+        torch.set_num_threads(before)
     assert (run / "body" / "model.safetensors").is_file() and "held-out prediction error" in done.output
     card = json.loads((run / "body" / "config.json").read_text())
     assert card["held_out_episodes"] == 1 and card["config"]["steps"] == 2

@@ -217,6 +217,28 @@ def test_resume_continues_exactly(run, tiny_dataset_master, tmp_path):
     assert all(torch.equal(straight[k], again[k]) for k in straight)
 
 
+def test_a_probe_cut_before_its_first_checkpoint_starts_again_resumed_or_not(run, tiny_dataset_master, tmp_path):
+    """Its folder holds the config and nothing trained: a rerun, with --resume or without, trains it
+    from the start, its increment scale set as a fresh run sets it."""
+    copies = {name: tmp_path / name for name in ("again", "resumed")}
+    for copy in copies.values():
+        shutil.copytree(run, copy)
+    train_probe(request(run, tiny_dataset_master))
+    straight = PhysicsProbe.from_pretrained(run).state_dict()
+
+    def stop(record):
+        if record["step"] == 1:
+            raise Interrupt  # before the first checkpoint, at step 2
+
+    for name, copy in copies.items():
+        with pytest.raises(Interrupt):
+            train_probe(request(copy, tiny_dataset_master), on_log=stop)
+        assert not (copy / "probe" / "checkpoints").exists()
+        train_probe(ProbeRequest(**{**request(copy, tiny_dataset_master).__dict__, "resume": name == "resumed"}))
+        again = PhysicsProbe.from_pretrained(copy).state_dict()
+        assert all(torch.equal(straight[k], again[k]) for k in straight), name
+
+
 def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
     for flag in ([], ["--state-only"]):
         res = runner.invoke(app, ["probe", str(run), str(tiny_dataset_master), "--device", "cpu", *flag])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -88,6 +89,40 @@ def test_a_killed_run_resumes_to_the_same_weights(tiny_dataset_master, tmp_path)
         assert torch.equal(a[name], b[name]), name
     steps = [json.loads(r)["step"] for r in (tmp_path / "b" / "metrics.jsonl").read_text().splitlines()]
     assert steps == list(range(1, 9))  # no step logged twice
+
+
+class _Cut(Exception):
+    pass
+
+
+def test_a_run_cut_before_its_first_checkpoint_starts_again_resumed_or_not(tiny_dataset_master, tmp_path):
+    """A chain that reruns `train` after a kill must not meet "pass --resume" and then "no checkpoint yet":
+    the folder holds only its config (and a logged step), nothing trained to lose."""
+    _train(tiny_dataset_master, tmp_path / "straight", steps=6, save_every=4, log_every=1)
+
+    def cut(record):
+        if record["step"] == 2:
+            raise _Cut  # before the first checkpoint, at step 4
+
+    for name, resume in (("again", False), ("resumed", True)):
+        preset = get_preset("tiny").with_train(max_steps=6, save_every=4, log_every=1)
+        req = Stage1Request(dataset=str(tiny_dataset_master), preset=preset, out=tmp_path / name, device="cpu")
+        with pytest.raises(_Cut):
+            train_world_model(req, on_log=cut)
+        assert (tmp_path / name / "config.json").exists() and not (tmp_path / name / "checkpoints").exists()
+        train_world_model(Stage1Request(**{**req.__dict__, "resume": resume}))
+        a, b = load_file(tmp_path / "straight" / "model.safetensors"), load_file(tmp_path / name / "model.safetensors")
+        assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a), name
+        steps = [json.loads(r)["step"] for r in (tmp_path / name / "metrics.jsonl").read_text().splitlines()]
+        assert steps == list(range(1, 7)), name  # the cut run's logged steps are not kept twice
+    # a trained run still refuses to be trained over without a word, and a resume with nothing to
+    # continue from names the way out
+    trained = Stage1Request(**{**req.__dict__, "out": tmp_path / "again"})
+    with pytest.raises(RunError, match="already holds this run; pass --resume"):
+        train_world_model(trained)
+    shutil.rmtree(tmp_path / "again" / "checkpoints")
+    with pytest.raises(RunError, match="no checkpoint to continue from; pass --overwrite"):
+        train_world_model(Stage1Request(**{**trained.__dict__, "resume": True}))
 
 
 def test_ddp_on_two_cpu_processes(tiny_dataset_master, tmp_path):
