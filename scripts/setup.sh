@@ -9,18 +9,20 @@ cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
 VENV=${VENV:-.venv}
 
-# Headless OpenGL for MuJoCo: EGL on Mesa (default) and OSMesa (fallback).
-need=()
+# Headless OpenGL for MuJoCo: EGL on Mesa (default) and OSMesa (fallback); a C++ compiler for
+# torch.compile's CPU backend (the planner's `compile` setting).
+need=() packages=()
 for lib in libEGL.so.1 libEGL_mesa.so.0 libOSMesa.so; do
   ldconfig -p | grep -q "$lib" || need+=("$lib")
 done
-if [ ${#need[@]} -gt 0 ]; then
+[ ${#need[@]} -eq 0 ] || packages+=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libosmesa6)
+command -v c++ >/dev/null || command -v g++ >/dev/null || { need+=(c++) && packages+=(g++); }
+if [ ${#packages[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
-      libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libosmesa6 >/dev/null
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${packages[@]}" >/dev/null
   else
-    echo "missing headless OpenGL libraries (${need[*]}): install libegl1 libegl-mesa0 libgl1-mesa-dri libosmesa6" >&2
+    echo "missing ${need[*]}: install ${packages[*]}" >&2
   fi
 fi
 

@@ -1,18 +1,13 @@
 """The contract's difficulty promise (DESIGN): at v0 = 2 m/s with 5 obstacles a straight flight
-collides in most episodes, while the expert succeeds in at least 95 % of them.
-
-Slow (the evaluation grid, ~140 episodes without rendering), so deselected by default:
-run it with ``pytest -m slow``.
+collides in most episodes, while the expert succeeds in at least 95 % of them: the evaluation
+grid, 140 episodes without rendering.
 """
-
-import pytest
 
 from orbitdata.fly import fly_grid
 
 EPISODES = 20  # per setting, as in the README's table
 
 
-@pytest.mark.slow
 def test_the_expert_succeeds_where_straight_flight_collides():
     expert = fly_grid("expert", [1, 3, 5], [1.0, 2.0], EPISODES)
     risky = fly_grid("risky", [5], [2.0], EPISODES)[0]

@@ -147,9 +147,9 @@ def test_goal_inside_an_obstacle_is_reported_not_raised():
 
 
 def test_bad_inputs_raise():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="start must be 3 finite numbers"):
         plan_path((0, 0), (1, 0, 0), [], INFLATION, CFG, np.random.default_rng(0))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="goal must be 3 finite numbers"):
         plan_path((0, 0, 0), (1, 0, math.nan), [], INFLATION, CFG, np.random.default_rng(0))
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="planner.max_range must be > 0"):
         PlannerConfig(max_range=0.0)

@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import inspect
 import json
-from dataclasses import dataclass
 
 import numpy as np
 import pytest
 import torch
 
+from orbitdata.fly import Task
 from orbitmodel.baselines.diffusion.config import get_policy_preset
 from orbitmodel.baselines.diffusion.pilot import DiffusionPilot, load_policy_pilot, make_diffusion_pilot
 from orbitmodel.baselines.diffusion.policy import DiffusionPolicy
@@ -21,14 +21,6 @@ from orbitmodel.runs import RunDir
 
 torch.set_num_threads(1)
 PRESET = get_policy_preset("tiny")
-
-
-@dataclass(frozen=True)
-class Task:  # the fields of orbitdata.fly.Task (issue 10)
-    goal: tuple[float, float, float]
-    goal_radius: float
-    initial_velocity: tuple[float, float, float]
-    seed: int
 
 
 class SpyTask(Task):

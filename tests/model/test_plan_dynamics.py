@@ -184,13 +184,13 @@ def test_learned_dynamics_with_a_shorter_history_keeps_fewer_frames():
 def test_learned_dynamics_starts_with_one_frame_and_forgets_on_reset():
     model = SpyModel(get_preset("tiny").model).eval()
     dyn = LearnedDynamics(model, stand_in_probe)
-    with pytest.raises(RuntimeError):
+    with pytest.raises(RuntimeError, match=r"observe\(\) a frame before rollout"):
         dyn.rollout(torch.zeros(16), torch.rand(2, 3, 8))
     dyn.observe({"image": np.zeros((64, 64, 3), np.uint8), "state": np.zeros(16, np.float32)}, None)
     assert dyn.rollout(torch.zeros(16), torch.rand(2, 3, 8)).shape == (2, 3, 16)
     assert model.seen[0].shape[1] == 1 and model.seen[1].shape[1] == 3
     dyn.reset()
-    with pytest.raises(RuntimeError):
+    with pytest.raises(RuntimeError, match=r"observe\(\) a frame before rollout"):
         dyn.rollout(torch.zeros(16), torch.rand(2, 3, 8))
 
 

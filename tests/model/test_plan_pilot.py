@@ -24,6 +24,8 @@ from orbitmodel.plan.factory import PredictedDepth, sensor_depth
 from orbitmodel.plan.mppi import MPPIConfig
 from orbitmodel.plan.obstacles import Camera
 from orbitmodel.plan.pilot import OraclePilot, PlannerPilot, Variant
+from orbitmodel.probe.model import PhysicsProbe
+from orbitmodel.probe.train import probe_config
 
 torch.set_num_threads(1)
 SIM = SimConfig(camera=CameraConfig(image_size=64), max_steps=8)
@@ -50,11 +52,18 @@ class StandInProbe:
 stand_in_probe = StandInProbe()
 
 
+def untrained_probe(model: WorldModel) -> PhysicsProbe:
+    """A real probe for ``model`` (the tiny preset's recipe, untrained, seeded), as the planner reads it."""
+    torch.manual_seed(0)
+    config = probe_config(get_preset("tiny").probe, "latent", model.config.latent_dim, model.config.frame_step)
+    return PhysicsProbe(config).eval()
+
+
 def learned_planner(config: PlannerConfig = SMALL, model: WorldModel | None = None) -> PlannerPilot:
     model = model or WorldModel(get_preset("tiny").model).eval()
     return PlannerPilot(
         Variant.PLANNER,
-        LearnedDynamics(model, stand_in_probe),
+        LearnedDynamics(model, untrained_probe(model)),
         PredictedDepth(model),
         Camera.from_sim(SIM),
         config,
