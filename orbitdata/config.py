@@ -19,6 +19,8 @@ from orbitdata.scenario.config import STATIC, ScenarioConfig
 from orbitdata.schema import LEVELS
 from orbitdata.sim.config import SimConfig
 
+PARQUET_CODECS = frozenset({"zstd", "snappy", "gzip", "brotli", "lz4", "none"})  # what pyarrow writes
+
 
 @dataclass(frozen=True)
 class DatasetConfig:
@@ -61,6 +63,12 @@ class DatasetConfig:
             raise ValueError(f"jpeg_quality must be in [1, 100], got {self.jpeg_quality}")
         if self.episodes_per_unit < 1 or self.row_group_rows < 1 or self.max_shard_bytes < 1:
             raise ValueError("episodes_per_unit, row_group_rows and max_shard_bytes must be positive")
+        if not 0 <= self.png_compression <= 9:  # zlib's levels, which the PNG encoder takes
+            raise ValueError(f"png_compression must be in [0, 9], got {self.png_compression}")
+        if str(self.compression).lower() not in PARQUET_CODECS:
+            raise ValueError(
+                f"compression must be a Parquet codec ({', '.join(sorted(PARQUET_CODECS))}), got {self.compression!r}"
+            )
 
 
 class TierConflict(ValueError):
@@ -117,6 +125,10 @@ class GenerationConfig:
             data = tomllib.loads(path.read_text())
         except FileNotFoundError:
             raise ValueError(f"config file {path} does not exist") from None
+        except IsADirectoryError:
+            raise ValueError(f"config file {path} is a folder; give a TOML file") from None
+        except UnicodeDecodeError:
+            raise ValueError(f"config file {path} is not UTF-8 text; give a TOML file") from None
         except tomllib.TOMLDecodeError as exc:
             raise ValueError(f"config file {path} is not valid TOML: {exc}") from None
         if tier is not None:

@@ -12,8 +12,9 @@ How it talks to the Hub (``huggingface_hub.HfApi``; ``HF_ENDPOINT`` picks the se
    ``HF_HUB_DISABLE_XET=1``); blobs that reached the server before a failure are not sent again.
    ``upload_folder`` would do one commit without ``hf_xet`` and cannot drop stale shards, hence
    our own batching.
-4. Shards in the repo that this dataset no longer has (an older sharding) are deleted in the
-   last commit, so ``data/train-*.parquet`` globs never mix two layouts.
+4. Shards in the repo that this dataset no longer has (an older sharding), and orbitdata's own
+   ``meta/`` files it no longer has, are deleted in the last commit, so ``data/train-*.parquet``
+   globs never mix two layouts. Any other file in the repo (one of the user's) stays.
 
 The token comes from the usual sources (``HF_TOKEN``, then ``hf auth login``'s token file); it
 is handed to the client and never printed, logged or put in an error message.
@@ -138,6 +139,11 @@ def hub_errors(repo_id: str, endpoint: str) -> Iterator[None]:
         ) from None
 
 
+def _ours(path: str) -> bool:
+    """Whether a file in the repo is one orbitdata writes: a shard, or one of its meta/ files."""
+    return bool(S.SHARD_RE.match(path)) or path in (S.INFO_PATH, S.STATS_PATH, S.OVERVIEW_PATH)
+
+
 def push(
     root: Path,
     repo_id: str,
@@ -194,8 +200,7 @@ def push(
             else:
                 todo.append(f)
         planned = {f.rel for f in plan.files}
-        owned = (f"{S.DATA_DIR}/", f"{S.EPISODES_DIR}/", f"{S.META_DIR}/")
-        result.deleted = sorted(p for p in remote if p.startswith(owned) and p not in planned)
+        result.deleted = sorted(p for p in remote if _ours(p) and p not in planned)
         if result.unchanged:
             log(f"{len(result.unchanged)} file(s) already on the Hub with the same content: skipped")
         commits = batches(todo, options.commit_bytes, options.commit_files)

@@ -62,6 +62,10 @@ def finalize(
                 f"{S.INFO_PATH}); pass a folder made by `orbitdata generate`"
             )
         config = GenerationConfig.from_dict(existing, where=f"{out} config")
+        if (out / S.INFO_PATH).exists() and parts.parts_dir(out).exists():
+            # info.json is written last, before the parts are removed: these were left by a kill while a
+            # finished generation removed them (or a later rerun of it), and its shards hold every episode
+            shutil.rmtree(parts.parts_dir(out))
         if parts.read_manifest(out) is not None and not (out / S.INFO_PATH).exists():  # parts to compact: only
             # a finished generation's (with info.json, written last, a finished one died removing its parts)
             units = plan_units(config.dataset)

@@ -130,7 +130,30 @@ def _source_from_shards(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]
         if row[S.DATA_FILE] != current:
             current = row[S.DATA_FILE]
             reader = RowReader(out / current, memory_map=True)
-        yield row, reader.rows(row[S.ROW_START], row[S.ROW_END])
+        frames = reader.rows(row[S.ROW_START], row[S.ROW_END])
+        held = frames.column(S.EPISODE_INDEX)
+        if len(held) == 0 or held[0].as_py() != row[S.EPISODE_INDEX] or held[-1].as_py() != row[S.EPISODE_INDEX]:
+            raise ValueError(
+                f"{out}: {S.EPISODES_DIR}/ says episode {row[S.EPISODE_INDEX]} is rows {row[S.ROW_START]}-"
+                f"{row[S.ROW_END]} of {current}, which hold other frames (a re-shard cut between its data and "
+                "episodes shards?); restore the dataset (download or generate it again) before re-sharding"
+            )
+        yield row, frames
+
+
+def _check_listed(out: Path, listed: dict[str, int]) -> None:
+    """Re-sharding existing shards reads the episodes tables and replaces every data shard: rows
+    they do not list would be lost with the old shards, so each split's data must be listed whole."""
+    for split in S.SPLITS:
+        shards = [
+            p for p in (out / S.DATA_DIR).glob(f"{split}-*.parquet") if S.SHARD_RE.match(f"{S.DATA_DIR}/{p.name}")
+        ]
+        rows = sum(pq.ParquetFile(p).metadata.num_rows for p in shards)
+        if rows != listed[split]:
+            raise ValueError(
+                f"{out}: the {split} data shards hold {rows} frames and {S.EPISODES_DIR}/ lists {listed[split]}; "
+                f"restore {S.EPISODES_DIR}/{split}-*.parquet (download or generate the dataset again) before re-sharding"
+            )
 
 
 def _rows_per_split(out: Path, from_parts: bool) -> dict[str, int]:
@@ -164,6 +187,8 @@ def write_shards(out: Path, storage: DatasetConfig, tier: str = STATIC) -> Shard
     for folder in (out / S.DATA_DIR, out / S.EPISODES_DIR):
         remove_temporaries(folder)
     totals = _rows_per_split(out, from_parts)
+    if not from_parts:
+        _check_listed(out, totals)
     stats = StatsAccumulator(totals["train"])
     files, all_rows = [], []
     for split in S.SPLITS:

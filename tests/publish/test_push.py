@@ -136,17 +136,22 @@ def test_push_to_a_branch(hub_client, tiny_dataset_master):
     assert "revision='v1'" in result.output
 
 
-def test_repush_of_a_resharded_dataset_removes_stale_shards(hub_client, tiny_dataset):
+def test_repush_of_a_resharded_dataset_removes_stale_shards_and_keeps_the_users_files(hub_client, tiny_dataset):
+    from huggingface_hub import HfApi
+
     from orbitdata.viz import overview_figure
     from orbitdata.write.finalize import finalize
 
     push(tiny_dataset, REPO)
+    mine = {"meta/notes.md": b"how we use it\n", "data/README.txt": b"the shards\n"}  # added on the Hub by hand
+    for rel, data in mine.items():
+        HfApi().upload_file(path_or_fileobj=data, path_in_repo=rel, repo_id=REPO, repo_type="dataset")
     finalize(
         tiny_dataset, max_shard_bytes=100_000, figure=overview_figure
     )  # several smaller shards replace each split's one
     result = push(tiny_dataset, REPO)
     assert result.deleted == [S.shard_path(S.DATA_DIR, "test", 0, 1), S.shard_path(S.DATA_DIR, "train", 0, 1)]
-    assert hub_client.files(REPO) == dataset_files(tiny_dataset)
+    assert hub_client.files(REPO) == {**dataset_files(tiny_dataset), **mine}
 
 
 @pytest.mark.parametrize(

@@ -204,6 +204,61 @@ def test_reshard_round_trip_reproduces_the_generated_bytes(tiny_dataset, tiny_da
     assert tree_digest(tiny_dataset) == tree_digest(tiny_dataset_master)
 
 
+def test_a_reshard_refuses_data_its_episodes_tables_do_not_list_and_keeps_every_shard(tiny_dataset):
+    """A missing episodes table (a partial download, a deleted file) would have made the re-shard skip
+    its split and delete that split's data shards."""
+    before = tree_digest(tiny_dataset)
+    (test_table,) = tiny_dataset.glob("episodes/test-*.parquet")
+    test_table.unlink()
+    with pytest.raises(ValueError, match=r"test data shards hold \d+ frames and episodes/ lists 0; restore"):
+        finalize(tiny_dataset)
+    del before[str(test_table.relative_to(tiny_dataset))]
+    assert tree_digest(tiny_dataset) == before
+
+
+def test_a_reshard_refuses_an_episodes_table_that_points_at_other_frames(tiny_dataset):
+    """As a re-shard cut between replacing the data shards and their episodes table leaves it."""
+    (table_path,) = tiny_dataset.glob("episodes/train-*.parquet")
+    table = pq.read_table(table_path)
+    rows = table.to_pylist()
+    assert len(rows) >= 2
+    rows[0][S.ROW_START], rows[0][S.ROW_END] = rows[1][S.ROW_START], rows[1][S.ROW_END]
+    pq.write_table(type(table).from_pylist(rows, schema=table.schema), table_path)
+    before = tree_digest(tiny_dataset)
+    with pytest.raises(ValueError, match="which hold other frames"):
+        finalize(tiny_dataset)
+    assert tree_digest(tiny_dataset) == before
+
+
+def test_parts_left_by_a_kill_while_a_finished_generation_removed_them_are_not_resharded(
+    tmp_path, tiny_dataset_master, monkeypatch
+):
+    """info.json is written last, then the parts are removed: `orbitdata shard` after a kill there
+    keeps the finished shards (it used to rebuild them from the parts that survived, smaller)."""
+    import shutil
+
+    from orbitdata.write import finalize as finalizing
+    from orbitdata.write import parts
+
+    out, rmtree = tmp_path / "orbit", shutil.rmtree
+
+    def killed_midway(path, *args, **kwargs):
+        if Path(path) == parts.parts_dir(out):
+            for part in sorted(parts.parts_dir(out).glob("unit-*.parquet"))[:2]:  # one unit's two files
+                part.unlink()
+            raise KeyboardInterrupt
+        return rmtree(path, *args, **kwargs)
+
+    monkeypatch.setattr(finalizing.shutil, "rmtree", killed_midway)
+    with pytest.raises(KeyboardInterrupt):
+        generate(out, tiny_config(), workers=1, figure=overview_figure)
+    monkeypatch.setattr(finalizing.shutil, "rmtree", rmtree)
+    assert (out / S.INFO_PATH).exists() and any(parts.parts_dir(out).glob("unit-*.parquet"))
+    finalize(out, figure=overview_figure)  # what `orbitdata shard OUT` runs
+    assert not parts.parts_dir(out).exists()
+    assert tree_digest(out) == tree_digest(tiny_dataset_master)
+
+
 def test_generate_from_python_refuses_what_it_cannot_run(tmp_path):
     for kwargs, says in (
         (dict(config=None), "config is a NoneType: give a GenerationConfig"),

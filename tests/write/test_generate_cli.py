@@ -44,10 +44,16 @@ def test_config_file_errors(tmp_path):
         ("[scenario]\nmax_tries = 1.5", "scenario.max_tries: expected a whole number, got 1.5"),
         ('[dataset]\nepisodes = "10"', "dataset.episodes: expected a whole number, got '10'"),
         ("[dataset]\nepisodes = true", "dataset.episodes: expected a whole number, got True"),
+        ('[dataset]\ncompression = "lz5"', "compression must be a Parquet codec (brotli, gzip, lz4, none, snappy"),
+        ("[dataset]\npng_compression = 42", "png_compression must be in [0, 9], got 42"),
     ):
         bad.write_text(setting + "\n")
         res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(bad)])
         assert res.exit_code == 2 and says in res.output and len(res.output.strip().splitlines()) == 1, res.output
+    bad.write_bytes(b"[dataset]\nepisodes = 4 # \xff\n")
+    for config, says in ((bad, "is not UTF-8 text"), (tmp_path, "is a folder")):
+        res = runner.invoke(app, ["generate", str(tmp_path / "out"), "--config", str(config)])
+        assert res.exit_code == 2 and f"config file {config} {says}" in res.output, res.output
     assert not (tmp_path / "out").exists()
 
 
