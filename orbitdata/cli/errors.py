@@ -48,8 +48,12 @@ def usage_errors(*errors: type[Exception], flags: dict[str, str] | None = None):
         usage(f"{flags[field]}: {message}" if field else message)
 
 
-def friendly(func):
-    """Turn library exceptions into a one-line message and a non-zero exit, no traceback."""
+def friendly(func=None, *, resumes: bool = False):
+    """Turn library exceptions into a one-line message and a non-zero exit, no traceback.
+    ``@friendly(resumes=True)``: a command that, run again after an interrupt, picks up its work."""
+    if func is None:
+        return functools.partial(friendly, resumes=resumes)
+    again = "run the same command again" + (" to resume" if resumes else "")
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
@@ -58,7 +62,7 @@ def friendly(func):
         except typer.Exit:
             raise
         except KeyboardInterrupt:
-            typer.secho("interrupted; run the same command again to resume", err=True)
+            typer.secho(f"interrupted; {again}", err=True)
             sys.exit(130)
         except USER_ERRORS as exc:
             fail(str(exc))

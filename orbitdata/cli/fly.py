@@ -105,7 +105,9 @@ def register(app: typer.Typer) -> None:
         from orbitdata.fly.registry import pilot_factory
         from orbitdata.scenario.config import STATIC
         from orbitdata.schema import outcomes
+        from orbitdata.write.parts import atomic_write
 
+        json_out = json_out.expanduser() if json_out is not None else None  # `--json=~/r.json` comes unexpanded
         with usage_errors(flags={"image_size": "--image-size"} if image_size is not None else None):
             check_grid(obstacles, speeds, episodes)
             check_report_path(json_out)
@@ -128,6 +130,8 @@ def register(app: typer.Typer) -> None:
                 raise TypeError(f"--pilot-option: pilot {pilot!r} {exc}") from None
         with usage_errors(ValueError):  # an option value the factory refuses, before anything flies
             built = factory(cfg.flight, **options)
+            if render is False and getattr(built, "needs_images", False):
+                raise ValueError(f"pilot {pilot!r} reads the camera: drop --no-render")
         image_codec = image_codec or bool(getattr(built, "image_codec", False))  # the flag, or the pilot's own
         recorder = None
         if video is not None:
@@ -181,4 +185,4 @@ def register(app: typer.Typer) -> None:
                 "noise_hold": noise_hold,
             }
             report = grid_report(name, seed, cells, flight, cfg.tier)
-            json_out.write_text(json.dumps(report, indent=2) + "\n")
+            atomic_write(json_out, (json.dumps(report, indent=2) + "\n").encode())

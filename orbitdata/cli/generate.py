@@ -70,7 +70,7 @@ def _below_one(value: float | None) -> float | None:
 
 def register(app: typer.Typer) -> None:
     @app.command()
-    @friendly
+    @friendly(resumes=True)
     def generate(
         out: Path = typer.Argument(..., help="Output folder (a Hugging Face dataset layout)."),
         episodes: int = typer.Option(None, min=1, show_default=str(DatasetConfig.episodes), help="Number of episodes."),

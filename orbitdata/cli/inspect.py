@@ -179,6 +179,7 @@ def register(app: typer.Typer) -> None:
         from orbitdata.load.source import dataset_folder
         from orbitdata.viz.show import check_format
 
+        out = out.expanduser()  # `--out=~/ep.gif` reaches us unexpanded
         with usage_errors():
             check_format(out)
             check_report_path(out, "--out")

@@ -13,7 +13,7 @@ from orbitdata.publish.hub import PushOptions
 
 def register(app: typer.Typer) -> None:
     @app.command()
-    @friendly
+    @friendly(resumes=True)
     def push(
         folder: Path = typer.Argument(..., help="Dataset folder made by `orbitdata generate`."),
         repo_id: str = typer.Argument(..., help="Hub dataset repo, e.g. user/orbit_planner."),

@@ -154,7 +154,9 @@ class Report:
         }
 
     def write_json(self, path: Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        from orbitdata.write.parts import atomic_write  # an interrupted write leaves the old report whole
+
+        atomic_write(Path(path), (json.dumps(self.to_dict(), indent=2) + "\n").encode())
 
     def render(self) -> str:
         """The readable report: one line per check, problems listed under failing ones."""

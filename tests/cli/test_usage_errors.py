@@ -198,6 +198,19 @@ def test_a_script_turns_bad_input_into_one_line(capsys, raised, code, line):
     assert exit_.value.code == code and err.count("\n") == 1 and line in err and "Traceback" not in err
 
 
+def test_an_interrupt_says_resume_only_for_a_command_that_resumes(capsys):
+    """generate and push pick up their work when run again; fly, validate, info and show start over."""
+    from orbitdata.cli.errors import friendly
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    for command, says in ((friendly(resumes=True)(interrupted), " to resume"), (friendly(interrupted), "")):
+        with pytest.raises(SystemExit) as exit_:
+            command()
+        assert exit_.value.code == 130 and capsys.readouterr().err == f"interrupted; run the same command again{says}\n"
+
+
 def test_a_scripts_return_value_is_its_exit_code_and_its_help_its_first_paragraph():
     from orbitdata.cli.errors import run_script, script_help
 

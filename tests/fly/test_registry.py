@@ -177,6 +177,9 @@ def test_orbitdata_fly_flies_a_registered_pilot_that_sees(stub_registered, tmp_p
     assert json.loads((tmp_path / "g.json").read_text())["pilot"] == "stub"
     res = runner.invoke(app, ["fly", "--pilot", "stub", "--episodes", "1", "--pilot-option", "speed=3"])
     assert res.exit_code == 2 and "--pilot-option" in res.output and "speed" in res.output
+    res = runner.invoke(app, ["fly", "--pilot", "stub", "--episodes", "1", "--no-render"])  # it reads the camera
+    lines = [line for line in res.output.splitlines() if line.strip()]
+    assert res.exit_code == 2 and lines == ["error: pilot 'stub' reads the camera: drop --no-render"], res.output
 
 
 def test_an_entry_point_pilot_flies_the_real_command(tmp_path):

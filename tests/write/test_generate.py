@@ -316,4 +316,4 @@ def test_a_killed_generate_leaves_no_worker_behind(tmp_path, how):
         time.sleep(0.2)
     assert not _alive(workers), f"workers {sorted(_alive(workers))} outlived generate"
     if how == signal.SIGTERM:
-        assert "interrupted; run the same command again" in proc.stderr.read()
+        assert "interrupted; run the same command again to resume" in proc.stderr.read()
