@@ -82,10 +82,11 @@ def train_policy(
     ] = False,
     threads: Threads = None,
 ) -> None:
-    """Train a Diffusion Policy (Chi and others, 2023) on the dataset's expert episodes.
+    """Train a Diffusion Policy on the dataset's expert episodes.
 
-    It sees the last 2 camera images (none for --preset cpu-state) and states and the goal in the
-    body frame, predicts 16 actions and executes 8. Multi-GPU: `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
+    The baseline of Chi et al. (2023): it sees the last 2 camera images (none for --preset cpu-state)
+    and states and the goal in the body frame, predicts 16 actions and executes 8. Multi-GPU:
+    `torchrun --nproc_per_node N -m orbitmodel.cli.app train-policy ...`.
     """
     use_threads(threads)
     from orbitmodel.baselines.diffusion.config import get_policy_preset
