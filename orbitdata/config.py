@@ -19,7 +19,7 @@ from orbitdata.scenario.config import STATIC, ScenarioConfig
 from orbitdata.schema import LEVELS
 from orbitdata.sim.config import SimConfig
 
-PARQUET_CODECS = frozenset({"zstd", "snappy", "gzip", "brotli", "lz4", "none"})  # what pyarrow writes
+PARQUET_CODECS = frozenset({"zstd", "snappy", "gzip", "brotli", "lz4", "lz4_raw", "none"})  # what pyarrow writes
 
 
 @dataclass(frozen=True)
@@ -122,7 +122,7 @@ class GenerationConfig:
         file's own scenario settings); a file whose ``[scenario]`` names another tier is an error."""
         path = Path(path)
         try:
-            data = tomllib.loads(path.read_text())
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
         except FileNotFoundError:
             raise ValueError(f"config file {path} does not exist") from None
         except IsADirectoryError:

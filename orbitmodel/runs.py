@@ -241,10 +241,10 @@ class RunDir:
                 raise RunError(
                     f"{self.path} already holds this run; pass --resume to continue it, or --overwrite to start again"
                 )
-            if resume and not self.has_checkpoint() and (self.path / WEIGHTS).exists():
+            if resume and not self.has_checkpoint() and self.trained_any():
                 raise RunError(
-                    f"--resume: {self.path} holds trained weights but no checkpoint to continue from; "
-                    "pass --overwrite to train it again"
+                    f"--resume: {self.path} holds training but no checkpoint to continue from (no "
+                    f"{CHECKPOINTS}/{LATEST}); pass --overwrite to train it again"
                 )
             if extend and same and (self.path / WEIGHTS).exists():
                 raise RunError(
@@ -272,9 +272,17 @@ class RunDir:
         return (self.path / CHECKPOINTS / LATEST).is_file()
 
     def trained_any(self) -> bool:
-        """Whether the run holds any training to lose: a checkpoint or its final weights. One cut
-        before its first checkpoint holds none, and starts again with or without ``--resume``."""
-        return self.has_checkpoint() or (self.path / WEIGHTS).exists()
+        """Whether the run holds any training to lose: a checkpoint (pointed at or not) or its final
+        weights. One cut before its first checkpoint holds none, and starts again with or without
+        ``--resume``."""
+        saved = self.path / CHECKPOINTS
+        return self.has_checkpoint() or (self.path / WEIGHTS).exists() or any(saved.glob("step-*"))
+
+    def resumes(self, resume: bool, overwrite: bool) -> bool:
+        """Whether training continues from a checkpoint: asked for, not overwritten, and one is there.
+        Every DDP rank reads the same answer: without --overwrite, :meth:`start` neither makes nor
+        removes the pointer."""
+        return resume and not overwrite and self.has_checkpoint()
 
     def save_checkpoint(self, step: int, weights: dict[str, torch.Tensor], state: dict) -> None:
         import torch

@@ -9,14 +9,17 @@ cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
 VENV=${VENV:-.venv}
 
-# Headless OpenGL for MuJoCo: EGL on Mesa (default) and OSMesa (fallback); a C++ compiler for
-# torch.compile's CPU backend (the planner's `compile` setting).
+# Headless OpenGL for MuJoCo: EGL on Mesa (default) and OSMesa (fallback); a C++ compiler and
+# Python's headers for torch.compile's CPU backend (the planner's `compile` setting).
 need=() packages=()
+libraries=$(ldconfig -p)  # read whole: `ldconfig -p | grep -q` can die of SIGPIPE under pipefail
 for lib in libEGL.so.1 libEGL_mesa.so.0 libOSMesa.so; do
-  ldconfig -p | grep -q "$lib" || need+=("$lib")
+  grep -q "$lib" <<<"$libraries" || need+=("$lib")
 done
 [ ${#need[@]} -eq 0 ] || packages+=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libosmesa6)
 command -v c++ >/dev/null || command -v g++ >/dev/null || { need+=(c++) && packages+=(g++); }
+"$PYTHON" -c 'import os, sys, sysconfig; sys.exit(not os.path.isfile(os.path.join(sysconfig.get_paths()["include"], "Python.h")))' 2>/dev/null ||
+  { need+=(Python.h) && packages+=(python3-dev); }
 if [ ${#packages[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     apt-get update -qq

@@ -105,9 +105,9 @@ def register(app: typer.Typer) -> None:
         from orbitdata.fly.registry import pilot_factory
         from orbitdata.scenario.config import STATIC
         from orbitdata.schema import outcomes
-        from orbitdata.write.parts import atomic_write
+        from orbitdata.write.parts import write_report
 
-        json_out = json_out.expanduser() if json_out is not None else None  # `--json=~/r.json` comes unexpanded
+        json_out, video = (p.expanduser() if p is not None else None for p in (json_out, video))  # `--json=~/r.json`
         with usage_errors(flags={"image_size": "--image-size"} if image_size is not None else None):
             check_grid(obstacles, speeds, episodes)
             check_report_path(json_out)
@@ -185,4 +185,4 @@ def register(app: typer.Typer) -> None:
                 "noise_hold": noise_hold,
             }
             report = grid_report(name, seed, cells, flight, cfg.tier)
-            atomic_write(json_out, (json.dumps(report, indent=2) + "\n").encode())
+            write_report(json_out, json.dumps(report, indent=2) + "\n")

@@ -154,9 +154,9 @@ class Report:
         }
 
     def write_json(self, path: Path) -> None:
-        from orbitdata.write.parts import atomic_write  # an interrupted write leaves the old report whole
+        from orbitdata.write.parts import write_report
 
-        atomic_write(Path(path), (json.dumps(self.to_dict(), indent=2) + "\n").encode())
+        write_report(Path(path), json.dumps(self.to_dict(), indent=2) + "\n")
 
     def render(self) -> str:
         """The readable report: one line per check, problems listed under failing ones."""

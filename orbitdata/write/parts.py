@@ -30,6 +30,15 @@ def atomic_write(path: Path, data: bytes) -> None:
     os.replace(tmp, path)
 
 
+def write_report(path: Path, text: str) -> None:
+    """Write a report at the end of a command: a file whole or not at all (an interrupted write
+    leaves the old one), or a stream or device such as ``/dev/stdout`` as it is."""
+    if path.exists() and not path.is_file():
+        path.write_text(text)
+    else:
+        atomic_write(path, text.encode())
+
+
 def parts_dir(out: Path) -> Path:
     return out / PARTS_DIR
 

@@ -141,18 +141,32 @@ def _source_from_shards(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]
         yield row, frames
 
 
-def _check_listed(out: Path, listed: dict[str, int]) -> None:
+def _check_listed(out: Path) -> None:
     """Re-sharding existing shards reads the episodes tables and replaces every data shard: rows
-    they do not list would be lost with the old shards, so each split's data must be listed whole."""
+    they do not list would be lost with the old shards. So each data file the tables name must hold
+    exactly the rows listed in it, and a split with data shards must be listed. Shards of another
+    layout that no table names (a re-shard cut before it removed the old ones) are leftovers."""
+    files = sorted((out / S.EPISODES_DIR).glob("*.parquet"))
+    listed = pa.concat_tables([pq.read_table(f, columns=[S.DATA_FILE, S.LENGTH]) for f in files]) if files else None
+    per_file: dict[str, int] = {}
+    for row in listed.to_pylist() if listed is not None else []:
+        per_file[row[S.DATA_FILE]] = per_file.get(row[S.DATA_FILE], 0) + row[S.LENGTH]
+    for rel, rows in sorted(per_file.items()):
+        held = pq.ParquetFile(out / rel).metadata.num_rows if (out / rel).is_file() else None
+        if held != rows:
+            has = "is missing" if held is None else f"holds {held} frames"
+            raise ValueError(
+                f"{out}: {S.EPISODES_DIR}/ lists {rows} frames in {rel}, which {has}; restore the dataset "
+                "(download or generate it again) before re-sharding"
+            )
     for split in S.SPLITS:
         shards = [
             p for p in (out / S.DATA_DIR).glob(f"{split}-*.parquet") if S.SHARD_RE.match(f"{S.DATA_DIR}/{p.name}")
         ]
-        rows = sum(pq.ParquetFile(p).metadata.num_rows for p in shards)
-        if rows != listed[split]:
+        if shards and not any(rel.startswith(f"{S.DATA_DIR}/{split}-") for rel in per_file):
             raise ValueError(
-                f"{out}: the {split} data shards hold {rows} frames and {S.EPISODES_DIR}/ lists {listed[split]}; "
-                f"restore {S.EPISODES_DIR}/{split}-*.parquet (download or generate the dataset again) before re-sharding"
+                f"{out}: {len(shards)} {split} data shard(s) and no episode of them in {S.EPISODES_DIR}/; restore "
+                f"{S.EPISODES_DIR}/{split}-*.parquet (download or generate the dataset again) before re-sharding"
             )
 
 
@@ -188,7 +202,7 @@ def write_shards(out: Path, storage: DatasetConfig, tier: str = STATIC) -> Shard
         remove_temporaries(folder)
     totals = _rows_per_split(out, from_parts)
     if not from_parts:
-        _check_listed(out, totals)
+        _check_listed(out)
     stats = StatsAccumulator(totals["train"])
     files, all_rows = [], []
     for split in S.SPLITS:

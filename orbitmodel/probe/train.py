@@ -387,7 +387,7 @@ def train_probe(req: ProbeRequest, on_log=None) -> FitResult:
     if req.variant != FLOWN:
         parts["variant"] = req.variant
     run.start(run_config(PROBE, **parts), resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_probe_config)
-    resume = req.resume and run.has_checkpoint()  # a probe cut before its first checkpoint starts again
+    resume = run.resumes(req.resume, req.overwrite)  # a probe cut before its first checkpoint starts again
     data = windows
     if t.cache_windows:
         chosen = [pool[i] for i in subset(len(pool), t.cache_windows, t.loop.seed)]

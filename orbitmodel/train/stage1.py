@@ -121,7 +121,7 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
         t.loop,
         run,
         device,
-        resume=req.resume and run.has_checkpoint(),
+        resume=run.resumes(req.resume, req.overwrite),
         label="train",
         on_log=on_log,
     )

@@ -198,6 +198,21 @@ def test_a_script_turns_bad_input_into_one_line(capsys, raised, code, line):
     assert exit_.value.code == code and err.count("\n") == 1 and line in err and "Traceback" not in err
 
 
+def test_a_report_replaces_a_file_whole_and_writes_into_a_device_as_it_is(tmp_path):
+    """fly's and validate's --json: a file is replaced whole; /dev/null (or /dev/stdout) is written
+    to, never replaced by a file (as root, a rename over it would)."""
+    import stat
+
+    from orbitdata.write.parts import write_report
+
+    report = tmp_path / "r.json"
+    report.write_text("old")
+    write_report(report, '{"new": 1}\n')
+    assert report.read_text() == '{"new": 1}\n' and [p.name for p in tmp_path.iterdir()] == ["r.json"]
+    write_report(Path("/dev/null"), "{}\n")
+    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+
+
 def test_an_interrupt_says_resume_only_for_a_command_that_resumes(capsys):
     """generate and push pick up their work when run again; fly, validate, info and show start over."""
     from orbitdata.cli.errors import friendly

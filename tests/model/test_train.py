@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -120,9 +119,13 @@ def test_a_run_cut_before_its_first_checkpoint_starts_again_resumed_or_not(tiny_
     trained = Stage1Request(**{**req.__dict__, "out": tmp_path / "again"})
     with pytest.raises(RunError, match="already holds this run; pass --resume"):
         train_world_model(trained)
-    shutil.rmtree(tmp_path / "again" / "checkpoints")
-    with pytest.raises(RunError, match="no checkpoint to continue from; pass --overwrite"):
+    (tmp_path / "again" / "checkpoints" / "latest").unlink()  # its checkpoints, no longer pointed at
+    with pytest.raises(RunError, match=r"no checkpoint to continue from \(no checkpoints/latest\); pass --overwrite"):
         train_world_model(Stage1Request(**{**trained.__dict__, "resume": True}))
+    (tmp_path / "again" / "model.safetensors").unlink()  # and no final weights: the checkpoints still count
+    for resume, says in ((False, "already holds this run"), (True, "no checkpoint to continue from")):
+        with pytest.raises(RunError, match=says):  # a restart from step 0 would prune those checkpoints
+            train_world_model(Stage1Request(**{**trained.__dict__, "resume": resume}))
 
 
 def test_ddp_on_two_cpu_processes(tiny_dataset_master, tmp_path):

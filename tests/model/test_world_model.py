@@ -207,9 +207,14 @@ def test_the_predictors_last_position_alone_equals_its_full_pass(t):
 
 def test_a_compiled_rollout_imagines_the_same_latents():
     """compile_rollout (the planner's ``compile`` option) changes the speed, not the plan."""
+    import sysconfig
+    from pathlib import Path
+
+    headers = Path(sysconfig.get_paths()["include"]) / "Python.h"
     assert shutil.which("g++") or shutil.which("c++"), (
         "torch.compile's CPU backend needs a C++ compiler: apt-get install g++"
     )
+    assert headers.is_file(), f"torch.compile's CPU backend needs {headers}: apt-get install python3-dev"
     model = _model()
     images, states, actions, _ = _batch(model)
     with torch.no_grad():

@@ -44,7 +44,10 @@ def test_config_file_errors(tmp_path):
         ("[scenario]\nmax_tries = 1.5", "scenario.max_tries: expected a whole number, got 1.5"),
         ('[dataset]\nepisodes = "10"', "dataset.episodes: expected a whole number, got '10'"),
         ("[dataset]\nepisodes = true", "dataset.episodes: expected a whole number, got True"),
-        ('[dataset]\ncompression = "lz5"', "compression must be a Parquet codec (brotli, gzip, lz4, none, snappy"),
+        (
+            '[dataset]\ncompression = "lz5"',
+            "compression must be a Parquet codec (brotli, gzip, lz4, lz4_raw, none, snappy",
+        ),
         ("[dataset]\npng_compression = 42", "png_compression must be in [0, 9], got 42"),
     ):
         bad.write_text(setting + "\n")

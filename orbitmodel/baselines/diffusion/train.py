@@ -321,7 +321,7 @@ def train_policy(req: PolicyRequest, on_log=None) -> FitResult:
         loop,
         run,
         device,
-        resume=req.resume and run.has_checkpoint(),
+        resume=run.resumes(req.resume, req.overwrite),
         label="train-policy",
         on_log=on_log,
     )
