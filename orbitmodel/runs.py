@@ -207,7 +207,7 @@ class RunDir:
         on to the new total (its schedule from the checkpoint on is the new total's, and
         training.json records each segment's ``schedule_steps``). A run cut before its first
         checkpoint holds nothing trained: it starts again from step 0, resumed or not (the caller's
-        loop resumes only when :meth:`has_checkpoint`)."""
+        loop resumes only when :meth:`resumes`)."""
         if extend and not resume:
             raise RunError("--extend continues a run: pass --resume with it")
         existing = self.path / CONFIG

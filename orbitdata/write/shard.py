@@ -146,11 +146,11 @@ def _check_listed(out: Path) -> None:
     they do not list would be lost with the old shards. So each data file the tables name must hold
     exactly the rows listed in it, and a split with data shards must be listed. Shards of another
     layout that no table names (a re-shard cut before it removed the old ones) are leftovers."""
-    files = sorted((out / S.EPISODES_DIR).glob("*.parquet"))
-    listed = pa.concat_tables([pq.read_table(f, columns=[S.DATA_FILE, S.LENGTH]) for f in files]) if files else None
     per_file: dict[str, int] = {}
-    for row in listed.to_pylist() if listed is not None else []:
-        per_file[row[S.DATA_FILE]] = per_file.get(row[S.DATA_FILE], 0) + row[S.LENGTH]
+    for table in sorted((out / S.EPISODES_DIR).glob("*.parquet")):
+        t = pq.read_table(table, columns=[S.DATA_FILE, S.LENGTH])
+        for rel, length in zip(t.column(S.DATA_FILE).to_pylist(), t.column(S.LENGTH).to_pylist()):
+            per_file[rel] = per_file.get(rel, 0) + length
     for rel, rows in sorted(per_file.items()):
         held = pq.ParquetFile(out / rel).metadata.num_rows if (out / rel).is_file() else None
         if held != rows:
