@@ -72,7 +72,14 @@ def closed_loop(
     speeds: Annotated[str, typer.Option(help="initial speeds in m/s, comma-separated")] = "1,2",
     episodes: Annotated[int, typer.Option(min=1, help="episodes per setting")] = 20,
     seed: Annotated[int, typer.Option(min=0, help="root seed of the grid (as orbitdata fly)")] = 0,
-    json_out: Annotated[Optional[Path], typer.Option("--json", help="write the table and every episode here")] = None,
+    json_out: Annotated[
+        Optional[Path],
+        typer.Option(
+            "--json",
+            help="write the table and every episode here; a cut flight run again continues from the chunks "
+            "kept beside it (*.chunks.jsonl)",
+        ),
+    ] = None,
     max_steps: Annotated[Optional[int], typer.Option(min=2, help="frames per episode at most [default: 300]")] = None,
     threads: Annotated[int, typer.Option(min=1, help="torch threads (1 is fastest for these small batches)")] = 1,
     batch: Annotated[
@@ -130,15 +137,36 @@ def closed_loop(
     check_report_path(json_out)
     check_video_folder(video)
     loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
-    report = loop.report(_fly_with_progress(loop, json_out))
+    log, kept = _chunk_log(loop, json_out)
+    report = loop.report(_fly_with_progress(loop, json_out, log, kept))
     print_table(report, episodes)
     if json_out is not None:
         json_out.write_text(json.dumps(report, indent=2) + "\n")
+        log.remove()
 
 
-def _fly_with_progress(loop, json_out: Path | None):
+def _chunk_log(loop, json_out: Path | None):
+    """With ``--json``, the flight's kept chunks (``evaluate.kept_chunks``): those a cut flight of
+    this same command left are read, and said so; a file left by another flight is replaced."""
+    if json_out is None:
+        return None, {}
+    from orbitmodel.evaluate.kept_chunks import ChunkLog, chunk_log_path
+
+    log = ChunkLog(chunk_log_path(json_out), loop.key())
+    kept = log.resume(loop.parts())
+    if kept:
+        flown = sum(len(chunk.episodes) for chunk in kept.values())
+        typer.echo(f"resuming: {flown} of {len(loop.order)} episodes were flown by a cut flight ({log.path})", err=True)
+    elif log.replaced:
+        typer.echo(f"note: {log.path} was left by another flight (other flags or weights); flying afresh", err=True)
+    return log, kept
+
+
+def _fly_with_progress(loop, json_out: Path | None, log=None, kept=None):
     """Fly ``loop`` under a progress bar; with ``--json``, stream each episode to
-    ``*.episodes.jsonl`` as it lands, so a grid stopped early keeps what it flew."""
+    ``*.episodes.jsonl`` as it lands, so a grid stopped early keeps what it flew, and keep each
+    finished chunk in ``log`` (``kept_chunks.ChunkLog``), so that the same command run again
+    continues from it."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
@@ -163,7 +191,7 @@ def _fly_with_progress(loop, json_out: Path | None):
                 stream.flush()
 
         try:
-            return loop.fly(on_episode=landed)
+            return loop.fly(on_episode=landed, kept=kept, on_chunk=log.add if log else None)
         except (ValueError, ArithmeticError) as exc:
             # every refusal of the request came before the bar: a failure now is the flight's, not bad input
             kept = f"; those are in {stream.name}" if stream is not None else ""
@@ -174,6 +202,8 @@ def _fly_with_progress(loop, json_out: Path | None):
         finally:
             if stream is not None:
                 stream.close()
+            if log is not None:
+                log.close()
 
 
 def print_table(report: dict, episodes: int) -> None:

@@ -216,7 +216,7 @@ class ClosedLoop:
         # Round-robin over the settings (episode k of every setting, then k + 1): a grid stopped
         # early has covered every setting alike. Each episode's seed is fixed by (n, v, k).
         self.order = sorted(self.seeds, key=lambda cell: cell.episode)
-        run = None if req.run is None else resolve_run(req.run)  # a folder, or a Hub repo id downloaded once
+        self.run = run = None if req.run is None else resolve_run(req.run)  # a folder, or a Hub id downloaded once
         if run is not None:
             meta = run_dataset(run)
             check_unseen_seeds([s for *_, s in self.seeds], meta.root_seed, sum(meta.episodes.values()))
@@ -242,10 +242,27 @@ class ClosedLoop:
             "batch": self.req.batch,
         }
 
-    def fly(self, on_episode: EpisodeHook | None = None) -> ClosedLoopResult:
+    def parts(self) -> list[range]:
+        """The flight's chunks (:func:`lockstep.chunks`), in flight order."""
+        return chunks(len(self.order), self.req.batch)
+
+    def key(self) -> str:
+        """The flight's identity for its kept chunks (``kept_chunks.flight_key``)."""
+        from orbitmodel.evaluate.kept_chunks import flight_key
+
+        return flight_key(self.req, self.run, self.parts())
+
+    def fly(
+        self,
+        on_episode: EpisodeHook | None = None,
+        kept: dict[int, ChunkResult] | None = None,
+        on_chunk: Callable[[ChunkResult], None] | None = None,
+    ) -> ClosedLoopResult:
         """Fly every grid episode, ``req.batch`` at a time, chunk by chunk (:func:`lockstep.chunks`)
-        here or on Ray; ``on_episode(cell, record)`` as each episode lands (on Ray, as its chunk does)."""
-        req = self.req
+        here or on Ray; ``on_episode(cell, record)`` as each episode lands (on Ray, as its chunk does),
+        ``on_chunk(chunk)`` as each chunk ends. ``kept``: chunks a cut flight of this request flew
+        (``kept_chunks.ChunkLog``), by their first episode: they land first and are not flown again."""
+        req, kept = self.req, kept or {}
         cells = {
             (n, float(v)): CellResult(obstacles=n, speed=float(v), episodes=req.episodes)
             for n in req.obstacles
@@ -261,7 +278,15 @@ class ClosedLoop:
             if on_episode:
                 on_episode(cell, entry.record)
 
-        parts = chunks(len(self.order), req.batch)
+        def count(chunk: ChunkResult) -> None:
+            for phase, seconds in chunk.timings.items():
+                timings[phase] = timings.get(phase, 0.0) + seconds
+
+        parts = [part for part in self.parts() if part.start not in kept]
+        for start in sorted(kept):
+            for entry in kept[start].episodes:
+                land(entry)
+            count(kept[start])
         if req.executor == "ray":
             threads = torch.get_num_threads()
             done = run_ray(fly_chunk_task, [(req, part, threads) for part in parts], cpus=threads)
@@ -271,8 +296,9 @@ class ClosedLoop:
             if req.executor == "ray":
                 for entry in chunk.episodes:
                     land(entry)
-            for phase, seconds in chunk.timings.items():
-                timings[phase] = timings.get(phase, 0.0) + seconds
+            count(chunk)
+            if on_chunk:
+                on_chunk(chunk)
         flown.sort(key=lambda entry: entry.index)  # grid order, however the chunks and batches landed
         return ClosedLoopResult(
             list(cells.values()),
@@ -314,7 +340,7 @@ class ClosedLoop:
             self.image_quality,
             keep_frames=req.video_dir is not None,
         )
-        return ChunkResult(flown, self.timings.snapshot())
+        return ChunkResult(part, flown, self.timings.snapshot())
 
 
 def fly_chunk_task(req: ClosedLoopRequest, part: range, threads: int) -> ChunkResult:

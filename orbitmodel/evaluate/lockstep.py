@@ -50,6 +50,7 @@ class FlownEpisode:
 
 @dataclass
 class ChunkResult:
+    part: range  # the chunk: its episodes' places in the flight order
     episodes: list[FlownEpisode]
     timings: dict[str, float]  # seconds per phase, summed over the chunk
 
