@@ -194,10 +194,10 @@ def _fly_with_progress(loop, json_out: Path | None, log=None, kept=None):
             return loop.fly(on_episode=landed, kept=kept, on_chunk=log.add if log else None)
         except (ValueError, ArithmeticError) as exc:
             # every refusal of the request came before the bar: a failure now is the flight's, not bad input
-            kept = f"; those are in {stream.name}" if stream is not None else ""
+            where = f"; those are in {stream.name}" if stream is not None else ""
             flown = int(bar.tasks[0].completed)
             fail(
-                f"the flight stopped after {flown} episode{'' if flown == 1 else 's'}: {first_line(exc)}{kept}", code=1
+                f"the flight stopped after {flown} episode{'' if flown == 1 else 's'}: {first_line(exc)}{where}", code=1
             )
         finally:
             if stream is not None:
