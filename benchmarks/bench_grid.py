@@ -103,6 +103,8 @@ def fly(
     jsons = [out.with_name(f"{out.stem}-{i}.json") for i in range(len(parts))]
     logs = [path.with_suffix(".stderr") for path in jsons]  # a file each: no pipe to drain while they fly
     out.parent.mkdir(parents=True, exist_ok=True)
+    for path in jsons:  # a killed benchmark's kept chunks: every flight here is timed whole
+        path.with_suffix(".chunks.jsonl").unlink(missing_ok=True)
     start = time.perf_counter()
     procs = []
     for (speeds, threads), path, log in zip(parts, jsons, logs):

@@ -58,6 +58,7 @@ def fly(run: str, pilot: str, episodes: int, seed: int, out: Path) -> list[list[
         return actions
 
     planning.plan_batch = kept
+    out.with_suffix(".chunks.jsonl").unlink(missing_ok=True)  # every episode flies here, to be seen
     try:
         motion = "true" if pilot != "planner" else "tracker"
         args = ["eval", "closed-loop", run, "--pilot", pilot, "--preset", "cpu", "--config", "configs/dynamic.toml"]

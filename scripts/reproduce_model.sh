@@ -21,8 +21,8 @@
 # Every step resumes if run again: training, probes and refits whose output exists are skipped
 # (training resumes from its checkpoints); the evaluations re-run (seconds each). A grid is flown
 # again unless its JSON records ("command") exactly the command that would fly it now, so a
-# changed flag, preset or run re-flies it; a grid cut mid-way continues from the chunks its
-# flight kept (docs/planner.md).
+# changed flag, preset or run re-flies it; an eval closed-loop grid cut mid-way continues from
+# the chunks its flight kept (docs/planner.md), and its step time then counts what it flew.
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
 # is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each:
 # both cores busy.

@@ -147,7 +147,8 @@ def closed_loop(
 
 def _chunk_log(loop, json_out: Path | None):
     """With ``--json``, the flight's kept chunks (``evaluate.kept_chunks``): those a cut flight of
-    this same command left are read, and said so; a file left by another flight is replaced."""
+    this same command left are read, and said so; a file left by another flight is replaced once
+    this flight's first chunk lands."""
     if json_out is None:
         return None, {}
     from orbitmodel.evaluate.kept_chunks import ChunkLog, chunk_log_path
@@ -158,7 +159,11 @@ def _chunk_log(loop, json_out: Path | None):
         flown = sum(len(chunk.episodes) for chunk in kept.values())
         typer.echo(f"resuming: {flown} of {len(loop.order)} episodes were flown by a cut flight ({log.path})", err=True)
     elif log.replaced:
-        typer.echo(f"note: {log.path} was left by another flight (other flags or weights); flying afresh", err=True)
+        typer.echo(
+            f"note: {log.path} was left by another flight (other flags, weights or code): flying afresh, "
+            "it is replaced when this flight's first chunk lands",
+            err=True,
+        )
     return log, kept
 
 

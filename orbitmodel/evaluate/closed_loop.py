@@ -287,7 +287,7 @@ class ClosedLoop:
             for entry in kept[start].episodes:
                 land(entry)
             count(kept[start])
-        if req.executor == "ray":
+        if req.executor == "ray" and parts:  # none left: no cluster to start
             threads = torch.get_num_threads()
             done = run_ray(fly_chunk_task, [(req, part, threads) for part in parts], cpus=threads)
         else:

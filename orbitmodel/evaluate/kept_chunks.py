@@ -4,11 +4,12 @@
 ``eval closed-loop --json OUT.json`` appends every finished chunk (``lockstep.chunks``: the unit
 of work, here and on Ray) to ``OUT.chunks.jsonl``: its episodes, their latencies and the chunk's
 phase timings. The file's first line names the flight (:func:`flight_key`): the request, the
-chunks it splits into and the run's weights. Run again with the same key, the flight flies only
-the chunks the file lacks; which episodes share a batch depends only on the grid and the batch
-size, so the table is the one an uncut flight writes (its latencies are those measured when each
-chunk flew). A file with another key (a changed flag, a retrained run) is replaced by the new
-flight's. The file goes once the table is written.
+chunks it splits into, the run's weights, the code and the kernels. Run again with the same key,
+the flight flies only the chunks the file lacks; which episodes share a batch depends only on the
+grid and the batch size, so the table is the one an uncut flight writes (its latencies are those
+measured when each chunk flew). A file with another key (a changed flag, a retrained run, changed
+code) is replaced by the new flight's once its first chunk lands. The file goes once the table is
+written.
 """
 
 from __future__ import annotations
@@ -19,10 +20,17 @@ import json
 import os
 from pathlib import Path
 
+import torch
+
+import orbitdata
+import orbitmodel
 from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode
 
-WEIGHT_FILES = ("*.safetensors", "config.json", "latent_probe.json")  # what a pilot loads from a run folder
-SKIPPED = {"checkpoints", "tensorboard"}  # training state, not the weights flown
+# What a pilot loads from a run folder: weights and their cards, the probe chosen on validation,
+# and the pointer to the checkpoint a run without final weights is flown from.
+WEIGHT_FILES = ("*.safetensors", "config.json", "latent_probe.json", "latest")
+SKIPPED = {"tensorboard"}
+RECORD_KEYS = ("obstacles", "speed", "episode", "outcome")  # what landing an episode reads
 
 
 def chunk_log_path(report: Path) -> Path:
@@ -42,17 +50,42 @@ def weights_state(run: Path | None) -> list[tuple[str, int, int]]:
             parts = path.relative_to(run).parts
             if SKIPPED.intersection(parts[:-1]) or not path.is_file():
                 continue
+            if "checkpoints" in parts[:-1] and path.name != "latest":
+                continue  # a checkpoint flown is named by its pointer, which a new checkpoint rewrites
             stat = path.stat()
             found.append((path.relative_to(run).as_posix(), stat.st_size, stat.st_mtime_ns))
     return sorted(found)
 
 
+def code_state() -> str:
+    """sha256 of orbitdata's and orbitmodel's sources: changed code flies another flight."""
+    h = hashlib.sha256()
+    for package in (orbitdata, orbitmodel):
+        root = Path(package.__file__).parent
+        for path in sorted(root.rglob("*.py")):
+            h.update(path.relative_to(root).as_posix().encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
 def flight_key(req, run: Path | None, parts: list[range]) -> str:
     """What makes two flights one: the request (wherever its chunks fly: a Ray grid is the local
-    grid), the run it reads and the state of its weights, and the chunks."""
-    request = dataclasses.replace(req, run=None if run is None else Path(run).resolve(), executor="local")
+    grid), the run it reads and the state of its weights, the chunks, the code, and the kernels
+    and threads its sums run on."""
+    video = None if req.video_dir is None else Path(req.video_dir).resolve()
+    request = dataclasses.replace(
+        req, run=None if run is None else Path(run).resolve(), executor="local", video_dir=video
+    )
     text = json.dumps(
-        {"request": repr(request), "weights": weights_state(run), "chunks": [[p.start, p.stop] for p in parts]}
+        {
+            "request": repr(request),
+            "weights": weights_state(run),
+            "chunks": [[p.start, p.stop] for p in parts],
+            "code": code_state(),
+            "torch": torch.__version__,
+            "kernels": torch.backends.cpu.get_cpu_capability(),
+            "threads": torch.get_num_threads(),
+        }
     )
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -68,35 +101,38 @@ def _entry(chunk: ChunkResult) -> dict:
 def _chunk(entry: dict) -> ChunkResult:
     start, stop = entry["chunk"]
     episodes = [FlownEpisode(**e) for e in entry["episodes"]]
+    if len(episodes) != stop - start or any(k not in e.record for e in episodes for k in RECORD_KEYS):
+        raise ValueError(f"chunk [{start}, {stop}) is not whole")
     return ChunkResult(range(start, stop), episodes, dict(entry["timings"]))
 
 
 class ChunkLog:
     """The chunks of the flight ``key`` kept in ``path``: :meth:`resume` reads those a cut flight
-    left and opens the file for more, :meth:`add` appends one as it lands (written through to the
-    disk), :meth:`remove` deletes the file once the table is written."""
+    left, :meth:`add` appends one as it lands (written through to the disk; the first one writes
+    the file afresh, with the kept chunks), :meth:`remove` deletes the file once the table is
+    written. A file of another flight stays until this flight's first chunk lands."""
 
     def __init__(self, path: Path, key: str):
         self.path, self.key = Path(path), key
         self.replaced = False  # the file held another flight's chunks (set by kept)
+        self._kept: dict[int, ChunkResult] = {}
         self._file = None
 
     def resume(self, parts: list[range]) -> dict[int, ChunkResult]:
-        """The chunks of ``parts`` a cut flight of this key left (:meth:`kept`); the file is then
-        written afresh with them (:meth:`start`), open for the chunks still to fly."""
-        kept = self.kept(parts)
-        self.start(kept)
-        return kept
+        """The chunks of ``parts`` a cut flight of this key left (:meth:`kept`), which the file
+        keeps when the next chunk lands (:meth:`add`)."""
+        self._kept = self.kept(parts)
+        return self._kept
 
     def kept(self, parts: list[range]) -> dict[int, ChunkResult]:
         """The chunks of this flight already flown, by their first episode; empty for a file of
         another flight or none. A line the kill cut short ends the reading."""
         if not self.path.is_file():
             return {}
-        lines = self.path.read_text().splitlines()
         try:
+            lines = self.path.read_text().splitlines()
             self.replaced = not lines or json.loads(lines[0]).get("key") != self.key
-        except (json.JSONDecodeError, AttributeError):
+        except (UnicodeDecodeError, json.JSONDecodeError, AttributeError):
             self.replaced = True
         if self.replaced:
             return {}
@@ -119,11 +155,15 @@ class ChunkLog:
             f.write(json.dumps({"key": self.key}) + "\n")
             for start in sorted(kept):
                 f.write(json.dumps(_entry(kept[start])) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
         os.replace(tmp, self.path)
         self._file = self.path.open("a")
 
     def add(self, chunk: ChunkResult) -> None:
         """Append a finished chunk, on the disk before this returns."""
+        if self._file is None:
+            self.start(self._kept)
         self._file.write(json.dumps(_entry(chunk)) + "\n")
         self._file.flush()
         os.fsync(self._file.fileno())
