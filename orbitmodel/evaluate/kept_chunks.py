@@ -16,14 +16,13 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import importlib.util
 import json
 import os
 from pathlib import Path
 
 import torch
 
-import orbitdata
-import orbitmodel
 from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode
 
 # What a pilot loads from a run folder: weights and their cards, the probe chosen on validation,
@@ -60,8 +59,8 @@ def weights_state(run: Path | None) -> list[tuple[str, int, int]]:
 def code_state() -> str:
     """sha256 of orbitdata's and orbitmodel's sources: changed code flies another flight."""
     h = hashlib.sha256()
-    for package in (orbitdata, orbitmodel):
-        root = Path(package.__file__).parent
+    for package in ("orbitdata", "orbitmodel"):
+        root = Path(importlib.util.find_spec(package).submodule_search_locations[0])
         for path in sorted(root.rglob("*.py")):
             h.update(path.relative_to(root).as_posix().encode())
             h.update(path.read_bytes())
