@@ -113,19 +113,19 @@ class ChunkLog:
 
     def __init__(self, path: Path, key: str):
         self.path, self.key = Path(path), key
-        self.replaced = False  # the file held another flight's chunks (set by kept)
+        self.replaced = False  # the file held another flight's chunks (set by resume)
         self._kept: dict[int, ChunkResult] = {}
         self._file = None
 
     def resume(self, parts: list[range]) -> dict[int, ChunkResult]:
-        """The chunks of ``parts`` a cut flight of this key left (:meth:`kept`), which the file
-        keeps when the next chunk lands (:meth:`add`)."""
-        self._kept = self.kept(parts)
+        """The chunks of ``parts`` a cut flight of this key left, by their first episode, which
+        the file keeps when the next chunk lands (:meth:`add`)."""
+        self._kept = self._read(parts)
         return self._kept
 
-    def kept(self, parts: list[range]) -> dict[int, ChunkResult]:
-        """The chunks of this flight already flown, by their first episode; empty for a file of
-        another flight or none. A line the kill cut short ends the reading."""
+    def _read(self, parts: list[range]) -> dict[int, ChunkResult]:
+        """The kept chunks; empty for a file of another flight or none. A line the kill cut
+        short ends the reading."""
         if not self.path.is_file():
             return {}
         try:
@@ -146,7 +146,7 @@ class ChunkLog:
                 kept[chunk.part.start] = chunk
         return kept
 
-    def start(self, kept: dict[int, ChunkResult]) -> None:
+    def _start(self, kept: dict[int, ChunkResult]) -> None:
         """Write the file afresh: this flight's key and the chunks ``kept`` (a cut line dropped)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
         tmp = self.path.with_name(f".{self.path.name}.tmp")
@@ -162,7 +162,7 @@ class ChunkLog:
     def add(self, chunk: ChunkResult) -> None:
         """Append a finished chunk, on the disk before this returns."""
         if self._file is None:
-            self.start(self._kept)
+            self._start(self._kept)
         self._file.write(json.dumps(_entry(chunk)) + "\n")
         self._file.flush()
         os.fsync(self._file.fileno())
