@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 from enum import Enum
 from pathlib import Path
@@ -136,13 +137,24 @@ def closed_loop(
     )
     check_report_path(json_out)
     check_video_folder(video)
-    loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
-    log, kept = _chunk_log(loop, json_out)
-    report = loop.report(_fly_with_progress(loop, json_out, log, kept))
-    print_table(report, episodes)
-    if json_out is not None:
-        json_out.write_text(json.dumps(report, indent=2) + "\n")
-        log.remove()
+    with _flying(json_out):
+        loop = ClosedLoop(req)  # everything that can be refused is refused here, before the progress bar
+        log, kept = _chunk_log(loop, json_out)
+        report = loop.report(_fly_with_progress(loop, json_out, log, kept))
+        print_table(report, episodes)
+        if json_out is not None:
+            json_out.write_text(json.dumps(report, indent=2) + "\n")
+            log.remove()
+
+
+def _flying(json_out: Path | None):
+    """With ``--json``, hold its table's lock (``kept_chunks.flight_lock``) for the flight: a second
+    flight to the same table is refused."""
+    if json_out is None:
+        return contextlib.nullcontext()
+    from orbitmodel.evaluate.kept_chunks import flight_lock
+
+    return flight_lock(json_out)
 
 
 def _chunk_log(loop, json_out: Path | None):

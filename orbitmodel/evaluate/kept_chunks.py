@@ -9,12 +9,15 @@ the flight flies only the chunks the file lacks; which episodes share a batch de
 grid and the batch size, so the table is the one an uncut flight writes (its latencies are those
 measured when each chunk flew). A file with another key (a changed flag, a retrained run, changed
 code) is replaced by the new flight's once its first chunk lands. The file goes once the table is
-written.
+written. While a flight runs it holds ``OUT.lock`` (:func:`flight_lock`): a second flight to the
+same table is refused, not left to rewrite the first one's chunks.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import fcntl
 import hashlib
 import importlib.util
 import json
@@ -37,6 +40,39 @@ def chunk_log_path(report: Path) -> Path:
     return report.with_suffix(".chunks.jsonl")
 
 
+@contextlib.contextmanager
+def flight_lock(report: Path):
+    """Hold ``OUT.lock`` (an advisory lock, with this process's id in it) for ``OUT.json``'s flight:
+    raises FileExistsError naming the holder's id while another flight holds it. The file goes
+    when the flight ends; the lock goes with the process, however it ends."""
+    path = Path(report).with_suffix(".lock")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    while True:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode(errors="replace").strip() or "?"
+            os.close(fd)
+            raise FileExistsError(
+                f"{report}: another flight (process {holder}) is flying this table now; wait for it to end, "
+                "or give another --json"
+            ) from None
+        try:
+            if os.stat(path).st_ino == os.fstat(fd).st_ino:
+                break
+        except FileNotFoundError:
+            pass
+        os.close(fd)  # the flight that held it removed the file before this lock landed: take a new one
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)  # while still held, so no waiting flight locks a removed file
+        os.close(fd)
+
+
 def weights_state(run: Path | None) -> list[tuple[str, int, int]]:
     """(path in the run, size, modification time in ns) of every file a pilot can load from
     ``run``: a retrained or refitted part changes it."""
@@ -44,15 +80,14 @@ def weights_state(run: Path | None) -> list[tuple[str, int, int]]:
         return []
     run = Path(run)
     found = []
-    for pattern in WEIGHT_FILES:
-        for path in run.rglob(pattern):
-            parts = path.relative_to(run).parts
-            if SKIPPED.intersection(parts[:-1]) or not path.is_file():
-                continue
-            if "checkpoints" in parts[:-1] and path.name != "latest":
-                continue  # a checkpoint flown is named by its pointer, which a new checkpoint rewrites
-            stat = path.stat()
-            found.append((path.relative_to(run).as_posix(), stat.st_size, stat.st_mtime_ns))
+    for path in run.rglob("*"):
+        parts = path.relative_to(run).parts
+        if not any(path.match(pattern) for pattern in WEIGHT_FILES) or SKIPPED.intersection(parts[:-1]):
+            continue
+        if not path.is_file() or ("checkpoints" in parts[:-1] and path.name != "latest"):
+            continue  # a checkpoint flown is named by its pointer, which a new checkpoint rewrites
+        stat = path.stat()
+        found.append((path.relative_to(run).as_posix(), stat.st_size, stat.st_mtime_ns))
     return sorted(found)
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -19,7 +20,7 @@ from typer.testing import CliRunner
 from orbitmodel.cli.app import app
 from orbitmodel.evaluate import lockstep
 from orbitmodel.evaluate.closed_loop import ClosedLoop, ClosedLoopRequest
-from orbitmodel.evaluate.kept_chunks import ChunkLog, chunk_log_path
+from orbitmodel.evaluate.kept_chunks import ChunkLog, chunk_log_path, flight_lock
 from orbitmodel.evaluate.lockstep import ChunkResult, FlownEpisode
 from orbitmodel.plan.config import planner_config
 
@@ -66,8 +67,11 @@ def test_a_killed_flight_continues_from_its_kept_chunks(tmp_path, flown_chunks):
     with log.open("a") as f:
         f.write(log.read_text().splitlines()[2][:40])  # and a line cut half-way, as a kill while writing leaves it
 
+    lock = out.with_suffix(".lock")
+    assert lock.exists()  # the killed flight's, no longer held: it does not stop the next flight
     res = runner.invoke(app, [*FLIGHT, "--json", str(out)])
     assert res.exit_code == 0, res.output
+    assert not lock.exists()
     assert f"resuming: 4 of 8 episodes were flown by a cut flight ({log})" in res.output
     assert flown_chunks == [range(4, 6), range(6, 8)]  # only what the kill left
     assert not log.exists()  # the table is written: nothing left to continue
@@ -93,6 +97,20 @@ def test_a_changed_command_flies_afresh(tmp_path, flown_chunks):
     assert f"note: {log} was left by another flight" in res.output and "resuming" not in res.output
     assert flown_chunks == [range(0, 2), range(2, 4), range(4, 6), range(6, 8)] and not log.exists()
     assert json.loads(out.read_text())["planner"]["mppi"]["samples"] == 9
+
+
+def test_a_second_flight_to_the_same_table_is_refused(tmp_path, flown_chunks):
+    out = tmp_path / "grid" / "oracle.json"
+    with flight_lock(out):  # a flight of this table under way (the lock is per open file, so this process counts)
+        res = runner.invoke(app, [*FLIGHT, "--json", str(out)])
+        assert res.exit_code == 2, res.output
+        assert f"{out}: another flight (process {os.getpid()}) is flying this table now" in res.output
+        assert "Traceback" not in res.output
+        assert flown_chunks == [] and not chunk_log_path(out).exists() and not out.exists()
+    assert not out.with_suffix(".lock").exists()  # gone with the flight that held it
+    res = runner.invoke(app, [*FLIGHT, "--json", str(out)])
+    assert res.exit_code == 0, res.output
+    assert len(flown_chunks) == 4 and out.exists()
 
 
 def test_another_flights_chunks_stay_until_the_new_flights_first_chunk_lands(tmp_path):
@@ -138,6 +156,15 @@ def test_the_key_names_the_request_the_run_and_the_threads(probed_run, tmp_path,
     monkeypatch.setattr(torch, "get_num_threads", lambda: 7)
     assert ClosedLoop(req).key() != key
     monkeypatch.undo()
+    logs, checkpoints = run / "tensorboard", run / "checkpoints"
+    logs.mkdir(exist_ok=True)
+    checkpoints.mkdir(exist_ok=True)
+    (logs / "config.json").write_text("{}")
+    (checkpoints / "step_00000099.safetensors").write_bytes(b"not flown: no pointer names it")
+    assert ClosedLoop(req).key() == key  # training logs and unnamed checkpoints are not what a pilot loads
+    (checkpoints / "latest").write_text("step_00000099")
+    pointed = ClosedLoop(req).key()
+    assert pointed != key
     card = run / "probe" / "config.json"
     card.write_text(card.read_text())  # rewritten: a refit
-    assert ClosedLoop(req).key() != key
+    assert ClosedLoop(req).key() != pointed
