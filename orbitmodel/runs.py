@@ -160,6 +160,17 @@ def run_config(stage: str, **parts) -> dict:
     return json.loads(json.dumps({"stage": stage, **parts}))
 
 
+def _changed_settings(old: dict, new: dict, most: int = 3) -> str:
+    """The settings in which two run configs differ, as ``preset.train.loop.max_steps: 2 -> 4``
+    (paths to the same folder are the same; the first ``most``, then how many more)."""
+    from orbitdata.config import config_changes
+
+    tops = [k for k in sorted(set(old) | set(new)) if not same_config({k: old.get(k)}, {k: new.get(k)})]
+    changes = [c for k in tops for c in config_changes({k: old.get(k)}, {k: new.get(k)})] or tops
+    more = f" and {len(changes) - most} more" if len(changes) > most else ""
+    return ", ".join(changes[:most]) + more
+
+
 def same_config(a: dict, b: dict) -> bool:
     """Whether two run configs are one run's: equal, once every string that names an existing local
     path is read as the folder it names (``toy``, ``./toy`` and ``/home/me/toy`` alike)."""
@@ -210,6 +221,9 @@ class RunDir:
         loop resumes only when :meth:`resumes`)."""
         if extend and not resume:
             raise RunError("--extend continues a run: pass --resume with it")
+        blocking = next((p for p in (self.path, *self.path.parents) if p.exists()), None)
+        if blocking is not None and not blocking.is_dir():
+            raise RunError(f"{self.path} cannot be a run folder: {blocking} is a file; give another folder")
         existing = self.path / CONFIG
         config = json.loads(json.dumps(config))  # as it reads back (tuples become lists)
         if existing.exists() and overwrite:
@@ -225,17 +239,16 @@ class RunDir:
                 old = json.loads(json.dumps(upgrade(old)))
             same = same_config(old, config)
             if not same and not (extend and extends(old, config)):
-                changed = sorted(
-                    k for k in set(old) | set(config) if not same_config({k: old.get(k)}, {k: config.get(k)})
-                )
+                changed = _changed_settings(old, config)
                 if extend:
                     raise RunError(
                         f"--extend: {self.path} may differ from this run in a larger --max-steps only "
-                        f"(differs in: {', '.join(changed)}); give the run's other settings"
+                        f"(differs in: {changed}); give the run's other settings"
                     )
+                keep = "give the run's own settings to continue it, " if resume else ""
                 raise RunError(
-                    f"{self.path} holds a run with another config (differs in: {', '.join(changed)}); "
-                    "pass --overwrite to replace it, or train into another folder"
+                    f"{self.path} holds a run with another config (differs in: {changed}); "
+                    f"{keep}pass --overwrite to replace it (its training is lost), or train into another folder"
                 )
             if not resume and self.trained_any():
                 raise RunError(

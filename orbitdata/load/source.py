@@ -127,7 +127,16 @@ def _check_reachable(repo_id: str, filename: str, revision: str | None, token) -
 
 
 def hub_file(repo_id: str, filename: str, revision: str | None = None, token=None) -> Path:
-    """Download one file of a dataset repo (or take it from the local cache)."""
+    """Download one file of a dataset repo (or take it from the local cache). Only a source that
+    names no local folder is looked for on the Hub, so a failure says that too: it may be a
+    mistyped path."""
+    try:
+        return _hub_file(repo_id, filename, revision, token)
+    except HubUnavailable as exc:
+        raise HubUnavailable(f"no local folder {repo_id}, and {exc}") from None
+
+
+def _hub_file(repo_id: str, filename: str, revision: str | None = None, token=None) -> Path:
     from huggingface_hub import hf_hub_download, try_to_load_from_cache
     from huggingface_hub.errors import (
         EntryNotFoundError,

@@ -259,6 +259,16 @@ def print_table(report: dict, episodes: int) -> None:
     console.print(line)
 
 
+def not_an_input(json_out: Path | None, inputs: list[Path]) -> None:
+    """Refuse a ``--json`` that would overwrite one of the command's own inputs, or is a folder."""
+    if json_out is None:
+        return
+    if json_out.is_dir():
+        fail(f"--json {json_out} is a folder: give a file to write")
+    if any(json_out.resolve() == Path(p).resolve() for p in inputs):
+        fail(f"--json {json_out} is one of the inputs: give another file to write")
+
+
 @friendly
 def figure6(
     results: Annotated[list[Path], typer.Argument(help="JSON tables of orbitmodel eval closed-loop / orbitdata fly")],
@@ -287,9 +297,13 @@ def merge(
 ) -> None:
     """Merge a grid flown in parallel (say `--speeds 1` and `--speeds 2` in two processes) into one table."""
     from orbitmodel.evaluate.closed_loop import merge_reports
-    from orbitmodel.evaluate.figure6 import read_json
+    from orbitmodel.evaluate.figure6 import read_report
 
-    reports = [read_json(path) for path in parts]
+    not_an_input(json_out, parts)
+    reports = [read_report(path) for path in parts]
+    for path, report in zip(parts, reports):
+        if report.get("partial"):
+            fail(f"{path} is a stopped grid's episode stream: merge the --json tables of finished parts")
     try:
         report = merge_reports(reports)
     except (KeyError, TypeError) as err:
@@ -326,6 +340,7 @@ def pool(
     from orbitmodel.evaluate.figure6 import read_report
     from orbitmodel.evaluate.success import pool_seeds, rate_text, report_totals
 
+    not_an_input(json_out, results)
     pooled = pool_seeds([read_report(p) for p in results])
     worst = pooled["worst_setting"]
     typer.echo(
@@ -352,6 +367,7 @@ def factors(
     from orbitmodel.evaluate.factors import breakdown, distinct_names, factor_tables
     from orbitmodel.evaluate.figure6 import read_report
 
+    not_an_input(json_out, results)
     rows = []
     for name, path in zip(distinct_names(results), results):
         try:
@@ -372,11 +388,12 @@ def flips(
 ) -> None:
     """Count the episodes whose outcome differs between two flights of one grid (e.g. --threads 1
     and 2, or two machines): a planner whose figures hold flips few."""
-    from orbitmodel.evaluate.figure6 import read_json
+    from orbitmodel.evaluate.figure6 import read_report
     from orbitmodel.evaluate.success import outcome_flips
 
+    not_an_input(json_out, [first, second])
     result = {"flights": [str(first), str(second)]}  # the JSON names what it compares
-    result |= outcome_flips(read_json(first), read_json(second), (str(first), str(second)))
+    result |= outcome_flips(read_report(first), read_report(second), (str(first), str(second)))
     typer.echo(
         f"{result['flips']} of {result['episodes']} episodes flip (successes {result['successes'][0]} vs "
         f"{result['successes'][1]})"

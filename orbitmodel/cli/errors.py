@@ -9,6 +9,8 @@ import sys
 
 import typer
 
+from orbitdata.load.source import HubUnavailable
+
 BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError, PermissionError)
 
 
@@ -45,6 +47,8 @@ def friendly(func):
             fail(first_line(exc), code=1)
         except BAD_INPUT as exc:
             fail(first_line(exc))
+        except HubUnavailable as exc:  # a dataset given as a Hub repo id (or a mistyped path) the Hub did not give
+            fail(first_line(exc), code=1)
         except OSError as exc:
             fail(f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": "), code=1)
 

@@ -143,9 +143,9 @@ def probe(
             weights = tuple(float(w) for w in loss_weights.split(","))
         except ValueError:
             weights = ()
-        if len(weights) != 5 or min(weights) < 0:
+        if len(weights) != 5 or not all(0 <= w < float("inf") for w in weights):  # nan fails the test too
             fail(
-                f"--loss-weights {loss_weights!r}: give 5 non-negative numbers, position,velocity,rot6d,w,fuel "
+                f"--loss-weights {loss_weights!r}: give 5 finite non-negative numbers, position,velocity,rot6d,w,fuel "
                 "(e.g. 1,1,1,1,100)"
             )
     base = run_recipe(run) if variant.value == FLOWN else trained_recipe(run)  # a variant changes the run's probe

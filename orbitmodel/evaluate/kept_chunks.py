@@ -9,7 +9,7 @@ the flight flies only the chunks the file lacks; which episodes share a batch de
 grid and the batch size, so the table is the one an uncut flight writes (its latencies are those
 measured when each chunk flew). A file with another key (a changed flag, a retrained run, changed
 code) is replaced by the new flight's once its first chunk lands. The file goes once the table is
-written. While a flight runs it holds ``OUT.lock`` (:func:`flight_lock`): a second flight to the
+written. While a flight runs it holds ``OUT.json.lock`` (:func:`flight_lock`): a second flight to the
 same table is refused, not left to rewrite the first one's chunks.
 """
 
@@ -42,10 +42,10 @@ def chunk_log_path(report: Path) -> Path:
 
 @contextlib.contextmanager
 def flight_lock(report: Path):
-    """Hold ``OUT.lock`` (an advisory lock, with this process's id in it) for ``OUT.json``'s flight:
+    """Hold ``OUT.json.lock`` (an advisory lock, with this process's id in it) for ``OUT.json``'s flight:
     raises FileExistsError naming the holder's id while another flight holds it. The file goes
     when the flight ends; the lock goes with the process, however it ends."""
-    path = Path(report).with_suffix(".lock")
+    path = Path(report).with_name(Path(report).name + ".lock")  # never the table's own name
     path.parent.mkdir(parents=True, exist_ok=True)
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)

@@ -108,6 +108,7 @@ def markdown_table(reports: list[dict], sources: list[str] | None = None, per_se
 
 
 FLIGHT_KEYS = ("preset", "pilot_settings", "image_codec")  # how a grid was flown, beside the pilot and its run
+SAME_FLIGHT = ("run", "tier", "max_steps")  # what else pooled seeds share (the pooled table records the first's)
 
 
 def pool_seeds(reports: list[dict]) -> dict:
@@ -115,8 +116,8 @@ def pool_seeds(reports: list[dict]) -> dict:
     outcomes summed over the seeds; ``seeds`` lists them, ``per_seed`` keeps each seed's settings,
     ``worst_setting`` names the lowest-rate (seed, setting) and ``episodes`` holds every seed's
     episode records (where each seed has them). Refuses reports of different
-    pilots, grids, pilot settings (a policy's sampling, the camera codec, the planner's probe or
-    obstacle motion) or a repeated seed:
+    pilots, runs, tiers, frame limits, grids, pilot settings (a policy's sampling, the camera codec,
+    any planner setting both record: K, the probe, obstacle motion, ...) or a repeated seed:
     pooling is for fresh episodes of one way of flying only."""
     if not reports:
         raise ValueError("give the grid results of at least one seed")
@@ -137,7 +138,7 @@ def pool_seeds(reports: list[dict]) -> dict:
     for r in reports:
         if r["pilot"] != first["pilot"]:
             raise ValueError(f"pilots differ ({first['pilot']!r}, {r['pilot']!r}): pool one pilot's seeds")
-        for key in FLIGHT_KEYS:
+        for key in (*FLIGHT_KEYS, *SAME_FLIGHT):
             if r.get(key) != first.get(key):
                 raise ValueError(
                     f"seed {r['seed']} was flown with {key} {r.get(key)!r}, seed {first['seed']} with "
@@ -149,6 +150,13 @@ def pool_seeds(reports: list[dict]) -> dict:
                 raise ValueError(
                     f"seed {r['seed']} was flown with {key} {mine_}, seed {first['seed']} with {theirs}: "
                     "pool one way of flying"
+                )
+        mine_, theirs = r.get("planner") or {}, first.get("planner") or {}
+        for key in sorted(set(mine_) & set(theirs)):  # the planner's settings (K, horizon, ...) that both record
+            if mine_[key] != theirs[key]:
+                raise ValueError(
+                    f"seed {r['seed']} was flown with the planner's {key} {mine_[key]!r}, seed {first['seed']} "
+                    f"with {theirs[key]!r}: pool one way of flying"
                 )
         mine = {(int(x["obstacles"]), float(x["speed"])): x for x in r["settings"]}
         if sorted(mine) != keys:

@@ -13,6 +13,7 @@ the tracker's knobs only when the obstacles are not taken to stand still: :func:
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -140,6 +141,15 @@ class PlannerConfig:
             raise ValueError(f"support={self.support}: give 0 (off) to 8 neighbours")
         if self.replan_every < 1 or self.memory_frames < 1:
             raise ValueError(f"replan_every={self.replan_every} and memory_frames={self.memory_frames} must be >= 1")
+        if self.replan_every > self.mppi.horizon:
+            raise ValueError(
+                f"replan_every={self.replan_every}: a plan holds {self.mppi.horizon} frames (horizon); replan within them"
+            )
+        if not (self.max_range > 0 and self.footprint > 0 and self.torque_noise >= 0):
+            raise ValueError(
+                f"max_range={self.max_range}, footprint={self.footprint} and torque_noise={self.torque_noise}: give "
+                "positive metres and cell widths and a torque scale >= 0"
+            )
         if self.precision not in PRECISIONS:
             raise ValueError(f"precision={self.precision!r}: use {' or '.join(PRECISIONS)}")
         if self.probe not in PROBES:
@@ -244,6 +254,8 @@ def planner_config(preset: str | None = None, **options) -> PlannerConfig:
         except ValueError:
             what = {int: "a whole number", float: "a number"}.get(kind, f"a {kind.__name__}")
             raise ValueError(f"planner option {key}={value!r}: give {what}") from None
+        if kind is float and not math.isfinite(parts[owner][key]):
+            raise ValueError(f"planner option {key}={value!r}: give a finite number")
     return dataclasses.replace(
         base,
         mppi=dataclasses.replace(base.mppi, **parts[MPPIConfig]),

@@ -291,6 +291,7 @@ def fit(
     after_step = getattr(job, "after_step", None)
     main = rank == 0
     metrics, progress, tally = _Metrics(run, main, step), Progress(label, total, step, enabled=main), _Tally(world)
+    diverged = torch.zeros((), dtype=torch.bool, device=device)  # a non-finite loss or gradient since the start
     try:
         for epoch, batch in _batches(dataset, sampler, step, per_epoch, total, s, device, rank, tally):
             got = time.perf_counter()
@@ -303,6 +304,7 @@ def fit(
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             grad_norm = torch.nn.utils.clip_grad_norm_(params, s.grad_clip)
+            diverged |= ~torch.isfinite(loss.detach()) | ~torch.isfinite(grad_norm)  # read at logs and checkpoints
             optimizer.step()
             step += 1
             if after_step is not None:
@@ -314,6 +316,12 @@ def fit(
                 progress.update(step, record)
                 if on_log:
                     on_log(record)
+            if (step % s.log_every == 0 or step % s.save_every == 0 or step == total) and diverged.item():
+                raise RunError(
+                    f"{run.path}: the loss or its gradient became nan or inf by step {step}, so the weights "
+                    f"diverged and nothing after the last checkpoint was saved; train again with a lower --lr "
+                    f"(this run's: {s.lr:g}) and --overwrite"
+                )
             if step % s.save_every == 0 or step == total:
                 _save(run, job, optimizer, step, world, main)
                 if main:  # the segment so far: a run killed after this checkpoint still records its time

@@ -67,7 +67,7 @@ def test_a_killed_flight_continues_from_its_kept_chunks(tmp_path, flown_chunks):
     with log.open("a") as f:
         f.write(log.read_text().splitlines()[2][:40])  # and a line cut half-way, as a kill while writing leaves it
 
-    lock = out.with_suffix(".lock")
+    lock = out.with_name("oracle.json.lock")
     assert lock.exists()  # the killed flight's, no longer held: it does not stop the next flight
     res = runner.invoke(app, [*FLIGHT, "--json", str(out)])
     assert res.exit_code == 0, res.output
@@ -107,10 +107,15 @@ def test_a_second_flight_to_the_same_table_is_refused(tmp_path, flown_chunks):
         assert f"{out}: another flight (process {os.getpid()}) is flying this table now" in res.output
         assert "Traceback" not in res.output
         assert flown_chunks == [] and not chunk_log_path(out).exists() and not out.exists()
-    assert not out.with_suffix(".lock").exists()  # gone with the flight that held it
+    assert not out.with_name("oracle.json.lock").exists()  # gone with the flight that held it
     res = runner.invoke(app, [*FLIGHT, "--json", str(out)])
     assert res.exit_code == 0, res.output
     assert len(flown_chunks) == 4 and out.exists()
+    table = tmp_path / "grid.lock"  # a table named like a lock is not its own lock
+    table.write_text("{}")
+    with flight_lock(table):
+        pass
+    assert table.read_text() == "{}"
 
 
 def test_another_flights_chunks_stay_until_the_new_flights_first_chunk_lands(tmp_path):

@@ -234,6 +234,7 @@ def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
     """eval table, flips and figure6 name the file given and what to give instead."""
     (tmp_path / "other.json").write_text('{"a": 1}')
     (tmp_path / "broken.json").write_text("{")
+    (tmp_path / "grid.json").write_text('{"pilot": "planner", "settings": []}')  # a table without its episodes
     for args, says in (
         (["table", str(tmp_path)], "is a folder"),
         (["table", str(tmp_path / "nope.json")], "does not exist"),
@@ -241,8 +242,9 @@ def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
         (["table", str(tmp_path / "broken.json")], "is not JSON"),
         (["factors", str(tmp_path / "other.json")], "is not a grid result"),
         (["flips", str(tmp_path / "broken.json"), str(tmp_path / "other.json")], "is not JSON"),
-        (["flips", str(tmp_path / "other.json"), str(tmp_path / "nope.json")], "does not exist"),
-        (["flips", str(tmp_path / "other.json"), str(tmp_path / "other.json")], "holds no episodes"),
+        (["flips", str(tmp_path / "other.json"), str(tmp_path / "grid.json")], "is not a grid result"),
+        (["flips", str(tmp_path / "grid.json"), str(tmp_path / "nope.json")], "does not exist"),
+        (["flips", str(tmp_path / "grid.json"), str(tmp_path / "grid.json")], "holds no episodes"),
         (
             ["figure6", str(tmp_path / "other.json"), "--out", str(tmp_path / "f.txt")],
             "give a file matplotlib writes (",

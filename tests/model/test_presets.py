@@ -88,6 +88,15 @@ def test_planner_presets_and_their_overrides():
         planner_config("fast")
     with pytest.raises(ValueError, match="unknown planner option 'bogus'"):
         planner_config("cpu", bogus=1)
+    for key, value in (("margin", "nan"), ("collision", "nan"), ("temperature", "inf"), ("noise_std", "-inf")):
+        with pytest.raises(ValueError, match=f"planner option {key}='{value}': give a finite number"):
+            planner_config("cpu", **{key: value})
+    for key in ("max_range", "footprint", "torque_noise"):
+        with pytest.raises(ValueError, match=f"{key}=-1.0"):
+            planner_config("cpu", **{key: "-1"})
+    with pytest.raises(ValueError, match="replan_every=51: a plan holds 50 frames"):
+        planner_config("cpu", replan_every="51")
+    assert planner_config("cpu", replan_every="50", torque_noise="0").replan_every == 50
 
 
 def test_the_rollouts_precision_is_recorded_only_when_it_is_not_float32():

@@ -190,7 +190,7 @@ def test_a_probe_run_with_a_flat_training_config_resumes_as_the_same_run(run, ti
         json.dumps({**nested, "train": {**{k: v for k, v in train.items() if k != "loop"}, **train["loop"]}})
     )
     (run / "probe" / "model.safetensors").unlink()
-    with pytest.raises(RunError, match=r"another config \(differs in: train\)"):
+    with pytest.raises(RunError, match=r"another config \(differs in: train.loop.epochs: 1 -> 2\)"):
         train_probe(replace(request(run, tiny_dataset_master, epochs=2), resume=True))
     train_probe(replace(request(run, tiny_dataset_master, epochs=1), resume=True))
     assert (run / "probe" / "model.safetensors").is_file() and json.loads(path.read_text()) == nested
@@ -305,7 +305,7 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
     one_line_error(
         runner.invoke(app, ["probe", str(run), data, "--state-only", "--increment-weight", "1"]), "--increment-weight"
     )
-    for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1"):
+    for bad in ("1,1,1", "1,1,1,1,x", "1,1,1,1,-1", "nan,1,1,1,1", "1,inf,1,1,1"):
         one_line_error(runner.invoke(app, ["probe", str(run), data, "--loss-weights", bad]), "--loss-weights")
     assert runner.invoke(app, ["probe", str(run), data, "--max-steps", "1"]).exit_code == 0
     one_line_error(

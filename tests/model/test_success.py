@@ -84,8 +84,9 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     ]
     with pytest.raises(ValueError, match="share no episode seed"):
         outcome_flips(a, {"episodes": [{**e, "seed": e["seed"] + 50} for e in a["episodes"]]})
-    (tmp_path / "a.json").write_text(json.dumps(a))
-    (tmp_path / "b.json").write_text(json.dumps(b))
+    table = {"pilot": "planner", "seed": 0, "settings": [{"obstacles": 1, "speed": 1.0, "episodes": 4, "success": 2}]}
+    (tmp_path / "a.json").write_text(json.dumps({**table, **a}))
+    (tmp_path / "b.json").write_text(json.dumps({**table, **b}))
     flights = [str(tmp_path / "a.json"), str(tmp_path / "b.json")]
     res = CliRunner().invoke(app, ["eval", "flips", *flights, "--json", str(tmp_path / "flips.json")])
     assert res.exit_code == 0 and "2 of 4 episodes flip" in res.output and "success -> collision" in res.output
@@ -94,7 +95,7 @@ def test_flips_count_the_episodes_whose_outcome_changed(tmp_path):
     assert written["flights"] == flights and written["flips"] == 2  # it names the two flights it compares
     assert "only_first" not in written and "only_second" not in written  # the same episodes: nothing left out
     # a flight with an episode the other did not fly: the shared ones are compared, the others counted
-    (tmp_path / "c.json").write_text(json.dumps({"episodes": a["episodes"][:3]}))
+    (tmp_path / "c.json").write_text(json.dumps({**table, "episodes": a["episodes"][:3]}))
     res = CliRunner().invoke(app, ["eval", "flips", str(tmp_path / "c.json"), flights[1]])
     assert res.exit_code == 0 and "1 of 3 episodes flip" in res.output
     assert f"compared the 3 episodes both flew: 0 more in {tmp_path / 'c.json'}, 1 more in {flights[1]}" in res.output
@@ -137,9 +138,20 @@ def test_pooling_seeds_sums_the_settings_and_names_the_worst(tmp_path):
         ),
         ([seeds[0], {**seeds[1], "image_codec": True}], "image_codec"),
         ([{**seeds[0], "preset": "cpu"}, {**seeds[1], "preset": "reference"}], "preset"),
+        ([{**seeds[0], "run": "runs/a"}, {**seeds[1], "run": "runs/b"}], "run"),
+        ([{**seeds[0], "max_steps": 300}, {**seeds[1], "max_steps": 30}], "max_steps"),
+        (
+            [{**seeds[0], "planner": {"samples": 32}}, {**seeds[1], "planner": {"samples": 8}}],
+            "the planner's samples 8, seed 3 with 32",
+        ),
     ):
         with pytest.raises(ValueError, match=match):
             pool_seeds(bad)
+    newer = {
+        **seeds[1],
+        "planner": {"samples": 32, "added_later": 1},
+    }  # a setting one version records and not the other
+    assert pool_seeds([{**seeds[0], "planner": {"samples": 32}}, newer])["seeds"] == [3, 4]
     flown = [{**s, "preset": "cpu", "pilot_settings": {"draws": 1}, "image_codec": True} for s in seeds]
     assert {k: pool_seeds(flown)[k] for k in ("preset", "pilot_settings", "image_codec")} == {
         "preset": "cpu",

@@ -180,6 +180,14 @@ def _one_line_exit_2(result, *needles: str) -> None:
         assert needle in lines[0], lines[0]
 
 
+def test_an_out_folder_that_is_a_file(tiny_dataset_master, tmp_path):
+    (tmp_path / "taken").write_text("a result")
+    for out in ("taken", "taken/run"):
+        result = runner.invoke(app, ["train", str(tiny_dataset_master), "--out", str(tmp_path / out)])
+        _one_line_exit_2(result, f"{tmp_path / 'taken'} is a file; give another folder")
+    assert (tmp_path / "taken").read_text() == "a result"
+
+
 def test_missing_dataset(tmp_path):
     _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "nope"), "--out", str(tmp_path / "r")]), "nope")
 
@@ -208,6 +216,28 @@ def test_image_size_the_preset_cannot_take(tiny_dataset_master, tmp_path):
 def test_unknown_preset(tiny_dataset_master, tmp_path):
     result = runner.invoke(app, ["train", str(tiny_dataset_master), "--preset", "huge", "--out", str(tmp_path / "r")])
     assert result.exit_code == 2 and "huge" in result.output
+
+
+def test_a_diverging_run_stops_without_saving_its_weights(tiny_dataset_master, tmp_path):
+    run = tmp_path / "r"
+    args = [
+        "train",
+        str(tiny_dataset_master),
+        "--preset",
+        "tiny",
+        "--max-steps",
+        "4",
+        "--lr",
+        "1e12",
+        "--out",
+        str(run),
+    ]
+    res = runner.invoke(app, args)
+    last = [line for line in res.output.splitlines() if line.strip()][-1]  # after the progress lines
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert last.startswith(f"error: {run}: the loss or its gradient became nan or inf by step"), last
+    assert "a lower --lr (this run's: 1e+12)" in last
+    assert not (run / "model.safetensors").exists() and not (run / "checkpoints").exists()
 
 
 def test_run_folder_with_another_config_needs_overwrite(tiny_dataset_master, trained, tmp_path):
@@ -249,10 +279,15 @@ def test_a_run_resumes_whatever_the_spelling_of_its_dataset_path(tmp_path, monke
     run.start(config, resume=False, overwrite=False)
     for spelling in ("./toy", str(tmp_path / "toy"), "toy/"):
         run.start({**config, "dataset": {**config["dataset"], "source": spelling}}, resume=True, overwrite=False)
-    with pytest.raises(RunError, match=r"differs in: dataset\); pass --overwrite"):
+    with pytest.raises(
+        RunError,
+        match=r"differs in: dataset.source: 'toy/' -> 'elsewhere'\); give the run's own settings to continue it",
+    ):
         run.start({**config, "dataset": {**config["dataset"], "source": "elsewhere"}}, resume=True, overwrite=False)
-    with pytest.raises(RunError, match=r"differs in: preset\)"):
+    with pytest.raises(RunError, match=r"differs in: preset.name: 'tiny' -> 'cpu'\); give the run's own settings"):
         run.start({**config, "preset": {"name": "cpu"}}, resume=True, overwrite=False)
+    with pytest.raises(RunError, match=r"differs in: preset.name: 'tiny' -> 'cpu'\); pass --overwrite to replace it"):
+        RunDir(tmp_path / "run").start({**config, "preset": {"name": "cpu"}}, resume=False, overwrite=False)
 
 
 def test_a_corrupt_checkpoint_is_one_line(trained, tmp_path):
