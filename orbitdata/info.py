@@ -10,6 +10,7 @@ same rules (:func:`counts`, :func:`orbitdata.schema.readable_schema`).
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Iterable
@@ -70,6 +71,8 @@ class Info:
         version = data.get("schema_version")
         if version is None:
             raise ValueError(f"{where} has no schema_version; it was not written by orbitdata")
+        if not isinstance(version, str):
+            raise ValueError(f"{where}: schema_version must be a string like {S.SCHEMA_VERSION!r}, not {version!r}")
         if not S.readable_schema(version):
             from orbitdata.version import __version__
 
@@ -78,9 +81,9 @@ class Info:
                 f"schema {S.SCHEMA_VERSION.split('.')[0]}.x; install the orbitdata release that matches "
                 "the dataset"
             )
-        missing = [f.name for f in fields(cls) if f.name not in data]
-        if missing:
-            raise ValueError(f"{where} lacks {', '.join(missing)}; run `orbitdata validate` on the dataset")
+        problems = cls.field_problems(data)
+        if problems:
+            raise ValueError(f"{where} {'; '.join(problems)}; run `orbitdata validate` on the dataset")
         try:
             files = {rel: FileEntry(str(e["sha256"]), int(e["bytes"])) for rel, e in data["files"].items()}
         except (AttributeError, KeyError, TypeError, ValueError):
@@ -88,6 +91,21 @@ class Info:
                 f"{where}: 'files' must map each path to its sha256 and bytes; run `orbitdata validate` on the dataset"
             ) from None
         return cls(**{f.name: data[f.name] for f in fields(cls) if f.name != "files"}, files=files)
+
+    @classmethod
+    def field_problems(cls, data: dict) -> list[str]:
+        """What keeps ``data`` from being an info.json's fields: those missing, and those of the
+        wrong kind (``files`` is :meth:`from_dict`'s to check)."""
+        kinds = {"str": (str, "a string"), "int": (int, "a whole number"), "float": ((int, float), "a number")}
+        kinds["dict"] = (dict, "a JSON object")
+        missing = [f.name for f in fields(cls) if f.name not in data]
+        out = [f"lacks {', '.join(missing)}"] if missing else []
+        for f in fields(cls):
+            if f.name in data and f.type in kinds:
+                value, (kind, name) = data[f.name], kinds[f.type]
+                if isinstance(value, bool) or not isinstance(value, kind):
+                    out.append(f"{f.name} must be {name}, not {json.dumps(value)[:40]}")
+        return out
 
     def to_dict(self) -> dict:
         out = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -178,13 +178,13 @@ def register(app: typer.Typer) -> None:
         from orbitdata.load.episodes import EpisodeNotFound, index_range
         from orbitdata.load.source import dataset_folder
         from orbitdata.viz.show import check_format
+        from orbitdata.viz.video import check_fps
 
         out = out.expanduser()  # `--out=~/ep.gif` reaches us unexpanded
         with usage_errors():
             check_format(out)
             check_report_path(out, "--out")
-            if not fps > 0:
-                raise ValueError(f"--fps {fps} must be positive")
+            check_fps(fps, "--fps")
         with usage_errors(FileNotFoundError, NotADirectoryError):
             folder = dataset_folder(folder)
         if episode is None:

@@ -24,6 +24,7 @@ from typing import Callable, Iterable, Iterator
 import pyarrow.parquet as pq
 
 from orbitdata import schema as S
+from orbitdata.info import Info
 from orbitdata.load.source import local_folder
 from orbitdata.scenario.config import DYNAMIC, STATIC
 from orbitdata.validate import checks as C
@@ -146,6 +147,15 @@ def validate(
     layout.card = load_card(root, sink)
     if layout.info is not None:
         check_version(layout.info, sink)
+        damaged = Info.field_problems(layout.info)
+        if damaged:  # checked as an unreadable record: nothing below reads its fields
+            sink.add(
+                C.UNREADABLE,
+                f"{'; '.join(damaged)}: the dataset's record is damaged; download the dataset again, or "
+                "regenerate it with the command its README gives",
+                S.INFO_PATH,
+            )
+            layout.info = None
     tier = tier_of(layout.info, sink)
     report.checks = C.checks_for(tier)
     check_presence(layout, sink)

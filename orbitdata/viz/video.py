@@ -8,6 +8,7 @@ written one by one with Pillow, each with its own 256-colour palette.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Iterable
 
@@ -82,15 +83,31 @@ def _write_gif(path: Path, frames: Iterable[np.ndarray], fps: float) -> int:
     return count
 
 
+FPS_RANGE = (0.01, 1000.0)  # a GIF holds each frame for a whole number of ms, at most 65,535 cs
+
+
+def check_fps(fps: float, name: str = "fps") -> float:
+    """``fps`` if a video can play at it, else a ValueError naming it (``name``) and the range."""
+    low, high = FPS_RANGE
+    if not low <= fps <= high:  # nan fails too
+        raise ValueError(f"{name} {fps:g}: give a frame rate from {low:g} to {high:g}")
+    return fps
+
+
 def write_video(path: Path, frames: Iterable[np.ndarray], fps: float) -> Path:
-    """Write (H, W, 3) uint8 RGB ``frames`` (any iterable; consumed once, one frame at a time)."""
+    """Write (H, W, 3) uint8 RGB ``frames`` (any iterable; consumed once, one frame at a time). The
+    video is written beside ``path`` and renamed onto it once whole: a failure leaves a file
+    already at ``path`` as it was."""
     path = Path(path)
     suffix = check_video_format(path)
-    if not fps > 0:
-        raise ValueError(f"fps {fps} must be positive")
+    check_fps(fps)
     path.parent.mkdir(parents=True, exist_ok=True)
-    count = (_write_mp4 if suffix == ".mp4" else _write_gif)(path, frames, fps)
-    if count == 0:
-        path.unlink(missing_ok=True)
-        raise ValueError(f"no frames to write to {path}")
+    tmp = path.with_name(f".{path.stem}.tmp{suffix}")  # the suffix names the format to ffmpeg
+    try:
+        count = (_write_mp4 if suffix == ".mp4" else _write_gif)(tmp, frames, fps)
+        if count == 0:
+            raise ValueError(f"no frames to write to {path}")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path

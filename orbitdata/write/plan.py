@@ -49,7 +49,8 @@ def plan_episodes(cfg: DatasetConfig) -> list[EpisodeTask]:
 
     A dataset too small for any level's share to round to one test episode still gets one (drawn
     from the split stream after the levels' shares, so larger plans are unchanged), as long as a
-    test share is asked for and one episode is left to train on.
+    test share is asked for and one episode is left to train on. A test share so large that it
+    takes every episode leaves one to train on (drawn the same way).
     """
     n = cfg.episodes
     counts = _largest_remainder(n, cfg.level_mix)
@@ -63,6 +64,8 @@ def plan_episodes(cfg: DatasetConfig) -> list[EpisodeTask]:
         split[split_rng.permutation(members)[:n_test]] = "test"
     if cfg.test_fraction > 0 and n >= 2 and not (split == "test").any():
         split[int(split_rng.integers(n))] = "test"
+    if n and not (split == "train").any():  # a test share so large it took every episode: keep one to train on
+        split[int(split_rng.integers(n))] = "train"
     return [
         EpisodeTask(index=i, split=str(split[i]), level=LEVELS[labels[i]], seed=episode_seed(cfg.seed, i))
         for i in range(n)

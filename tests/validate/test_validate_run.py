@@ -121,6 +121,25 @@ def test_hub_snapshot_extras_are_tolerated(tiny_dataset):
     assert validate(tiny_dataset, ValidateOptions(quick=True, workers=1)).ok
 
 
+@pytest.mark.parametrize(
+    "change, says",
+    [
+        (lambda info: info.update(counts=None), "counts must be a JSON object, not null"),
+        (lambda info: info.pop("features"), "lacks features"),
+        (lambda info: info.update(fps="abc"), 'fps must be a whole number, not "abc"'),
+    ],
+)
+def test_a_damaged_info_record_is_a_finding_not_a_crash(tiny_dataset, change, says):
+    """validate names what other commands refuse (they send the user to validate), and info is one line."""
+    X.edit_json(tiny_dataset, S.INFO_PATH, change)
+    report = validate(tiny_dataset, ValidateOptions(quick=True, workers=1))
+    found = [f for f in report.findings(C.UNREADABLE) if f.file == S.INFO_PATH]
+    assert len(found) == 1 and says in found[0].message, found
+    res = runner.invoke(app, ["info", str(tiny_dataset)])
+    assert res.exit_code != 0 and "Traceback" not in res.output and says in res.output, res.output
+    assert len(res.output.strip().splitlines()) == 1
+
+
 def test_not_a_dataset_reports_missing_meta(tmp_path):
     (tmp_path / "data").mkdir()
     report = validate(tmp_path, ValidateOptions(workers=1))

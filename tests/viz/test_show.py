@@ -114,15 +114,17 @@ def test_an_mp4_from_orbitdata_show_is_h264_that_browsers_play(tiny_dataset_mast
 
 
 def test_videos_stream_frames_as_they_are_drawn(tmp_path):
-    """The writer pulls one frame at a time: the file grows while frames are still to come."""
+    """The writer pulls one frame at a time: the file (written beside the video, renamed onto it
+    once whole) grows while frames are still to come."""
     from orbitdata.viz.video import write_video
 
     rng = np.random.default_rng(0)
     path, sizes = tmp_path / "v.gif", []
+    writing = tmp_path / ".v.tmp.gif"
 
     def frames():
         for _ in range(60):
-            sizes.append(path.stat().st_size if path.exists() else 0)
+            sizes.append(writing.stat().st_size if writing.exists() else 0)
             yield rng.integers(0, 256, (64, 96, 3), dtype=np.uint8)  # noise: ~6 KB a frame in the GIF
 
     write_video(path, frames(), 25)
@@ -187,6 +189,8 @@ def test_show_cli(tiny_dataset_master, shortest, tmp_path):
         (["--episode", "77", "--out", "x.png"], 2, "episode 77 is not in"),
         (["--out", "x.png"], 2, "pass --episode N"),
         (["--episode", "0", "--out", "x.mp4", "--fps", "0"], 2, "--fps 0"),
+        (["--episode", "0", "--out", "x.gif", "--fps", "0.0001"], 2, "give a frame rate from 0.01 to 1000"),
+        (["--episode", "0", "--out", "x.mp4", "--fps", "inf"], 2, "--fps inf"),
     ],
 )
 def test_show_cli_errors(tiny_dataset_master, tmp_path, args, code, message):
@@ -209,3 +213,21 @@ def test_without_matplotlib_the_error_says_how_to_install(tiny_dataset_master, t
         P.require_matplotlib()
     res = runner.invoke(app, ["show", str(tiny_dataset_master), "--episode", "0", "--out", str(tmp_path / "x.png")])
     assert res.exit_code == 1 and "pip install 'orbitdata[viz]'" in res.output
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_a_video_that_fails_half_way_leaves_the_file_it_would_replace(tmp_path, suffix):
+    from orbitdata.viz.video import write_video
+
+    frame = np.zeros((8, 8, 3), np.uint8)
+    out = tmp_path / f"keep{suffix}"
+    write_video(out, [frame, frame], 25)
+    before = out.read_bytes()
+
+    def frames_then_a_failure():
+        yield frame
+        raise RuntimeError("the episode could not be read")
+
+    with pytest.raises(RuntimeError):
+        write_video(out, frames_then_a_failure(), 25)
+    assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [out.name]

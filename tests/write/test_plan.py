@@ -40,6 +40,12 @@ def test_a_small_dataset_keeps_one_test_episode():
     assert all(t.split == "train" for t in plan_episodes(DatasetConfig(episodes=5, test_fraction=0.0)))
 
 
+def test_a_test_share_that_takes_every_episode_leaves_one_to_train_on():
+    for n, share in ((1, 0.99), (3, 0.99), (3, 0.9), (10, 0.99)):
+        splits = [t.split for t in plan_episodes(DatasetConfig(episodes=n, test_fraction=share))]
+        assert splits.count("train") == 1 and splits.count("test") == n - 1, (n, share)
+
+
 def test_plans_with_a_test_share_are_unchanged():
     """The default 8000-episode plan and the golden tiny dataset's, as the code made them before
     small datasets kept a test episode (digests of (index, split, level, seed))."""
