@@ -39,10 +39,28 @@ def check_report_path(path: Path | None, flag: str = "--json") -> None:
         raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
 
 
+def check_out_folder(path: Path | None, flag: str = "--out") -> None:
+    """Refuse, before any work, an output folder that could not be made: an existing file, a file
+    where one of its folders must be, or a folder not writable."""
+    if path is None:
+        return
+    path = Path(path).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{flag} {path} is a file: give a folder")
+    folder = path
+    while not folder.exists() and folder != folder.parent:  # the first folder that exists: the rest is made
+        folder = folder.parent
+    if not folder.is_dir():
+        raise ValueError(f"{flag} {path}: {folder} is a file, not a folder; give another path")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
+
+
 def check_video_folder(video: Path | None) -> None:
-    """Refuse, before any flight, a ``--video`` folder that is an existing file."""
+    """Refuse, before any flight, a ``--video`` folder that could not be made (:func:`check_out_folder`)."""
     if video is not None and Path(video).exists() and not Path(video).is_dir():
         raise ValueError(f"--video {video} is a file: give a folder for the videos")
+    check_out_folder(video, "--video")
 
 
 def wide_console():

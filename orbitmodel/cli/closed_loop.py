@@ -276,6 +276,7 @@ def figure6(
     title: Annotated[Optional[str], typer.Option(help="figure title")] = None,
 ) -> None:
     """Plot the paper's Figure 6: success per setting and on average, one bar per pilot."""
+    from orbitdata.cli.options import check_report_path
     from orbitmodel.evaluate.figure6 import plot_figure6, read_report
 
     try:
@@ -286,6 +287,8 @@ def figure6(
         kinds = None
     if kinds is not None and out.suffix and out.suffix.lower().lstrip(".") not in kinds:
         fail(f"--out {out}: give a file matplotlib writes ({', '.join('.' + k for k in sorted(kinds))})")
+    out = out if out.suffix else out.with_suffix(".png")  # what matplotlib writes for a bare name
+    check_report_path(out, "--out")
     path = plot_figure6([read_report(p) for p in results], out, title)
     typer.echo(f"wrote {path}")
 

@@ -28,9 +28,11 @@ def rollout(
 ) -> None:
     """Latent rollout error vs horizon with persistence and shuffled-action baselines (Fig. 3),
     depth predictions vs ground truth (Fig. 4), and collapse diagnostics."""
+    from orbitdata.cli.options import check_out_folder
     from orbitmodel.evaluate.rollout import RolloutEvalConfig, evaluate_rollout, summary_lines, write_rollout_report
     from orbitmodel.runs import local_run_folder
 
+    check_out_folder(out)
     if out is None:
         local_run_folder(run, "eval rollout without --out")  # before minutes of evaluation
 

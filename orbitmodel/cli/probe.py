@@ -220,9 +220,11 @@ def eval_probe(
     each MAE at h = 25 and 50 steps beside the paper's (RUN/eval/table1.json); the run's probe
     beside the state-only MLP at --history (probe_table.json); and Figure 5. On --split val it
     scores the trained latent_probe candidates and records the best (RUN/latent_probe.json)."""
+    from orbitdata.cli.options import check_out_folder
     from orbitmodel.probe import table1
     from orbitmodel.probe.evaluate import EvalRequest, evaluate_probe
 
+    check_out_folder(out)  # before minutes of evaluation
     req = EvalRequest(
         run=run,
         dataset=dataset,

@@ -25,6 +25,7 @@ import torch
 
 from orbitdata import schema as S
 from orbitdata.load import collate_windows, load_windows
+from orbitdata.load.index import NoWindow
 from orbitmodel.data import group_actions, read_dataset_meta, split_selection
 from orbitmodel.probe import table1
 from orbitmodel.probe.baselines import StateDynamics, constant_velocity
@@ -191,7 +192,15 @@ def evaluate_probe(req: EvalRequest, physics: table1.Physics | None = None) -> d
     steps = req.context or int(probe_config["train"]["context"])
     context, n = (steps - 1) * s + 1, max(req.horizons)
     split, episodes = split_selection(req.split, world_model.run.validation)
-    chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed, split, episodes)
+    try:
+        chosen, collided = select_windows(req.dataset, context, n, req.windows, req.seed, split, episodes)
+    except NoWindow as err:  # in the flags, with the longest horizon that fits
+        most = err.longest - context
+        raise ValueError(
+            f"--horizon {n}: {context} context frames and {n} horizon frames are longer than every episode of "
+            f"the {req.split} split of {req.dataset} (longest: {err.longest} frames); "
+            + (f"give --horizon {most} or less" if most >= 1 else "give a shorter --context")
+        ) from None
     windows = load_windows(
         req.dataset,
         split=split,

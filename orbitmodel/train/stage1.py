@@ -9,10 +9,11 @@ from pathlib import Path
 import torch
 
 from orbitdata import schema as S
+from orbitdata.load.index import NoWindow
 from orbitmodel.config import PRESETS, Preset
 from orbitmodel.data import DatasetMeta, load_model_windows, read_dataset_meta, training_episodes, validation_split
 from orbitmodel.model.world_model import WorldModel
-from orbitmodel.runs import WORLD_MODEL, RunDir, check_image_size, run_config, upgrade_preset_config
+from orbitmodel.runs import WORLD_MODEL, RunDir, RunError, check_image_size, run_config, upgrade_preset_config
 from orbitmodel.train.loop import FitResult, fit, resolve_device, step_generator
 
 COLUMNS = (S.IMAGE, S.STATE, S.ACTION, S.DEPTH_LOW)
@@ -91,6 +92,25 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
     t = req.preset.train
     rank = int(os.environ.get("RANK", 0))
     held_out = validation_split(req.dataset, t.val_fraction, t.val_seed)
+    step = req.preset.model.frame_step
+    try:
+        windows = load_model_windows(
+            req.dataset,
+            step,
+            split="train",
+            context=t.window,
+            horizon=0,
+            stride=t.window_stride,
+            image_size=image_size,
+            columns=list(COLUMNS),
+            episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out),
+        )
+    except NoWindow as err:  # in the flag's steps, with the longest window that fits
+        most = err.longest // step
+        raise RunError(
+            f"--window {t.window}: a window of {t.window} steps of {step} frame{'s' * (step > 1)} is longer than "
+            f"every training episode of {req.dataset} (longest: {err.longest} frames); give --window {most} or less"
+        ) from None
     if rank == 0:
         config = run_config(
             WORLD_MODEL,
@@ -101,17 +121,6 @@ def train_world_model(req: Stage1Request, on_log=None) -> FitResult:
             validation=held_out.to_dict(),
         )
         run.start(config, resume=req.resume, overwrite=req.overwrite, upgrade=upgrade_config)
-    windows = load_model_windows(
-        req.dataset,
-        req.preset.model.frame_step,
-        split="train",
-        context=t.window,
-        horizon=0,
-        stride=t.window_stride,
-        image_size=image_size,
-        columns=list(COLUMNS),
-        episodes=training_episodes(req.dataset, req.levels, req.outcomes, held_out),
-    )
     torch.manual_seed(t.loop.seed)  # initialisation
     model = WorldModel(req.preset.model)
     model.set_normalisation(meta.state_mean, meta.state_std, meta.depth_max)

@@ -134,6 +134,7 @@ def test_a_folder_that_is_no_dataset_exits_2(tmp_path, command):
         (["--no-render", "--video", "{tmp}/v"], "error: --video {tmp}/v records the camera: drop --no-render"),
         (["--video-format", "gif"], "error: --video-format gif without --video"),
         (["--video", "{tmp}/file"], "error: --video {tmp}/file is a file: give a folder for the videos"),
+        (["--video", "{tmp}/file/v"], "error: --video {tmp}/file/v: {tmp}/file is a file, not a folder"),
         (["--image-size", "50"], "error: --image-size: image_size must be a multiple of 16"),
     ],
 )

@@ -255,6 +255,19 @@ def test_grid_tables_that_are_not_grid_tables_are_one_line(tmp_path):
         assert line.count(str(tmp_path)) == 1, line  # the file named once
 
 
+def test_an_output_that_could_not_be_written_is_refused_before_the_work(tmp_path):
+    taken = tmp_path / "taken"
+    taken.write_text("x")
+    for args, says in (
+        (["figure6", str(taken), "--out", str(taken / "f.png")], f"--out {taken / 'f.png'}: {taken} is a file"),
+        (["rollout", str(tmp_path), str(tmp_path), "--out", str(taken)], f"--out {taken} is a file: give a folder"),
+        (["probe", str(tmp_path), str(tmp_path), "--out", str(taken / "t")], f"{taken} is a file, not a folder"),
+    ):
+        line = one_line_error(runner.invoke(app, ["eval", *args]))
+        assert says in line, line
+    assert taken.read_text() == "x"
+
+
 def test_a_grid_flown_in_parts_merges_into_the_single_run_table(tmp_path):
     common = [
         "eval",

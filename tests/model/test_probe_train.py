@@ -312,6 +312,11 @@ def test_clear_errors(run, tiny_dataset_master, tmp_path):
         runner.invoke(app, ["eval", "probe", str(run), data, "--windows", "50", "--horizon", "5", "--no-figures"]),
         "test episodes",
     )
+    too_long = runner.invoke(
+        app, ["eval", "probe", str(run), data, "--windows", "2", "--horizon", "5000", "--no-figures"]
+    )
+    one_line_error(too_long, "--horizon 5000:")
+    assert "give --horizon" in too_long.output and "pad=True" not in too_long.output, too_long.output
 
 
 def test_the_probe_takes_the_recipe_its_run_records_not_its_presets_name(run, tiny_dataset_master, tmp_path):

@@ -188,6 +188,15 @@ def test_an_out_folder_that_is_a_file(tiny_dataset_master, tmp_path):
     assert (tmp_path / "taken").read_text() == "a result"
 
 
+def test_a_window_longer_than_every_episode_names_the_flag_and_what_fits(tiny_dataset_master, tmp_path):
+    run = tmp_path / "r"
+    result = runner.invoke(
+        app, ["train", str(tiny_dataset_master), "--preset", "tiny", "--window", "1000", "--out", str(run)]
+    )
+    _one_line_exit_2(result, "--window 1000: a window of 1000 steps of 1 frame is longer than", "give --window")
+    assert "pad=True" not in result.output and not run.exists()  # nothing claimed: another --window just runs
+
+
 def test_missing_dataset(tmp_path):
     _one_line_exit_2(runner.invoke(app, ["train", str(tmp_path / "nope"), "--out", str(tmp_path / "r")]), "nope")
 
