@@ -22,6 +22,9 @@ from orbitdata.sim.config import SimConfig
 PARQUET_CODECS = frozenset({"zstd", "snappy", "gzip", "brotli", "lz4", "lz4_raw", "none"})  # what pyarrow writes
 
 
+MAX_EPISODES = 10_000_000  # episodes a dataset plans at most (the paper's has 8000)
+
+
 @dataclass(frozen=True)
 class DatasetConfig:
     """Size, split, level mix and storage of a generated dataset.
@@ -51,8 +54,8 @@ class DatasetConfig:
     max_shard_bytes: int = 500_000_000
 
     def __post_init__(self) -> None:
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if not 1 <= self.episodes <= MAX_EPISODES:  # the plan holds a few numbers per episode in memory
+            raise ValueError(f"episodes must be from 1 to {MAX_EPISODES:,}, got {self.episodes}")
         if not 0.0 <= self.test_fraction < 1.0:
             raise ValueError(f"test_fraction must be in [0, 1), got {self.test_fraction}")
         if self.seed < 0:

@@ -16,7 +16,7 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.codecs import decode_depth, decode_rgb
-from orbitdata.load.rows import read_rows
+from orbitdata.load.rows import read_rows, readable
 from orbitdata.load.source import dataset_folder
 from orbitdata.scenario.spec import Scenario
 from orbitdata.state import FUEL, POSITION, ROT6D, VELOCITY
@@ -52,11 +52,11 @@ def read_episodes(root: Path, columns: list[str] | None = None) -> pa.Table:
     """The episodes table of all splits, ordered by episode index."""
     files = episode_files(root)
     if columns is not None and files:
-        names = pq.read_schema(files[0]).names
+        names = readable(lambda: pq.read_schema(files[0]).names, files[0])
         missing = sorted(set(columns) - set(names))
         if missing:
             raise ValueError(f"columns {missing} are not in the episodes table of {root}: give some of {names}")
-    table = pa.concat_tables([pq.read_table(f, columns=columns) for f in files])
+    table = pa.concat_tables([readable(lambda f=f: pq.read_table(f, columns=columns), f) for f in files])
     return table.sort_by(S.EPISODE_INDEX) if S.EPISODE_INDEX in table.column_names else table
 
 

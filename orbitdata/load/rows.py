@@ -13,6 +13,26 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 
+def damaged(path: Path, exc: BaseException) -> ValueError:
+    """The one-line error for a Parquet file pyarrow could not read: the file, why, and what to do."""
+    why = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return ValueError(
+        f"{path} cannot be read ({why}): the file is damaged; run `orbitdata validate` on the dataset, then "
+        "download or regenerate the files it names"
+    )
+
+
+def readable(read, path: Path):
+    """``read()``, with pyarrow's errors on a damaged file turned into :func:`damaged`'s (a missing
+    file stays a FileNotFoundError)."""
+    try:
+        return read()
+    except FileNotFoundError:
+        raise
+    except (pa.ArrowException, OSError) as exc:
+        raise damaged(path, exc) from None
+
+
 class RowReader:
     """Rows [start, stop) or single cells of a Parquet file; row groups read once each.
 
@@ -22,7 +42,7 @@ class RowReader:
 
     def __init__(self, path: Path, columns: list[str] | None = None, memory_map: bool = False):
         self.path = Path(path)
-        self.file = pq.ParquetFile(self.path, memory_map=memory_map)
+        self.file = readable(lambda: pq.ParquetFile(self.path, memory_map=memory_map), self.path)
         self.columns = columns
         sizes = [self.file.metadata.row_group(g).num_rows for g in range(self.file.num_row_groups)]
         self.starts = np.cumsum([0, *sizes])  # (G + 1,) first row of each group, then the row count
@@ -34,7 +54,7 @@ class RowReader:
 
     def _group(self, g: int) -> pa.Table:
         if g not in self._cache:
-            self._cache[g] = self.file.read_row_group(g, columns=self.columns)
+            self._cache[g] = readable(lambda: self.file.read_row_group(g, columns=self.columns), self.path)
         return self._cache[g]
 
     def rows(self, start: int, stop: int) -> pa.Table:

@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 
 from orbitdata import schema as S
 from orbitdata.config import DatasetConfig
-from orbitdata.load.rows import RowReader
+from orbitdata.load.rows import RowReader, readable
 from orbitdata.scenario.config import STATIC
 from orbitdata.write.parts import atomic_write, episodes_part, parts_dir, remove_temporaries, steps_part
 from orbitdata.write.stats import StatsAccumulator
@@ -106,10 +106,10 @@ def _source_from_parts(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]]
     """(episode row, frames) for every episode of ``split`` in the parts, in episode order."""
     units = sorted(p.name[: -len(".episodes.parquet")] for p in parts_dir(out).glob("unit-*.episodes.parquet"))
     for name in units:
-        episodes = pq.read_table(episodes_part(out, name)).to_pylist()
+        episodes = readable(lambda: pq.read_table(episodes_part(out, name)), episodes_part(out, name)).to_pylist()
         if not any(row[S.SPLIT] == split for row in episodes):
             continue
-        steps = pq.read_table(steps_part(out, name))
+        steps = readable(lambda: pq.read_table(steps_part(out, name)), steps_part(out, name))
         offset = 0
         for row in episodes:
             if row[S.SPLIT] == split:
@@ -122,7 +122,7 @@ def _source_from_shards(out: Path, split: str) -> Iterator[tuple[dict, pa.Table]
     files = sorted((out / S.EPISODES_DIR).glob("*.parquet"))
     if not files:
         raise FileNotFoundError(f"{out} has neither parts/ nor episodes/*.parquet to shard")
-    episodes = pa.concat_tables([pq.read_table(f) for f in files])
+    episodes = pa.concat_tables([readable(lambda f=f: pq.read_table(f), f) for f in files])
     episodes = episodes.filter(pc.equal(episodes.column(S.SPLIT), split))
     episodes = episodes.take(pc.sort_indices(episodes, [(S.EPISODE_INDEX, "ascending")]))
     reader, current = None, None
@@ -148,11 +148,13 @@ def _check_listed(out: Path) -> None:
     layout that no table names (a re-shard cut before it removed the old ones) are leftovers."""
     per_file: dict[str, int] = {}
     for table in sorted((out / S.EPISODES_DIR).glob("*.parquet")):
-        t = pq.read_table(table, columns=[S.DATA_FILE, S.LENGTH])
+        t = readable(lambda: pq.read_table(table, columns=[S.DATA_FILE, S.LENGTH]), table)
         for rel, length in zip(t.column(S.DATA_FILE).to_pylist(), t.column(S.LENGTH).to_pylist()):
             per_file[rel] = per_file.get(rel, 0) + length
     for rel, rows in sorted(per_file.items()):
-        held = pq.ParquetFile(out / rel).metadata.num_rows if (out / rel).is_file() else None
+        held = (
+            readable(lambda: pq.ParquetFile(out / rel).metadata.num_rows, out / rel) if (out / rel).is_file() else None
+        )
         if held != rows:
             has = "is missing" if held is None else f"holds {held} frames"
             raise ValueError(
@@ -178,7 +180,7 @@ def _rows_per_split(out: Path, from_parts: bool) -> dict[str, int]:
     )
     totals = {s: 0 for s in S.SPLITS}
     for p in paths:
-        t = pq.read_table(p, columns=[S.SPLIT, S.LENGTH])
+        t = readable(lambda: pq.read_table(p, columns=[S.SPLIT, S.LENGTH]), p)
         for split, length in zip(t.column(S.SPLIT).to_pylist(), t.column(S.LENGTH).to_pylist()):
             totals[split] += length
     return totals

@@ -55,6 +55,13 @@ def test_a_bad_flag_is_one_line_naming_it(tmp_path, capsys, args, line):
     assert not (tmp_path / "out").exists()
 
 
+def test_more_episodes_than_a_plan_holds_is_refused_before_anything_is_written(tmp_path, capsys):
+    code, out, err = run(["generate", str(tmp_path / "out"), "--episodes", "99999999999999999999"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith("error: --episodes: episodes must be from 1 to 10,000,000, got 99999999999999999999"), err
+    assert not (tmp_path / "out").exists()
+
+
 def test_missing_arguments_and_unknown_commands(capsys):
     assert run(["generate"], capsys)[0::2] == (2, "error: Missing argument 'out' (see `orbitdata generate --help`)\n")
     code, _, err = run(["fly", "--pilot", "nobody"], capsys)

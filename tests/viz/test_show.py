@@ -231,3 +231,18 @@ def test_a_video_that_fails_half_way_leaves_the_file_it_would_replace(tmp_path, 
     with pytest.raises(RuntimeError):
         write_video(out, frames_then_a_failure(), 25)
     assert out.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [out.name]
+
+
+def test_a_damaged_shard_is_named_with_the_way_out(tiny_dataset, tmp_path):
+    """show (and shard) name a file pyarrow cannot read and send the user to validate."""
+    shard = next((tiny_dataset / "data").glob("train-*.parquet"))
+    shard.write_bytes(shard.read_bytes()[: shard.stat().st_size // 2])  # cut short, as a failed download leaves it
+    for args in (
+        ["show", str(tiny_dataset), "--episode", "0", "--out", str(tmp_path / "ep.png")],
+        ["shard", str(tiny_dataset)],
+    ):
+        res = runner.invoke(app, args)
+        lines = [line for line in res.output.splitlines() if line.strip()]
+        assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+        rel = shard.relative_to(tiny_dataset).as_posix()
+        assert rel in lines[-1] and "is damaged; run `orbitdata validate`" in lines[-1], lines[-1]
