@@ -25,7 +25,8 @@
 # the chunks its flight kept (docs/planner.md), and its step time then counts what it flew.
 # Each step's wall time goes to OUT/timings.tsv (step, seconds, finished at), and the last line
 # is the whole invocation's ("total"). The grid flights run two at a time, one torch thread each:
-# both cores busy.
+# both cores busy. With the policies, the static chain's trainings run as two streams side by side,
+# on half the cores' threads each (below), so their steps' times overlap in timings.tsv.
 # BATCH=N flies each eval closed-loop grid N episodes at a time in lockstep (--batch N), and
 # EXECUTOR=ray spreads its chunks over the Ray cluster that RAY_ADDRESS names (docs/planner.md);
 # without them the grids fly as reported (one episode at a time, here). The planner's and oracles'
@@ -315,13 +316,15 @@ fi
 # 50-frame plan (rollout horizon in model steps); it holds 5 % of the training episodes out, the
 # validation split its recipe was chosen on. Scored there, and on the test split at the planner's
 # history of 2 latents.
-step train-step5 train_wm "$WMS" cpu-step5
-probe_and_eval "$WMS" 10
-step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA" --horizon 10 --split val \
-  --out "$WMS/eval-val" "${ROLLOUT[@]}"
-"$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
-"$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
-refit "$WMS"
+world_model_steps() {
+  step train-step5 train_wm "$WMS" cpu-step5
+  probe_and_eval "$WMS" 10
+  step "eval-val-$(basename "$WMS")" "$BIN/orbitmodel" eval rollout "$WMS" "$DATA" --horizon 10 --split val \
+    --out "$WMS/eval-val" "${ROLLOUT[@]}"
+  "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --split val --history 2 --out "$WMS/eval-val" --no-figures "${VAL_WINDOWS[@]}"
+  "$BIN/orbitmodel" eval probe "$WMS" "$DATA" --history 2 --out "$WMS/eval-history2" --no-figures "${PROBE_EVAL[@]}"
+  refit "$WMS"
+}
 max_steps_of() {  # a run's --max-steps: under train.loop, or beside the other settings in a run from before that
   "$BIN/python" -c "import json, sys; t = json.load(open(sys.argv[1]))['preset']['train']
 print(t.get('loop', t)['max_steps'])" "$1/config.json"; }
@@ -340,12 +343,37 @@ train_policy() {  # train_policy RUN PRESET [TO]: the preset's steps, then (with
   [ -f "$run/model.safetensors" ] && [ "$(max_steps_of "$run")" = "$to" ] && return 0
   "$BIN/orbitmodel" train-policy "$DATA" --preset "$preset" --val-fraction 0.05 --out "$run" --resume --extend --max-steps "$to"
 }
-if [ "$POLICY" = 1 ]; then
+policy_steps() {  # the Diffusion Policy with the camera, its evaluation and the expert's floor
   step train-diffusion train_policy "$DP" cpu "$DP_STEPS"
   step eval-diffusion "$BIN/orbitmodel" eval policy "$DP" "$DATA" --max-windows 2000 --preset cpu
   step expert-floor "$BIN/orbitmodel" eval expert-floor "$DP" "$DATA" --max-windows 2000 --preset cpu "${FLOOR[@]}"
+}
+state_policy_steps() {  # the policy without the camera
   step train-diffusion-state train_policy "$DPS" cpu-state
   step eval-diffusion-state "$BIN/orbitmodel" eval policy "$DPS" "$DATA" --max-windows 2000 --preset reference
+}
+# With the policies, the training runs as two streams side by side, each with half the cores' torch
+# threads: the world model's steps then the camera-less policy, beside the camera policy (the two
+# take about as long). Trainings this size gain 1.4-1.6x from a second thread, and two of one
+# thread each run side by side about as fast as alone (docs/results.md#the-chain), so the two streams
+# finish sooner than the same steps one after the other on every core. Without the policies the
+# world model's steps take every core.
+HALF=$(($(nproc) / 2))
+[ "$HALF" -ge 1 ] || HALF=1
+halved() { (
+  export OMP_NUM_THREADS=$HALF
+  "$@"
+); }  # torch's threads, in commands not given --threads
+if [ "$POLICY" = 1 ]; then
+  world_model_stream() {
+    world_model_steps
+    state_policy_steps
+  }
+  spawn halved world_model_stream
+  spawn halved policy_steps
+  join
+else
+  world_model_steps
 fi
 # The grid, two flights at a time: the learned-dynamics pair is the long one.
 # learned_pair FLY / depth_pair FLY: FLY is fly_model (the planner's run) or fly_cpu (ALL=1's cpu run)
