@@ -30,7 +30,12 @@ def check_report_path(path: Path | None, flag: str = "--json") -> None:
     path = Path(path).expanduser()
     if path.is_dir():
         raise ValueError(f"{flag} {path} is a folder: give a file's path, such as one in it")
-    folder = path.parent
+    _check_makeable(path.parent, path, flag)
+
+
+def _check_makeable(folder: Path, path: Path, flag: str) -> None:
+    """Refuse ``path`` (given as ``flag``) when ``folder`` could not be made: a file stands where one
+    of its folders must be, or the first folder that exists is not writable."""
     while not folder.exists() and folder != folder.parent:  # the first folder that exists: the rest is made
         folder = folder.parent
     if not folder.is_dir():
@@ -47,13 +52,7 @@ def check_out_folder(path: Path | None, flag: str = "--out") -> None:
     path = Path(path).expanduser()
     if path.exists() and not path.is_dir():
         raise ValueError(f"{flag} {path} is a file: give a folder")
-    folder = path
-    while not folder.exists() and folder != folder.parent:  # the first folder that exists: the rest is made
-        folder = folder.parent
-    if not folder.is_dir():
-        raise ValueError(f"{flag} {path}: {folder} is a file, not a folder; give another path")
-    if not os.access(folder, os.W_OK | os.X_OK):
-        raise ValueError(f"{flag} {path}: {folder} is not writable; give a path you can write to")
+    _check_makeable(path, path, flag)
 
 
 def check_video_folder(video: Path | None) -> None:
