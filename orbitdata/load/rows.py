@@ -24,10 +24,10 @@ def damaged(path: Path, exc: BaseException) -> ValueError:
 
 def readable(read, path: Path):
     """``read()``, with pyarrow's errors on a damaged file turned into :func:`damaged`'s (a missing
-    file stays a FileNotFoundError)."""
+    or forbidden file stays a FileNotFoundError or PermissionError)."""
     try:
         return read()
-    except FileNotFoundError:
+    except (FileNotFoundError, PermissionError):
         raise
     except (pa.ArrowException, OSError) as exc:
         raise damaged(path, exc) from None

@@ -260,11 +260,13 @@ def print_table(report: dict, episodes: int) -> None:
 
 
 def not_an_input(json_out: Path | None, inputs: list[Path]) -> None:
-    """Refuse a ``--json`` that would overwrite one of the command's own inputs, or is a folder."""
+    """Refuse a ``--json`` that could not be written (``check_report_path``) or would overwrite one
+    of the command's own inputs."""
+    from orbitdata.cli.options import check_report_path
+
     if json_out is None:
         return
-    if json_out.is_dir():
-        fail(f"--json {json_out} is a folder: give a file to write")
+    check_report_path(json_out)
     if any(json_out.resolve() == Path(p).resolve() for p in inputs):
         fail(f"--json {json_out} is one of the inputs: give another file to write")
 
