@@ -9,6 +9,7 @@ rule: one line naming the flag, exit 2.
 from __future__ import annotations
 
 import contextlib
+import errno
 import functools
 import signal
 import sys
@@ -67,6 +68,9 @@ def friendly(func=None, *, resumes: bool = False):
         except USER_ERRORS as exc:
             fail(str(exc))
         except OSError as exc:
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                where = f" while writing {exc.filename}" if exc.filename else ""
+                fail(f"{exc.strerror}{where}: free some space there, then {again}")
             fail(f"{exc.strerror or exc}: {exc.filename or ''}".rstrip(": "))
 
     return wrapper

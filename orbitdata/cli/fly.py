@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import math
 from enum import Enum
 from pathlib import Path
 
@@ -11,7 +12,7 @@ import typer
 
 from orbitdata.cli.errors import friendly, usage_errors
 from orbitdata.cli.generate import TIER_HELP, Tier, load_config
-from orbitdata.cli.options import key_values, wide_console
+from orbitdata.cli.options import comma_numbers, key_values, wide_console
 from orbitdata.fly.registry import ENTRY_POINT_GROUP, list_pilots
 from orbitdata.sim.config import CameraConfig
 
@@ -31,14 +32,17 @@ def _pilot(name: str) -> str:
 def _numbers(kind, flag: str):
     def parse(text: str) -> list:
         try:
-            values = [kind(x) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise typer.BadParameter(f"{text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5") from None
-        if not values:
-            raise typer.BadParameter(f"empty: the grid needs at least one value, e.g. {flag} 1,3,5")
-        return values
+            return comma_numbers(text, kind, flag)
+        except ValueError as exc:
+            raise typer.BadParameter(str(exc).removeprefix(f"{flag} ")) from None
 
     return parse
+
+
+def _finite(value: float) -> float:
+    if not math.isfinite(value):
+        raise typer.BadParameter(f"{value} must be a finite sigma, such as 0.05")
+    return value
 
 
 def register(app: typer.Typer) -> None:
@@ -75,7 +79,10 @@ def register(app: typer.Typer) -> None:
             help="Camera image size in pixels, a multiple of 16.",
         ),
         thrust_noise: float = typer.Option(
-            0.0, min=0.0, help="Add Gaussian noise of this sigma (normalised thrust) to every action the pilot takes."
+            0.0,
+            min=0.0,
+            callback=_finite,
+            help="Add Gaussian noise of this sigma (normalised thrust) to every action the pilot takes.",
         ),
         noise_hold: int = typer.Option(
             1,

@@ -113,6 +113,10 @@ def register(app: typer.Typer) -> None:
         with usage_errors(flags={f: "--" + f.replace("_", "-") for f, v in given.items() if v is not None}):
             if ray_address and executor.value != "ray":
                 raise ValueError(f"--ray-address {ray_address} is for Ray tasks: add --executor ray, or drop it")
+            if executor.value == "ray":
+                from orbitdata.write.executors import check_ray_address
+
+                check_ray_address(ray_address)
             cfg = load_config(config, tier)
             flags = {
                 "episodes": episodes,
@@ -165,6 +169,7 @@ def register(app: typer.Typer) -> None:
                 progress=report,
                 repo_id=repo_id,
                 figure=overview_figure,
+                notice=lambda line: console.print(line, highlight=False, markup=False),
             )
             bar.update(task, completed=cfg.dataset.episodes)
         n, frames = info.counts["episodes"], info.counts["frames"]

@@ -1,5 +1,5 @@
 """Flag helpers: repeatable ``KEY=VALUE`` flags (``orbitdata fly --pilot-option``, ``orbitmodel eval closed-loop
---set``) and output paths checked before any work."""
+--set``), the grid's comma-separated lists, and output paths checked before any work."""
 
 from __future__ import annotations
 
@@ -20,6 +20,21 @@ def key_values(pairs: list[str], flag: str, example: str) -> dict[str, str]:
             usage(f"{flag} {pair!r} must be KEY=VALUE, e.g. {flag} {example}")
         options[key.strip()] = value
     return options
+
+
+def comma_numbers(text: str, kind: type, flag: str) -> list:
+    """``"1,3,5"`` -> ``[1, 3, 5]`` of ``kind`` (int or float; spaces allowed, one trailing comma
+    too); anything else, an empty item included (``1,,3``), is a ValueError naming ``flag`` with an
+    example."""
+    items = [x.strip() for x in text.split(",")]
+    if items and not items[-1]:
+        items.pop()
+    try:
+        if items and all(items):
+            return [kind(x) for x in items]
+    except ValueError:
+        pass
+    raise ValueError(f"{flag} {text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5")
 
 
 def check_report_path(path: Path | None, flag: str = "--json") -> None:

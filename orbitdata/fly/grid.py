@@ -18,7 +18,7 @@ from orbitdata.fly.pilot import Pilot
 from orbitdata.fly.record import episode_summary
 from orbitdata.fly.registry import PilotFactory, make_pilot
 from orbitdata.fly.rollout import EpisodeResult, FrameSink, fly_episode
-from orbitdata.scenario.config import DYNAMIC, STATIC
+from orbitdata.scenario.config import DYNAMIC, MAX_OBSTACLES, STATIC
 from orbitdata.schema import outcomes
 from orbitdata.seeding import grid_seed
 from orbitdata.sim.env import CubeSatEnv
@@ -63,8 +63,8 @@ EpisodeHook = Callable[[CellResult, int, EpisodeResult], None]
 def check_grid(obstacles: list[int], speeds: list[float], episodes: int) -> None:
     if not obstacles or not speeds:
         raise ValueError("the grid is empty: give at least one obstacle count and one speed")
-    if any(n < 0 for n in obstacles):
-        raise ValueError(f"obstacle counts must be >= 0, got {obstacles}")
+    if any(not 0 <= n <= MAX_OBSTACLES for n in obstacles):
+        raise ValueError(f"obstacle counts must be 0 to {MAX_OBSTACLES}, got {obstacles}")
     if any(not np.isfinite(v) or v < 0 for v in speeds):
         raise ValueError(f"speeds must be finite and >= 0 m/s, got {speeds}")
     if episodes < 1:

@@ -15,6 +15,7 @@ from orbitdata.schema import SHAPES
 STATIC, DYNAMIC = "static", "dynamic"
 TIERS = (STATIC, DYNAMIC)
 FAULT_KINDS = ("off", "scaled", "stuck")
+MAX_OBSTACLES = 1000  # per episode: far beyond any tier's, and a scene MuJoCo still builds in a moment
 
 
 def _check_range(where: str, name: str, pair, low: float = 0.0, high: float = float("inf")) -> None:
@@ -176,8 +177,8 @@ class ScenarioConfig:
         if self.tier not in TIERS:
             raise ValueError(f"scenario.tier must be one of {', '.join(TIERS)}, got {self.tier!r}")
         lo, hi = self.n_obstacles
-        if not 0 <= lo <= hi:
-            raise ValueError(f"n_obstacles must be 0 <= min <= max, got {self.n_obstacles}")
+        if not 0 <= lo <= hi <= MAX_OBSTACLES:
+            raise ValueError(f"n_obstacles must be 0 <= min <= max <= {MAX_OBSTACLES}, got {self.n_obstacles}")
         for name in ("obstacle_scale", "goal_distance", "speed", "along_range", "sun_intensity", "ambient"):
             a, b = getattr(self, name)
             if not 0 <= a <= b:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orbitdata.scenario.config import ScenarioConfig
+from orbitdata.scenario.config import MAX_OBSTACLES, ScenarioConfig
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -87,8 +87,12 @@ def draw_start(
     """The first draws of an episode; ``n_obstacles`` and ``speed`` override theirs (the grid fixes them)."""
     n = int(rng.integers(c.n_obstacles[0], c.n_obstacles[1] + 1))
     if n_obstacles is not None:
-        if isinstance(n_obstacles, bool) or not isinstance(n_obstacles, numbers.Integral) or n_obstacles < 0:
-            raise ValueError(f"n_obstacles must be a whole number >= 0, got {n_obstacles!r}")
+        if (
+            isinstance(n_obstacles, bool)
+            or not isinstance(n_obstacles, numbers.Integral)
+            or not 0 <= n_obstacles <= MAX_OBSTACLES
+        ):
+            raise ValueError(f"n_obstacles must be a whole number from 0 to {MAX_OBSTACLES}, got {n_obstacles!r}")
         n = int(n_obstacles)
     v0 = float(rng.uniform(*c.speed))
     if speed is not None:

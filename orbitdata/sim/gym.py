@@ -73,7 +73,7 @@ except ImportError:  # the optional extra
     raise ImportError("CubeSat-v1 as a Gymnasium environment needs gymnasium: pip install 'orbitdata[gym]'") from None
 
 from orbitdata import schema as S
-from orbitdata.scenario.config import STATIC, TIERS, ScenarioConfig
+from orbitdata.scenario.config import MAX_OBSTACLES, STATIC, TIERS, ScenarioConfig
 from orbitdata.scenario.spec import Scenario
 from orbitdata.sim.config import SimConfig
 from orbitdata.sim.env import CubeSatEnv
@@ -83,11 +83,20 @@ SEED_BOUND = 2**63 - 1  # episode seeds drawn by reset() without one
 KEYS = {"state": S.STATE, "image": S.IMAGE, "depth": S.DEPTH, "depth_low": S.DEPTH_LOW}  # simulator -> dataset
 
 
-def _whole(name: str, value, low: int, what: str, none: str | None = None):
-    """``value`` as an int >= ``low``, or None when ``none`` says what None means; else ValueError naming it."""
+OBSTACLE_COUNT = f"a whole number of obstacles from 0 to {MAX_OBSTACLES}"
+
+
+def _whole(name: str, value, low: int, what: str, none: str | None = None, high: int | None = None):
+    """``value`` as an int from ``low`` to ``high`` (None: no upper end), or None when ``none`` says
+    what None means; else ValueError naming it."""
     if value is None and none is not None:
         return None
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < low:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, numbers.Integral)
+        or value < low
+        or (high is not None and value > high)
+    ):
         raise ValueError(f"{name}={value!r}: give {what}" + (f", or None {none}" if none else ""))
     return int(value)
 
@@ -119,9 +128,7 @@ class CubeSatGymEnv(gymnasium.Env):
         render_mode: str | None = None,
         tier: str | None = None,
     ):
-        n_obstacles = _whole(
-            "n_obstacles", n_obstacles, 0, "a whole number of obstacles >= 0", "to draw it per episode"
-        )
+        n_obstacles = _whole("n_obstacles", n_obstacles, 0, OBSTACLE_COUNT, "to draw it per episode", MAX_OBSTACLES)
         speed = _speed(speed)
         image_size = _whole(
             "image_size", image_size, 16, "a whole number of pixels, a multiple of 16", "for the simulator's camera"
@@ -191,7 +198,7 @@ class CubeSatGymEnv(gymnasium.Env):
             episode_seed = scenario.seed  # the seed that drew it
         else:
             options["n_obstacles"] = _whole(
-                "options['n_obstacles']", options["n_obstacles"], 0, "a whole number of obstacles >= 0", "to draw it"
+                "options['n_obstacles']", options["n_obstacles"], 0, OBSTACLE_COUNT, "to draw it", MAX_OBSTACLES
             )
             options["speed"] = _speed(options["speed"], "options['speed']")
         obs, info = self.env.reset(seed=int(episode_seed), options=options)

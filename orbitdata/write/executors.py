@@ -10,6 +10,7 @@ import ctypes
 import multiprocessing
 import os
 import signal
+import socket
 import threading
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from typing import Iterator
@@ -21,6 +22,25 @@ RAY_HINT = "the Ray executor needs the 'ray' extra: pip install 'orbitdata[ray]'
 
 
 PR_SET_PDEATHSIG = 1  # prctl(2)
+
+
+def check_ray_address(address: str | None, flag: str = "--ray-address", timeout: float = 5.0) -> None:
+    """Refuse, in ``timeout`` seconds, a cluster address (``host:port`` or ``ray://host:port``) where
+    nothing answers: ``ray.init`` would retry it for minutes. ``None`` checks ``RAY_ADDRESS``, the
+    address Ray joins then; "auto", "local" and no address at all are Ray's to resolve."""
+    if address is None:
+        address, flag = os.environ.get("RAY_ADDRESS"), "RAY_ADDRESS"
+    host, sep, port = (address or "").removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), timeout=timeout).close()
+    except OSError as exc:
+        why = exc.strerror or type(exc).__name__
+        raise ValueError(
+            f"{flag} {address}: no Ray cluster answers there ({why}); start one with `ray start --head` "
+            "and give the address it prints"
+        ) from None
 
 
 def die_with_parent(parent: int) -> None:
@@ -65,6 +85,7 @@ def run_ray(config: dict, units: list[Unit], address: str | None, workers: int) 
         raise RuntimeError(RAY_HINT) from None
     started_here = not ray.is_initialized()
     if started_here:
+        check_ray_address(address or None)
         kwargs = {"address": address} if address else {"num_cpus": workers}
         on_term = signal.getsignal(signal.SIGTERM)
         ray.init(include_dashboard=False, log_to_driver=False, **kwargs)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import numbers
 import shutil
@@ -16,7 +17,7 @@ from orbitdata.info import Info
 from orbitdata.load.source import read_info
 from orbitdata.version import __version__
 from orbitdata.write import parts
-from orbitdata.write.executors import run_local, run_ray
+from orbitdata.write.executors import check_ray_address, run_local, run_ray
 from orbitdata.write.finalize import Figure, existing_config, finalize
 from orbitdata.write.plan import plan_units
 
@@ -75,9 +76,8 @@ def prepare_output(out: Path, config: GenerationConfig, overwrite: bool) -> bool
             out.mkdir(parents=True, exist_ok=True)
             parts.write_manifest(out, _manifest(config))
         except OSError as exc:
-            raise UnusableOutput(
-                f"cannot write to {out} ({exc.strerror}); choose another OUT or fix its permissions"
-            ) from None
+            fix = "free some space there" if exc.errno in (errno.ENOSPC, errno.EDQUOT) else "fix its permissions"
+            raise UnusableOutput(f"cannot write to {out} ({exc.strerror}); choose another OUT or {fix}") from None
     return complete
 
 
@@ -111,11 +111,14 @@ def generate(
     progress: Callable[[Progress], None] | None = None,
     repo_id: str | None = None,
     figure: Figure | None = None,
+    notice: Callable[[str], None] | None = None,
 ) -> Info:
     """Generate (or resume) the dataset in ``out`` and finalize it. Returns its ``meta/info.json``.
 
     ``figure``: draws ``meta/overview.png`` for the card (``orbitdata.viz.overview_figure``);
     ``None``: no figure. ``repo_id``: the Hub repo the card's loading snippet names.
+    ``notice``: called with one line for each damaged part file of an earlier, interrupted
+    generation, whose unit is generated again (the same seed gives the same bytes).
     """
     out = Path(out)
     if executor not in ("local", "ray"):
@@ -126,10 +129,15 @@ def generate(
         )
     if isinstance(workers, bool) or not isinstance(workers, numbers.Integral) or workers < 1:
         raise ValueError(f"workers={workers!r}: give 1 or more processes")
+    if executor == "ray":
+        check_ray_address(ray_address or None)  # before anything is written
     if prepare_output(out, config, overwrite):
         return read_info(out)
     parts.remove_temporaries(parts.parts_dir(out))
     units = plan_units(config.dataset)
+    for path in parts.drop_damaged(out, [u.name for u in units if parts.is_done(out, u.name)]):
+        if notice:
+            notice(f"{path} is damaged (Parquet cannot open it): its unit is generated again")
     todo = [u for u in units if not parts.is_done(out, u.name)]
     total_eps = config.dataset.episodes
     done_eps = sum(len(u.episodes) for u in units if parts.is_done(out, u.name))

@@ -21,13 +21,21 @@ MANIFEST_FILE = "manifest.json"
 
 
 def atomic_write(path: Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` whole or not at all; a failed write (a full disk) leaves no
+    temporary behind and names ``path``."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if exc.filename is None:  # a write's error names no file
+            raise OSError(exc.errno, exc.strerror, str(path)) from None
+        raise
 
 
 def write_report(path: Path, text: str) -> None:
@@ -53,6 +61,29 @@ def episodes_part(out: Path, unit_name: str) -> Path:
 
 def is_done(out: Path, unit_name: str) -> bool:
     return episodes_part(out, unit_name).exists() and steps_part(out, unit_name).exists()
+
+
+def drop_damaged(out: Path, unit_names: list[str]) -> list[Path]:
+    """Remove the parts of every finished unit whose files Parquet cannot open (a copy cut short,
+    a disk error: the atomic writes above never leave one), so that generating again redoes those
+    units. Returns the damaged files."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    bad = []
+    for name in unit_names:
+        files = (steps_part(out, name), episodes_part(out, name))
+        for f in files:
+            try:
+                pq.read_metadata(f)
+            except (pa.ArrowException, OSError) as exc:
+                if isinstance(exc, PermissionError):
+                    raise
+                bad.append(f)
+        if any(f in bad for f in files):
+            for f in (episodes_part(out, name), steps_part(out, name)):  # the mark of a finished unit first
+                f.unlink(missing_ok=True)
+    return bad
 
 
 def write_unit(out: Path, unit_name: str, steps: bytes, episodes: bytes) -> None:

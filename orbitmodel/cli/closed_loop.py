@@ -28,13 +28,12 @@ def register(app: typer.Typer) -> None:
 
 
 def _numbers(text: str, kind, flag: str) -> list:
+    from orbitdata.cli.options import comma_numbers
+
     try:
-        values = [kind(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        values = None
-    if not values:
-        fail(f"{flag} {text!r} must be a comma-separated list of numbers, e.g. {flag} 1,3,5")
-    return values
+        return comma_numbers(text, kind, flag)
+    except ValueError as exc:
+        fail(str(exc))
 
 
 @friendly
@@ -379,6 +378,8 @@ def factors(
             rows.append((name, breakdown(read_report(path))))
         except ValueError as err:
             fail(str(err) if str(err).startswith(str(path)) else f"{path}: {err}")
+        except KeyError as err:  # a record older code wrote, or one edited by hand
+            fail(f"{path}: an episode has no {err} record; give a grid that eval closed-loop or orbitdata fly wrote")
     typer.echo(factor_tables(rows), nl=False)
     if json_out is not None:
         json_out.parent.mkdir(parents=True, exist_ok=True)

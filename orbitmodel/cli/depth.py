@@ -7,7 +7,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.errors import fail, friendly, positive
 from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.data import EVAL_SPLITS
 from orbitmodel.plan.depth_recipe import DepthRefitConfig, ImaginedDepthConfig, check_head_name
@@ -41,11 +41,11 @@ def depth(
         ),
     ] = None,
     epochs: Annotated[int, typer.Option(min=1)] = _D.epochs,
-    lr: Annotated[float, typer.Option(min=0.0)] = _D.lr,
+    lr: Annotated[float, typer.Option(callback=positive, help="learning rate, above 0")] = _D.lr,
     near_weight: Annotated[
         float, typer.Option(min=0.0, help="extra loss weight of cells nearer than --near-m")
     ] = _D.near_weight,
-    near_m: Annotated[float, typer.Option(min=0.0, help="metres: the planner's range")] = _D.near_m,
+    near_m: Annotated[float, typer.Option(callback=positive, help="metres: the planner's range, above 0")] = _D.near_m,
     seed: Annotated[int, typer.Option(min=0)] = _D.seed,
     eval_split: Annotated[
         str,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import inspect
+import math
 import sys
 
 import typer
@@ -17,6 +18,13 @@ BAD_INPUT = (ValueError, FileNotFoundError, FileExistsError, NotADirectoryError,
 def first_line(exc: BaseException) -> str:
     """An exception's message in one line: its first, or its type's name when it has none."""
     return (str(exc).splitlines() or [type(exc).__name__])[0]
+
+
+def positive(value: float | None) -> float | None:
+    """A flag's callback: a finite number above 0 (None, the flag not given, passes)."""
+    if value is not None and not 0 < value < math.inf:
+        raise typer.BadParameter(f"{value:g} must be a finite number above 0")
+    return value
 
 
 def fail(message: str, code: int = 2) -> None:

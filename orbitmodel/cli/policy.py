@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 import typer
 
 from orbitmodel.baselines.diffusion.config import POLICY_PRESETS
-from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.errors import friendly, positive
 from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.cli.train import Device, Level, Outcome, echo_trained
 
@@ -60,7 +60,7 @@ def train_policy(
         ),
     ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
-    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    lr: Annotated[Optional[float], typer.Option(callback=positive, help="peak learning rate, above 0")] = None,
     level: Annotated[
         Optional[list[Level]],
         typer.Option("--level", "--levels", help="train on these levels (repeatable; default: expert)"),

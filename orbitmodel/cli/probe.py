@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from orbitmodel.cli.errors import fail, friendly
+from orbitmodel.cli.errors import fail, friendly, positive
 from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.cli.train import Device, echo_trained
 from orbitmodel.config import INPUTS, INTEGRATORS
@@ -57,7 +57,7 @@ def probe(
         Optional[int], typer.Option(min=0, help="stop after this many steps (0 = epochs only)")
     ] = None,
     batch_size: Annotated[Optional[int], typer.Option(min=1, help="windows per step and process")] = None,
-    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    lr: Annotated[Optional[float], typer.Option(callback=positive, help="peak learning rate, above 0")] = None,
     inputs: Annotated[
         Optional[Inputs],
         typer.Option(

@@ -9,7 +9,7 @@ from typing import Annotated, Optional
 import typer
 
 from orbitdata import schema as S
-from orbitmodel.cli.errors import friendly
+from orbitmodel.cli.errors import friendly, positive
 from orbitmodel.cli.threads import Threads, use_threads
 from orbitmodel.config import PRESETS
 
@@ -55,7 +55,7 @@ def train(
     window: Annotated[
         Optional[int], typer.Option(min=2, help="model steps per training window (default: the preset's)")
     ] = None,
-    lr: Annotated[Optional[float], typer.Option(min=0.0, help="peak learning rate")] = None,
+    lr: Annotated[Optional[float], typer.Option(callback=positive, help="peak learning rate, above 0")] = None,
     lambda_sigreg: Annotated[
         Optional[float], typer.Option(min=0.0, help="SIGReg loss weight (default: the preset's)")
     ] = None,

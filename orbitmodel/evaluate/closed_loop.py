@@ -58,6 +58,8 @@ class ClosedLoopRequest:
             (``evaluate.lockstep``; 1: one at a time, exactly the unbatched flight).
         executor: "local" (this process) or "ray": the grid's chunks as Ray tasks
             (``evaluate.executors``), the same episodes as a local flight with the same batch.
+        ray_address: with executor "ray", the cluster to join (None: ``RAY_ADDRESS``'s, else a
+            local Ray instance).
     """
 
     variant: Variant = Variant.PLANNER
@@ -74,6 +76,7 @@ class ClosedLoopRequest:
     video_format: str = ".mp4"
     batch: int = 1
     executor: str = "local"
+    ray_address: str | None = None
 
 
 def pilot_settings(run: str | Path | None, preset: str | None = None, **options) -> tuple[PilotSettings, str]:
@@ -202,8 +205,14 @@ class ClosedLoop:
             raise ValueError(f"batch={req.batch}: fly 1 or more episodes at a time")
         if req.executor not in EXECUTORS:
             raise ValueError(f"executor {req.executor!r}: use {' or '.join(EXECUTORS)}")
+        if req.ray_address and req.executor != "ray":
+            raise ValueError(f"ray_address={req.ray_address!r} is for Ray tasks: give executor='ray', or drop it")
         if req.executor == "ray" and req.video_dir is not None:
             raise ValueError("videos are written where the episodes fly: fly --video with the local executor")
+        if req.executor == "ray":
+            from orbitdata.write.executors import check_ray_address
+
+            check_ray_address(req.ray_address, "ray_address")  # before the flight: Ray retries a dead one for minutes
         settings, tier = req.settings, req.config.tier
         if req.variant.privileged and isinstance(settings, PlannerConfig) and tier != "static":
             if settings.obstacle_motion == "static":
@@ -289,7 +298,9 @@ class ClosedLoop:
             count(kept[start])
         if req.executor == "ray" and parts:  # none left: no cluster to start
             threads = torch.get_num_threads()
-            done = run_ray(fly_chunk_task, [(req, part, threads) for part in parts], cpus=threads)
+            done = run_ray(
+                fly_chunk_task, [(req, part, threads) for part in parts], cpus=threads, address=req.ray_address
+            )
         else:
             done = run_local(lambda part: self.fly_chunk(part, land), [(part,) for part in parts])
         for chunk in done:

@@ -1,9 +1,10 @@
 """Where a grid's chunks fly: one after another in this process, or as Ray tasks (``orbitdata[ray]``).
 
 The pattern of ``orbitdata generate --executor ray``: a task per unit of work, results back to
-the driver as they finish, in any order (the driver puts them in grid order). The cluster is
-Ray's own choice: ``RAY_ADDRESS`` names one to join, else a local Ray instance starts on this
-machine's cores; a Ray instance already started in this process (``ray.init``) is used as it is.
+the driver as they finish, in any order (the driver puts them in grid order). The cluster is the
+address given (``ClosedLoopRequest.ray_address``), else the one ``RAY_ADDRESS`` names, else a
+local Ray instance started on this machine's cores; a Ray instance already started in this
+process (``ray.init``) is used as it is.
 """
 
 from __future__ import annotations
@@ -22,15 +23,19 @@ def run_local(task: Callable, calls: list[tuple]) -> Iterator:
         yield task(*call)
 
 
-def run_ray(task: Callable, calls: list[tuple], cpus: int = 1) -> Iterator:
-    """``task(*call)`` for every call as a Ray task of ``cpus`` cores; results as they finish."""
+def run_ray(task: Callable, calls: list[tuple], cpus: int = 1, address: str | None = None) -> Iterator:
+    """``task(*call)`` for every call as a Ray task of ``cpus`` cores; results as they finish.
+    ``address``: the cluster to join (None: ``RAY_ADDRESS``'s, else a local instance)."""
     try:
         import ray
     except ImportError:
         raise MissingExtra(RAY_HINT) from None
     started_here = not ray.is_initialized()
     if started_here:
-        ray.init(include_dashboard=False, log_to_driver=False)  # joins RAY_ADDRESS when it is set
+        from orbitdata.write.executors import check_ray_address
+
+        check_ray_address(address)
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
     try:
         remote = ray.remote(num_cpus=cpus)(task)
         pending = [remote.remote(*call) for call in calls]

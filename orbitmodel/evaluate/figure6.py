@@ -21,16 +21,33 @@ def read_report(path: str | Path) -> dict:
     if path.suffix == ".jsonl":
         return report_from_episodes(path)
     report = read_json(path)
-    try:
-        settings = report["settings"]
-        for s in settings:
-            s["obstacles"], s["speed"], s["episodes"], s["success"]  # noqa: B018 (presence check)
-        report["pilot"]
-    except KeyError as err:
-        raise ValueError(f"{path} is not a grid result (it has no {err} key): {GIVE}") from None
-    except TypeError:
-        raise ValueError(f"{path} is not a grid result (its settings are not a list of tables): {GIVE}") from None
+
+    def refuse(why: str) -> ValueError:
+        return ValueError(f"{path} is not a grid result ({why}): {GIVE}")
+
+    missing = [key for key in ("settings", "pilot") if key not in report]
+    if missing:
+        raise refuse(f"it has no {missing[0]!r} key")
+    settings, episodes = report["settings"], report.get("episodes", [])
+    if not all(isinstance(t, list) and all(isinstance(x, dict) for x in t) for t in (settings, episodes)):
+        raise refuse("its settings or episodes are not lists of tables")
+    for what, tables, keys in (
+        ("a setting", settings, ("obstacles", "speed", "episodes", "success")),
+        ("an episode", episodes, ("obstacles", "speed", "episode", "seed", "outcome")),
+    ):
+        for table in tables:
+            lacks = [key for key in keys if key not in table]
+            if lacks:
+                raise refuse(f"{what} in it has no {lacks[0]!r} key")
+    for s in settings:
+        n, k = s["episodes"], s["success"]
+        if not (_whole(n) and _whole(k) and 0 <= k <= n and n >= 1):
+            raise refuse(f"a setting counts {k!r} successes in {n!r} episodes")
     return report
+
+
+def _whole(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
 
 
 GIVE = "give the --json table of orbitdata fly or orbitmodel eval closed-loop"

@@ -108,7 +108,7 @@ def flight_key(req, run: Path | None, parts: list[range]) -> str:
     and threads its sums run on."""
     video = None if req.video_dir is None else Path(req.video_dir).resolve()
     request = dataclasses.replace(
-        req, run=None if run is None else Path(run).resolve(), executor="local", video_dir=video
+        req, run=None if run is None else Path(run).resolve(), executor="local", ray_address=None, video_dir=video
     )
     text = json.dumps(
         {

@@ -324,3 +324,62 @@ def test_the_tier_chain_estimate_counts_the_grids_the_chain_flies():
     assert pooled == {p for f, p in flown if f == "grid"} | {"planner", "expert"}
     losses = re.search(r"LOSSES=\((.*?)\)", dynamic, re.S).group(1).split()
     assert sorted(losses) == sorted(p for f, p in flown if f == "static-run")
+
+
+def closed_port() -> int:
+    """A local port nothing listens on (bound, then let go)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_a_ray_address_where_no_cluster_answers_is_refused_at_once_writing_nothing(tmp_path, capsys, monkeypatch):
+    """ray.init retries a dead address for minutes; the check answers in seconds."""
+    from orbitdata.write.executors import check_ray_address
+
+    address = f"127.0.0.1:{closed_port()}"
+    code, _, err = run(
+        ["generate", str(tmp_path / "out"), "--episodes", "2", "--executor", "ray", "--ray-address", address], capsys
+    )
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"error: --ray-address {address}: no Ray cluster answers there ("), err
+    assert not (tmp_path / "out").exists()
+    monkeypatch.setenv("RAY_ADDRESS", f"ray://{address}")
+    with pytest.raises(ValueError, match=f"RAY_ADDRESS ray://{address}: no Ray cluster answers there"):
+        check_ray_address(None)
+    for left_to_ray in ("auto", "local", ""):
+        check_ray_address(left_to_ray)
+
+
+def test_a_full_disk_names_the_file_and_the_way_back_leaving_no_temporary(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from orbitdata.write import parts
+
+    fsync, calls = parts.os.fsync, []
+
+    def full_after_the_manifest(fd):
+        calls.append(fd)
+        if len(calls) > 1:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        fsync(fd)
+
+    monkeypatch.setattr(parts.os, "fsync", full_after_the_manifest)
+    out = tmp_path / "out"
+    args = ["generate", str(out), "--episodes", "2", "--image-size", "16", "--workers", "1"]
+    code, _, err = run(args, capsys)
+    assert code == 1 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"error: No space left on device while writing {out / 'parts'}/"), err
+    assert err.strip().endswith("free some space there, then run the same command again to resume"), err
+    assert not list(out.rglob(".tmp-*"))
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(parts.os, "fsync", full)
+    code, _, err = run(args, capsys)  # full from the first file on: the manifest's
+    assert code == 2 and err.startswith(
+        f"error: cannot write to {out} (No space left on device); choose another OUT or free some space there"
+    ), err

@@ -8,6 +8,7 @@ import json
 import pytest
 from typer.testing import CliRunner
 
+from orbitdata.cli.errors import run_app
 from orbitmodel.cli.app import app
 from orbitmodel.cli.errors import friendly
 
@@ -105,3 +106,62 @@ def test_a_dataset_that_is_neither_a_folder_nor_on_the_hub_is_one_line(tmp_path,
     assert res.exit_code == 1 and len(lines) == 1 and "Traceback" not in res.output, res.output
     assert lines[0].startswith("error: no local folder runs/d20, and cannot fetch"), lines[0]
     assert not (tmp_path / "wm").exists()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["train", "DATA", "--lr", "0"],
+        ["probe", "RUN", "DATA", "--lr", "-0.001"],
+        ["train-policy", "DATA", "--lr", "inf"],
+        ["depth", "RUN", "DATA", "--lr", "0"],
+        ["depth", "RUN", "DATA", "--near-m", "0"],
+    ],
+)
+def test_a_rate_or_range_that_must_be_above_zero_is_refused_as_usage(args, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        run_app(app, args)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2
+    assert err.startswith(f"error: {args[-2]}: {args[-1]} must be a finite number above 0 "), err
+    assert len(err.splitlines()) == 1
+    assert "above 0" in runner.invoke(app, [args[0], "--help"]).output  # not "x>=0.0"
+
+
+def edited(grid: dict, edit) -> dict:
+    grid = json.loads(json.dumps(grid))
+    edit(grid)
+    return grid
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["factors"], ["flips", "GOOD"], ["pool", "GOOD"], ["figure6", "--out", "OUT/f.png"]],
+    ids=["factors", "flips", "pool", "figure6"],
+)
+@pytest.mark.parametrize(
+    "edit, says",
+    [
+        (lambda g: g["episodes"][0].pop("outcome"), "an episode in it has no 'outcome' key"),
+        (lambda g: g["settings"][0].update(episodes=0, success=0), "a setting counts 0 successes in 0 episodes"),
+        (lambda g: g["settings"][0].update(success=2), "a setting counts 2 successes in 1 episodes"),
+        (lambda g: g.update(episodes={"a": 1}), "its settings or episodes are not lists of tables"),
+    ],
+    ids=["no-outcome", "no-episodes", "more-successes-than-episodes", "episodes-not-a-list"],
+)
+def test_a_hand_edited_grid_is_named_not_a_traceback(tmp_path, command, edit, says):
+    good, bad = tmp_path / "good.json", tmp_path / "bad.json"
+    good.write_text(json.dumps(edited(GRID, lambda g: g.update(seed=4))))
+    bad.write_text(json.dumps(edited(GRID, edit)))
+    args = [str(good) if a == "GOOD" else a.replace("OUT", str(tmp_path)) for a in command]
+    res = runner.invoke(app, ["eval", args[0], str(bad), *args[1:]])
+    assert res.exit_code == 2, res.output
+    assert res.output.startswith(f"error: {bad} is not a grid result ({says})"), res.output
+    assert "Traceback" not in res.output and len(res.output.splitlines()) == 1
+
+
+def test_factors_names_a_record_its_grid_lacks(tmp_path):
+    old = tmp_path / "old.json"
+    old.write_text(json.dumps(GRID))  # no min_clearance_m: not written by this version's flights
+    res = runner.invoke(app, ["eval", "factors", str(old)])
+    assert res.exit_code == 2 and res.output.startswith(f"error: {old}: an episode has no 'min_clearance_m' record")

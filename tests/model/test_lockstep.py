@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import socket
 
 import numpy as np
 import pytest
@@ -314,3 +315,8 @@ def test_the_cli_flies_a_batch_and_keeps_to_fifteen_options(tmp_path):
     assert res.exit_code == 2 and res.output.startswith("error:") and "local executor" in res.output
     res = runner.invoke(app, ["eval", "closed-loop", *grid, "--batch", "0"])
     assert res.exit_code == 2 and "--batch" in res.output
+    with socket.socket() as s:  # a port nothing listens on: refused before the flight, not retried for minutes
+        s.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{s.getsockname()[1]}"
+    res = runner.invoke(app, ["eval", "closed-loop", *grid, "--executor", "ray"], env={"RAY_ADDRESS": address})
+    assert res.exit_code == 2 and res.output.startswith(f"error: RAY_ADDRESS {address}: no Ray cluster answers")

@@ -168,6 +168,12 @@ def test_bad_input_is_one_line_and_exit_2(tiny_run, tmp_path):
     assert "obstacle counts" in one_line_error(
         runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "-1"])
     )
+    assert "'1,,3' must be a comma-separated list" in one_line_error(
+        runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "1,,3"])
+    )
+    assert "obstacle counts must be 0 to 1000" in one_line_error(
+        runner.invoke(app, base + ["--pilot", "oracle-true", "--obstacles", "99999999999999999999"])
+    )
     toml = tmp_path / "camera.toml"
     toml.write_text("[sim.camera]\nimage_size = 128\n")
     assert "64 px" in one_line_error(

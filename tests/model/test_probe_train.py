@@ -284,7 +284,9 @@ def test_eval_writes_the_table_and_figures(run, tiny_dataset_master, tmp_path):
 def one_line_error(res, message):
     assert res.exit_code == 2, res.output
     assert message in res.output and "Traceback" not in res.output
-    assert len(res.output.strip().splitlines()) == 1, res.output
+    # datasets' bar while it caches a split on its first load (whichever test loads it first) is not the error
+    lines = [line for line in res.output.strip().splitlines() if not line.startswith("Generating ")]
+    assert len(lines) == 1, res.output
 
 
 def test_clear_errors(run, tiny_dataset_master, tmp_path):

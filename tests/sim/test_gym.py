@@ -83,6 +83,7 @@ def test_a_given_scenario_flies_and_reports_the_seed_that_drew_it():
     [
         ({"n_obstacles": 2.5}, "n_obstacles=2.5"),
         ({"n_obstacles": -1}, "n_obstacles=-1"),
+        ({"n_obstacles": 10**20}, "n_obstacles=100000000000000000000: give a whole number of obstacles from 0 to 1000"),
         ({"speed": -1.0}, "speed=-1.0"),
         ({"speed": float("nan")}, "speed=nan"),
         ({"max_steps": 0}, "max_steps=0"),

@@ -163,7 +163,7 @@ generate(sys.argv[1], getattr(tiny, sys.argv[2])(episodes_per_unit=1), workers=1
 
 
 @pytest.mark.parametrize("make", [tiny_config, dynamic_config], ids=["static", "dynamic"])
-def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path, make):
+def test_sigkill_then_resume_equals_an_uninterrupted_run_and_redoes_a_damaged_part(tmp_path, make):
     clean = tmp_path / "clean" / "orbit"
     generate(clean, make(episodes_per_unit=1), workers=1, figure=overview_figure)
     out = tmp_path / "killed" / "orbit"
@@ -173,7 +173,12 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path, make):
     assert len(list((out / "parts").glob("*.episodes.parquet"))) == 2  # two whole units
     assert len(list((out / "parts").glob("*.steps.parquet"))) == 3  # and the frames of a third
     assert not (out / S.INFO_PATH).exists()
-    generate(out, make(episodes_per_unit=1), workers=1, figure=overview_figure)  # resume
+    # A part file cut short after the fact (a copy, a disk error) is found and its unit redone.
+    cut = sorted((out / "parts").glob("*.steps.parquet"))[0]
+    cut.write_bytes(cut.read_bytes()[:100])
+    notices = []
+    generate(out, make(episodes_per_unit=1), workers=1, figure=overview_figure, notice=notices.append)  # resume
+    assert notices == [f"{cut} is damaged (Parquet cannot open it): its unit is generated again"]
     assert tree_digest(out) == tree_digest(clean)
 
 
